@@ -1,0 +1,1 @@
+"""A virtual building and a virtual terrestrial laser scanner (the paper used Blensor)."""

@@ -1,0 +1,288 @@
+"""Plain data passed between the stages of the method.
+
+Conventions (contract 4 of ``CONTRACTS.md``): metres, Z up. A wall frame has its
+origin at the wall's lower-left corner seen from the room, ``axis_u`` horizontal along
+the wall, ``axis_v`` = +Z, ``normal`` into the room. Orthoimages are stored with row 0
+at the *top* of the wall (v = height) so that they look natural as images:
+pixel (r, c) has its centre at u = (c + 0.5) * pixel_m, v = height_m - (r + 0.5) * pixel_m.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class PointCloud:
+    """A coloured point cloud held compactly.
+
+    ``xyz`` is float32 relative to ``origin`` (float64), ``rgb`` is uint8.
+    """
+
+    xyz: np.ndarray  # (N, 3) float32, relative to origin
+    rgb: np.ndarray  # (N, 3) uint8
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))  # (3,) float64
+    sources: tuple[str, ...] = ()
+
+    def __len__(self) -> int:
+        return int(self.xyz.shape[0])
+
+    def world(self) -> np.ndarray:
+        """Absolute coordinates as float64 (allocates N x 3 doubles)."""
+        return self.xyz.astype(np.float64) + self.origin
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.xyz.nbytes + self.rgb.nbytes)
+
+
+@dataclass(frozen=True)
+class WallFrame:
+    """A wall's local frame (contract 4). All vectors are world-frame float64 arrays."""
+
+    origin: np.ndarray
+    axis_u: np.ndarray
+    axis_v: np.ndarray
+    normal: np.ndarray
+    width_m: float
+    height_m: float
+
+    def to_uvd(self, points: np.ndarray) -> np.ndarray:
+        """World points (N, 3) to (N, 3) columns u, v, d (d = signed distance along normal)."""
+        rel = np.asarray(points, dtype=np.float64) - self.origin
+        basis = np.stack([self.axis_u, self.axis_v, self.normal], axis=1)
+        return rel @ basis
+
+    def to_world(self, u: np.ndarray | float, v: np.ndarray | float, d: np.ndarray | float = 0.0) -> np.ndarray:
+        """Wall coordinates back to world points; broadcasts like numpy."""
+        u_, v_, d_ = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float), np.asarray(d, float))
+        return (
+            self.origin
+            + u_[..., None] * self.axis_u
+            + v_[..., None] * self.axis_v
+            + d_[..., None] * self.normal
+        )
+
+    def to_dict(self) -> dict:
+        return {
+            "origin": [float(x) for x in self.origin],
+            "axis_u": [float(x) for x in self.axis_u],
+            "axis_v": [float(x) for x in self.axis_v],
+            "normal": [float(x) for x in self.normal],
+            "width_m": float(self.width_m),
+            "height_m": float(self.height_m),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> WallFrame:
+        return cls(
+            origin=np.asarray(d["origin"], dtype=np.float64),
+            axis_u=np.asarray(d["axis_u"], dtype=np.float64),
+            axis_v=np.asarray(d["axis_v"], dtype=np.float64),
+            normal=np.asarray(d["normal"], dtype=np.float64),
+            width_m=float(d["width_m"]),
+            height_m=float(d["height_m"]),
+        )
+
+
+@dataclass
+class Wall:
+    """A segmented wall: its frame and the indices of its points in the cloud."""
+
+    id: str
+    frame: WallFrame
+    point_index: np.ndarray  # (K,) int64 indices into PointCloud
+
+
+@dataclass
+class Segmentation:
+    """Result of floor / ceiling / wall segmentation."""
+
+    floor_z: float  # world Z
+    ceiling_z: float  # world Z
+    walls: list[Wall]
+
+
+@dataclass
+class Orthoimage:
+    """The 4D orthoimage J_CD of one wall (paper, section 3.2).
+
+    ``depth`` is the signed distance from the wall plane in metres (positive into the
+    room), NaN where no point fell; ``colour`` is zero there and ``mask`` is False.
+    """
+
+    wall_id: str
+    frame: WallFrame
+    pixel_m: float
+    colour: np.ndarray  # (H, W, 3) uint8
+    depth: np.ndarray  # (H, W) float32, NaN = no data
+    mask: np.ndarray  # (H, W) bool, True = has data
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (int(self.depth.shape[0]), int(self.depth.shape[1]))
+
+    def pixel_to_uv(self, r: np.ndarray | float, c: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """Continuous pixel coordinates (row, col of a pixel *centre* = integer) to (u, v)."""
+        u = (np.asarray(c, float) + 0.5) * self.pixel_m
+        v = self.frame.height_m - (np.asarray(r, float) + 0.5) * self.pixel_m
+        return u, v
+
+    def uv_to_pixel(self, u: np.ndarray | float, v: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """(u, v) in metres to continuous (row, col)."""
+        c = np.asarray(u, float) / self.pixel_m - 0.5
+        r = (self.frame.height_m - np.asarray(v, float)) / self.pixel_m - 0.5
+        return r, c
+
+
+@dataclass(frozen=True)
+class Opening:
+    """A door or window found in a wall, in that wall's (u, v) metres."""
+
+    wall_id: str
+    kind: str  # "door" | "window"
+    u_min: float
+    u_max: float
+    v_min: float
+    v_max: float
+
+    def to_dict(self) -> dict:
+        return {
+            "wall": self.wall_id,
+            "kind": self.kind,
+            "u_min": round(float(self.u_min), 4),
+            "u_max": round(float(self.u_max), 4),
+            "v_min": round(float(self.v_min), 4),
+            "v_max": round(float(self.v_max), 4),
+        }
+
+
+@dataclass
+class WallArea:
+    """Visible wall area and openings of one orthoimage (paper, section 3.3)."""
+
+    visible: np.ndarray  # (H, W) bool: plain wall surface (background for recognition)
+    openings: list[Opening]
+    opening_mask: np.ndarray  # (H, W) bool: pixels inside openings (excluded from recognition)
+    wall_colour: np.ndarray  # (3,) float: mean RGB of the visible area
+
+
+@dataclass(frozen=True)
+class Box:
+    """An axis-aligned pixel rectangle: rows r0..r1-1, cols c0..c1-1 (end exclusive)."""
+
+    r0: int
+    c0: int
+    r1: int
+    c1: int
+
+    @property
+    def height(self) -> int:
+        return self.r1 - self.r0
+
+    @property
+    def width(self) -> int:
+        return self.c1 - self.c0
+
+    @property
+    def area(self) -> int:
+        return max(0, self.height) * max(0, self.width)
+
+    @property
+    def centre(self) -> tuple[float, float]:
+        """(row, col) of the box centre in continuous pixel-centre coordinates."""
+        return ((self.r0 + self.r1 - 1) / 2.0, (self.c0 + self.c1 - 1) / 2.0)
+
+    def intersection(self, other: Box) -> int:
+        h = min(self.r1, other.r1) - max(self.r0, other.r0)
+        w = min(self.c1, other.c1) - max(self.c0, other.c0)
+        return max(0, h) * max(0, w)
+
+    def union_box(self, other: Box) -> Box:
+        return Box(min(self.r0, other.r0), min(self.c0, other.c0), max(self.r1, other.r1), max(self.c1, other.c1))
+
+
+@dataclass
+class Candidate:
+    """One candidate instance of a class found by one recognizer on one wall.
+
+    ``box`` is the object's footprint in the orthoimage (pixels) at the matched
+    position; ``centre`` its (row, col) centre, possibly sub-pixel. ``score`` is
+    rho_D (cross-correlation, higher is better) for depth candidates and rho_C
+    (descriptor distance, lower is better) for colour candidates.
+    """
+
+    class_id: str
+    wall_id: str
+    source: str  # "depth" | "colour"
+    box: Box
+    centre: tuple[float, float]
+    score: float
+    roi: Box | None = None  # the RoI the match came from
+
+
+@dataclass
+class Detection:
+    """A recognized object after consensus, placed on its wall and in 3D (contract 4)."""
+
+    id: str
+    class_id: str
+    wall_id: str
+    u: float
+    v: float
+    position: np.ndarray  # (3,) world, centre of footprint on the wall plane
+    width_m: float
+    height_m: float
+    alpha: float
+    rho_depth: float | None
+    rho_colour: float | None
+    source: str  # "both" | "depth" | "colour"
+
+    def to_dict(self) -> dict:
+        return {
+            "id": self.id,
+            "class": self.class_id,
+            "wall": self.wall_id,
+            "position": [round(float(x), 5) for x in self.position],
+            "u": round(float(self.u), 5),
+            "v": round(float(self.v), 5),
+            "width_m": round(float(self.width_m), 4),
+            "height_m": round(float(self.height_m), 4),
+            "alpha": round(float(self.alpha), 4),
+            "rho_depth": None if self.rho_depth is None else round(float(self.rho_depth), 4),
+            "rho_colour": None if self.rho_colour is None else round(float(self.rho_colour), 4),
+            "source": self.source,
+        }
+
+
+@dataclass
+class ObjectModel:
+    """One class of the model library (contract 2), as loaded from disk."""
+
+    class_id: str
+    name: str
+    ifc_class: str
+    predefined_type: str | None
+    width_m: float
+    height_m: float
+    colour_views: list[np.ndarray]  # each (h, w, 4) uint8 RGBA, any pixel size
+    depth: np.ndarray | None  # (h, w) float32 metres, NaN unknown
+    extra: dict = field(default_factory=dict)  # other model.json keys (e.g. object_type)
+
+
+@dataclass
+class ModelLibrary:
+    models: dict[str, ObjectModel]
+    root: str = ""
+
+    def __contains__(self, class_id: str) -> bool:
+        return class_id in self.models
+
+    def __getitem__(self, class_id: str) -> ObjectModel:
+        return self.models[class_id]
+
+    @property
+    def class_ids(self) -> list[str]:
+        return sorted(self.models)
