@@ -8,7 +8,10 @@ dict (e.g. loaded from JSON/YAML) and refuses unknown keys.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
+from pathlib import Path
 from typing import Any
+
+import yaml
 
 from .errors import InputError
 
@@ -119,3 +122,16 @@ def _build(kind: type, data: dict[str, Any], where: str) -> Any:
         else:
             kwargs[key] = type(default)(value)
     return kind(**kwargs)
+
+
+def load_settings(path: Path | None) -> DetectionSettings:
+    """Read a JSON or YAML settings override file (nested like ``DetectionSettings``)."""
+    if path is None:
+        return DetectionSettings()
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(path, "no such file") from None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise InputError(path, f"cannot read settings: {str(exc).splitlines()[0]}") from None
+    return DetectionSettings.from_dict(data or {}, where=Path(path).name)
