@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# The main job on the embedded defaults, from nothing:
+#   set up -> simulate Scenario I (virtual scan + ground truth + model library)
+#   -> sbsc detect -> sbsc evaluate (the paper's Table 1) -> review app on the result.
+# Options: --no-serve  stop after the evaluation (headless check)
+#          --scenario II  use the low-contrast scenario
+set -euo pipefail
+cd "$(dirname "$0")/.."
+serve=1; scenario=I
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --no-serve) serve=0 ;;
+    --scenario) scenario="$2"; shift ;;
+    *) echo "demo: unknown option $1" >&2; exit 2 ;;
+  esac
+  shift
+done
+bash scripts/setup.sh
+run="runs/scenario_${scenario}"
+sbsc=.venv/bin/sbsc
+if [ ! -f "$run/scan/scan.ply" ]; then
+  "$sbsc" simulate --scenario "$scenario" --out "$run/scan"
+fi
+"$sbsc" detect "$run/scan/scan.ply" --models "$run/scan/models" \
+  --expected "$run/scan/expected.json" --out "$run/detect"
+"$sbsc" evaluate --detections "$run/detect/detections.json" \
+  --truth "$run/scan/ground_truth.json" --json "$run/evaluation.json"
+if [ "$serve" = 1 ]; then
+  .venv/bin/python -m app.sample --name "Sample: Scenario ${scenario}" \
+    --scan "$run/scan/scan.ply" --detections "$run/detect"
+  exec "$sbsc" serve --open
+fi
