@@ -1,0 +1,61 @@
+"""Benchmark ``sbsc detect`` on a simulated floor: points per second per stage, peak memory.
+
+    .venv/bin/python benchmarks/bench_detect.py [--scenario I] [--run-dir runs/bench_I]
+
+Simulates the scenario once (kept in the run dir), then runs the detection in this process
+and prints, per stage, seconds and points per second, the total, and the peak resident
+memory as a multiple of the scan's size in memory (float32 xyz + uint8 rgb).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from sbsc_core.pipeline import detect_to_dir
+
+
+def peak_rss_bytes() -> int:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default="I", choices=["I", "II"])
+    ap.add_argument("--run-dir", default=None)
+    args = ap.parse_args()
+    run = Path(args.run_dir or f"runs/bench_{args.scenario}")
+    scan = run / "scan"
+    if not (scan / "scan.ply").exists():
+        subprocess.run([sys.executable, "-m", "sbsc_core", "simulate", "--scenario", args.scenario,
+                        "--out", str(scan)], check=True)
+    base_rss = peak_rss_bytes()
+    t = time.perf_counter()
+    summary = detect_to_dir([scan / "scan.ply"], scan / "models", expected=scan / "expected.json",
+                            out=run / "detect")
+    wall = time.perf_counter() - t
+    n = summary["points"]
+    scan_bytes = n * (3 * 4 + 3)
+    print(f"scenario {args.scenario}: {n:,} points, {summary['walls']} walls, "
+          f"{summary['detections']} detections")
+    print(f"{'stage':<14}{'seconds':>10}{'Mpoints/s':>12}")
+    for stage, sec in summary["timings"].items():
+        rate = n / sec / 1e6 if sec > 0 else float("inf")
+        print(f"{stage:<14}{sec:>10.2f}{rate:>12.2f}")
+    peak = peak_rss_bytes()
+    print(f"wall-clock total {wall:.1f} s = {n / wall / 1e6:.2f} Mpoints/s")
+    print(f"peak RSS {peak / 2**30:.2f} GiB (before detection {base_rss / 2**30:.2f} GiB); "
+          f"scan in memory {scan_bytes / 2**30:.2f} GiB; peak/scan = {peak / scan_bytes:.2f}")
+    (run / "bench.json").write_text(json.dumps({
+        "points": n, "timings": summary["timings"], "wall_s": wall,
+        "peak_rss_bytes": peak, "scan_bytes": scan_bytes}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
