@@ -1,0 +1,282 @@
+"""JSON documents of contracts 3-5: expected counts, detections and ground truth.
+
+Readers check every field they use and raise :class:`~sbsc_core.errors.InputError`
+naming the file and the field, e.g. ``truth.json: objects[3].position: expected 3
+numbers``. Unknown extra keys are accepted (and kept) everywhere, so that documents
+from newer writers or from the web API (``review``) still read.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError
+from ..types import Detection, Opening, WallFrame
+from .atomic import write_json_atomic
+
+EXPECTED_SCHEMA = "sbsc.expected/1"
+DETECTIONS_SCHEMA = "sbsc.detections/1"
+TRUTH_SCHEMA = "sbsc.truth/1"
+CLASS_ID_RE = re.compile(r"^[a-z0-9_]+$")
+SOURCES = ("both", "depth", "colour")
+OPENING_KINDS = ("door", "window")
+
+
+@dataclass
+class TruthObject:
+    """One object of a ground-truth document (contract 5)."""
+
+    class_id: str
+    position: np.ndarray  # (3,) world, centre of the footprint on the wall plane
+    normal: np.ndarray  # (3,) into the room
+    width_m: float
+    height_m: float
+    wall: str | None = None
+    u: float | None = None
+    v: float | None = None
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class TruthDocument:
+    """A ground-truth document: objects, plus walls/openings kept as plain dicts."""
+
+    objects: list[TruthObject]
+    walls: list[dict] = field(default_factory=list)
+    openings: list[dict] = field(default_factory=list)
+    extra: dict = field(default_factory=dict)  # other top-level keys (scenario, seed, ...)
+
+
+# --------------------------------------------------------------------------- field checks
+
+
+class _Checker:
+    """Field validators that raise InputError(file, "field: reason")."""
+
+    def __init__(self, label: str) -> None:
+        self.label = label
+
+    def fail(self, where: str, reason: str) -> InputError:
+        return InputError(self.label, f"{where}: {reason}" if where else reason)
+
+    def obj(self, value: Any, where: str) -> dict:
+        if not isinstance(value, dict):
+            raise self.fail(where, "expected a JSON object")
+        return value
+
+    def lst(self, value: Any, where: str) -> list:
+        if not isinstance(value, list):
+            raise self.fail(where, "expected a list")
+        return value
+
+    def key(self, d: dict, key: str, where: str) -> Any:
+        if key not in d:
+            raise self.fail(where, f"missing key '{key}'")
+        return d[key]
+
+    def number(self, value: Any, where: str, *, positive: bool = False, nullable: bool = False,
+               lo: float | None = None, hi: float | None = None) -> float | None:
+        if value is None and nullable:
+            return None
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise self.fail(where, f"expected a number{' or null' if nullable else ''}, got {_show(value)}")
+        if positive and value <= 0:
+            raise self.fail(where, f"must be > 0, got {_show(value)}")
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise self.fail(where, f"must be between {lo:g} and {hi:g}, got {_show(value)}")
+        return float(value)
+
+    def vec3(self, value: Any, where: str) -> np.ndarray:
+        if (not isinstance(value, list) or len(value) != 3
+                or any(isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x)
+                       for x in value)):
+            raise self.fail(where, f"expected 3 numbers, got {_show(value)}")
+        return np.asarray(value, dtype=np.float64)
+
+    def string(self, value: Any, where: str, *, nullable: bool = False,
+               choices: tuple[str, ...] | None = None, pattern: re.Pattern | None = None) -> str | None:
+        if value is None and nullable:
+            return None
+        if not isinstance(value, str) or not value:
+            raise self.fail(where, f"expected a non-empty string, got {_show(value)}")
+        if choices is not None and value not in choices:
+            raise self.fail(where, f"expected one of {', '.join(choices)}, got {_show(value)}")
+        if pattern is not None and not pattern.match(value):
+            raise self.fail(where, f"expected lower case letters, digits and '_', got {_show(value)}")
+        return value
+
+    def schema(self, doc: dict, expected: str) -> None:
+        got = self.key(doc, "schema", "")
+        if got != expected:
+            raise self.fail("schema", f"expected '{expected}', got {_show(got)}")
+
+
+def _show(value: Any) -> str:
+    text = json.dumps(value) if not isinstance(value, np.ndarray) else str(value.tolist())
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _reject_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not valid JSON")
+
+
+def _load_json(path: Path) -> tuple[dict, _Checker]:
+    path = Path(path)
+    check = _Checker(str(path))
+    if not path.is_file():
+        raise InputError(path, "no such file")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"), parse_constant=_reject_constant)
+    except UnicodeDecodeError:
+        raise InputError(path, "not UTF-8 text") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(path, f"invalid JSON (line {exc.lineno} column {exc.colno}: {exc.msg})") from None
+    except ValueError as exc:
+        raise InputError(path, f"invalid JSON ({exc})") from None
+    return check.obj(doc, ""), check
+
+
+# --------------------------------------------------------------------------- expected (3)
+
+
+def read_expected(path: Path | str) -> dict[str, int]:
+    """``expected.json``: instances per class that the as-designed model holds."""
+    doc, check = _load_json(Path(path))
+    check.schema(doc, EXPECTED_SCHEMA)
+    counts = check.obj(check.key(doc, "counts", ""), "counts")
+    out: dict[str, int] = {}
+    for cls, n in counts.items():
+        where = f"counts.{cls}"
+        check.string(cls, where, pattern=CLASS_ID_RE)
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise check.fail(where, f"expected a non-negative integer, got {_show(n)}")
+        out[cls] = n
+    return out
+
+
+# --------------------------------------------------------------------------- truth (5)
+
+
+def read_truth(path: Path | str) -> TruthDocument:
+    """``ground_truth.json`` of a simulated scene."""
+    doc, check = _load_json(Path(path))
+    check.schema(doc, TRUTH_SCHEMA)
+    objects = []
+    for i, o in enumerate(check.lst(check.key(doc, "objects", ""), "objects")):
+        w = f"objects[{i}]"
+        check.obj(o, w)
+        objects.append(TruthObject(
+            class_id=check.string(check.key(o, "class", w), f"{w}.class", pattern=CLASS_ID_RE),
+            position=check.vec3(check.key(o, "position", w), f"{w}.position"),
+            normal=check.vec3(check.key(o, "normal", w), f"{w}.normal"),
+            width_m=check.number(check.key(o, "width_m", w), f"{w}.width_m", positive=True),
+            height_m=check.number(check.key(o, "height_m", w), f"{w}.height_m", positive=True),
+            wall=check.string(o.get("wall"), f"{w}.wall", nullable=True),
+            u=check.number(o.get("u"), f"{w}.u", nullable=True),
+            v=check.number(o.get("v"), f"{w}.v", nullable=True),
+            extra={k: v for k, v in o.items()
+                   if k not in ("class", "position", "normal", "width_m", "height_m", "wall", "u", "v")},
+        ))
+    lists = {}
+    for key in ("walls", "openings"):
+        items = check.lst(doc.get(key, []), key)
+        for i, item in enumerate(items):
+            check.obj(item, f"{key}[{i}]")
+        lists[key] = items
+    extra = {k: v for k, v in doc.items() if k not in ("schema", "objects", "walls", "openings")}
+    return TruthDocument(objects=objects, walls=lists["walls"], openings=lists["openings"], extra=extra)
+
+
+# --------------------------------------------------------------------------- detections (4)
+
+
+def validate_detections(doc: Any, label: str = "detections.json") -> dict:
+    """Check a detections document (contract 4); returns it unchanged."""
+    check = _Checker(label)
+    check.obj(doc, "")
+    check.schema(doc, DETECTIONS_SCHEMA)
+    wall_ids: set[str] = set()
+    for i, w in enumerate(check.lst(check.key(doc, "walls", ""), "walls")):
+        where = f"walls[{i}]"
+        check.obj(w, where)
+        wid = check.string(check.key(w, "id", where), f"{where}.id")
+        if wid in wall_ids:
+            raise check.fail(f"{where}.id", f"duplicate wall id {_show(wid)}")
+        wall_ids.add(wid)
+        for k in ("origin", "axis_u", "axis_v", "normal"):
+            check.vec3(check.key(w, k, where), f"{where}.{k}")
+        for k in ("width_m", "height_m"):
+            check.number(check.key(w, k, where), f"{where}.{k}", positive=True)
+    for i, o in enumerate(check.lst(check.key(doc, "openings", ""), "openings")):
+        where = f"openings[{i}]"
+        check.obj(o, where)
+        wid = check.string(check.key(o, "wall", where), f"{where}.wall")
+        if wid not in wall_ids:
+            raise check.fail(f"{where}.wall", f"unknown wall {_show(wid)}")
+        check.string(check.key(o, "kind", where), f"{where}.kind", choices=OPENING_KINDS)
+        b = {k: check.number(check.key(o, k, where), f"{where}.{k}")
+             for k in ("u_min", "u_max", "v_min", "v_max")}
+        if b["u_min"] > b["u_max"] or b["v_min"] > b["v_max"]:
+            raise check.fail(where, "u_min/v_min must not exceed u_max/v_max")
+    ids: set[str] = set()
+    for i, d in enumerate(check.lst(check.key(doc, "detections", ""), "detections")):
+        where = f"detections[{i}]"
+        check.obj(d, where)
+        did = check.string(check.key(d, "id", where), f"{where}.id")
+        if did in ids:
+            raise check.fail(f"{where}.id", f"duplicate detection id {_show(did)}")
+        ids.add(did)
+        check.string(check.key(d, "class", where), f"{where}.class", pattern=CLASS_ID_RE)
+        wid = check.string(check.key(d, "wall", where), f"{where}.wall")
+        if wid not in wall_ids:
+            raise check.fail(f"{where}.wall", f"unknown wall {_show(wid)}")
+        check.vec3(check.key(d, "position", where), f"{where}.position")
+        for k in ("u", "v"):
+            check.number(check.key(d, k, where), f"{where}.{k}")
+        for k in ("width_m", "height_m"):
+            check.number(check.key(d, k, where), f"{where}.{k}", positive=True)
+        check.number(check.key(d, "alpha", where), f"{where}.alpha", lo=0.0, hi=1.0)
+        for k in ("rho_depth", "rho_colour"):
+            check.number(check.key(d, k, where), f"{where}.{k}", nullable=True)
+        check.string(check.key(d, "source", where), f"{where}.source", choices=SOURCES)
+    return doc
+
+
+def read_detections(path: Path | str) -> dict:
+    """``detections.json`` (contract 4), checked; extra keys (e.g. ``review``) are kept."""
+    doc, check = _load_json(Path(path))
+    return validate_detections(doc, check.label)
+
+
+def detections_document(walls: list[tuple[str, WallFrame]], openings: list[Opening],
+                        detections: list[Detection], extra: dict | None = None) -> dict:
+    """Build a detections document (contract 4) from the pipeline's results.
+
+    ``extra`` adds top-level keys (e.g. run information); it may not replace the
+    contract's own keys.
+    """
+    doc: dict[str, Any] = {
+        "schema": DETECTIONS_SCHEMA,
+        "walls": [{"id": wid, **frame.to_dict()} for wid, frame in walls],
+        "openings": [o.to_dict() for o in openings],
+        "detections": [d.to_dict() for d in detections],
+    }
+    if extra:
+        clash = sorted(set(extra) & set(doc))
+        if clash:
+            raise ValueError(f"extra keys would replace contract keys: {clash}")
+        doc.update(extra)
+    return doc
+
+
+def write_detections(path: Path | str, document: dict) -> None:
+    """Check ``document`` and write it atomically (complete or not at all)."""
+    validate_detections(document, str(path))
+    write_json_atomic(path, document)
