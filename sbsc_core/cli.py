@@ -124,7 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
     x = sub.add_parser("export-ifc", help="write detections as an IFC as-is model")
     x.add_argument("detections")
     x.add_argument("--out", required=True)
-    x.add_argument("--schema", default="IFC4", choices=["IFC4", "IFC4X3"])
+    x.add_argument("--schema", default="IFC4", help="IFC4 (default) or IFC4X3")
     x.add_argument("--accepted-only", action="store_true")
     x.add_argument("--models", help="model library for IFC classes (default: bundled)")
     x.set_defaults(func=_cmd_export_ifc)

@@ -1,0 +1,108 @@
+"""BIM side of the tool: IFC as-is export, as-designed import and Scan-vs-BIM comparison.
+
+The paper (Adan et al. 2018, section 6) ends with the recognized objects' 3D positions
+"augmenting" the as-is BIM model, and names as future work what this package does next:
+reporting designed objects that were not found (possibly not built) and found objects that
+the as-designed model does not hold.
+
+- :mod:`.export`  detections (contract 4) -> IFC4 / IFC4X3 as-is model
+- :mod:`.design`  as-designed IFC -> expected objects; ground truth -> as-designed IFC
+- :mod:`.compare` as-designed vs detections: found / displaced / missing / unexpected
+- :mod:`.report`  self-contained HTML report with per-wall pictures
+- :mod:`.bcf`     BCF 2.1 topics, one per finding
+
+How a library class is written into IFC comes from its ``model.json`` (contract 2):
+``ifc_class``, ``predefined_type`` and an optional ``object_type``. :class:`ClassTyping`
+holds that plus the box used as the object's body (footprint x depth).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..types import ModelLibrary, ObjectModel
+
+SCHEMAS: tuple[str, ...] = ("IFC4", "IFC4X3")
+PSET_RECOGNITION = "SBSC_Recognition"  # alpha, rho, source, review of an exported detection
+PSET_DESIGN = "SBSC_Design"  # class of an object in an as-designed file written by sbsc
+DEFAULT_DEPTH_M = 0.02  # body depth of a class whose depth is not known
+MIN_DEPTH_M = 0.002  # thinnest box body written (a sign is ~3 mm)
+
+
+@dataclass(frozen=True)
+class ClassTyping:
+    """How one library class is written to / recognized in IFC."""
+
+    class_id: str
+    name: str
+    ifc_class: str
+    predefined_type: str | None
+    object_type: str | None
+    width_m: float
+    height_m: float
+    depth_m: float
+
+
+def normalise_schema(schema: str, where: str = "schema") -> str:
+    """``"ifc4"`` -> ``"IFC4"``; ``IFC4X3`` (any ADD) -> ``"IFC4X3"``; else InputError."""
+    s = str(schema).strip().upper()
+    if s.startswith("IFC4X3"):
+        return "IFC4X3"
+    if s == "IFC4":
+        return "IFC4"
+    raise InputError(where, f"unknown IFC schema '{schema}' (expected one of {', '.join(SCHEMAS)})")
+
+
+def _typing_from_model(model: ObjectModel) -> ClassTyping:
+    from ..simulate.catalogue import CATALOGUE
+
+    depth = model.extra.get("depth_m")
+    if not isinstance(depth, int | float) or not np.isfinite(depth) or depth <= 0:
+        depth = None
+        if model.depth is not None and np.isfinite(model.depth).any():
+            relief = float(np.nanmax(model.depth))
+            depth = relief if relief > 0 else None
+        if depth is None and model.class_id in CATALOGUE:
+            depth = CATALOGUE[model.class_id].depth_m
+    object_type = model.extra.get("object_type")
+    return ClassTyping(
+        class_id=model.class_id, name=model.name, ifc_class=model.ifc_class,
+        predefined_type=model.predefined_type,
+        object_type=str(object_type) if object_type else None,
+        width_m=float(model.width_m), height_m=float(model.height_m),
+        depth_m=max(MIN_DEPTH_M, float(depth if depth is not None else DEFAULT_DEPTH_M)),
+    )
+
+
+def catalogue_typings() -> dict[str, ClassTyping]:
+    """The 13 classes of :mod:`sbsc_core.simulate.catalogue` (used when no library exists)."""
+    from ..simulate.catalogue import CATALOGUE
+
+    return {
+        cid: ClassTyping(cid, s.name, s.ifc_class, s.predefined_type, s.object_type,
+                         s.width_m, s.height_m, max(MIN_DEPTH_M, s.depth_m))
+        for cid, s in CATALOGUE.items()
+    }
+
+
+def class_typings(library: ModelLibrary | None = None, models: Path | None = None) -> dict[str, ClassTyping]:
+    """Typing of every class: from ``library``, else the directory ``models``, else the
+    bundled library (or, while that is absent, the simulator's catalogue)."""
+    if library is None and models is not None:
+        from ..io.models import load_model_library
+
+        library = load_model_library(models)
+    if library is None:
+        from ..paths import bundled_models_dir
+
+        bundled = bundled_models_dir()
+        if not bundled.is_dir():
+            return catalogue_typings()
+        from ..io.models import load_model_library
+
+        library = load_model_library(bundled)
+    return {cid: _typing_from_model(m) for cid, m in library.models.items()}

@@ -1,0 +1,128 @@
+"""The findings of a Scan-vs-BIM comparison as a BCF 2.1 file (bcf-client).
+
+One topic per missing, displaced or unexpected object, so that the findings open in the
+BIM tools facility managers already use. Each topic references the as-designed IFC
+file, selects the designed element (by IFC GUID) where there is one, has a viewpoint with
+a camera in front of the object, looking at the wall, and a snapshot: the wall's
+orthoimage crop with the designed and found positions marked (see :mod:`.report`).
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+import tempfile
+import uuid
+from pathlib import Path
+
+import bcf.v2.model as mdl
+import numpy as np
+from bcf.v2.bcfxml import BcfXml
+from bcf.v2.visinfo import VisualizationInfoHandler, build_camera_from_vectors, build_components
+from xsdata.models.datatype import XmlDateTime
+
+from .compare import Comparison, ComparisonItem
+from .report import finding_snapshot, wall_picture
+
+AUTHOR = "sbsc"
+CAMERA_DISTANCE_M = 1.5
+TITLES = {"missing": "Missing", "displaced": "Displaced", "unexpected": "Unexpected"}
+
+
+def _fmt(p: np.ndarray | None) -> str:
+    return "-" if p is None else "(" + ", ".join(f"{c:.3f}" for c in p) + ")"
+
+
+def _normal(comparison: Comparison, item: ComparisonItem) -> np.ndarray | None:
+    if item.designed is not None and item.designed.normal is not None:
+        return item.designed.normal
+    if item.wall in comparison.walls:
+        return comparison.walls[item.wall].normal
+    return None
+
+
+def topic_text(comparison: Comparison, item: ComparisonItem) -> tuple[str, str]:
+    """(title, description) of one finding."""
+    where = f"wall {item.wall}" if item.wall else "no scanned wall"
+    title = f"{TITLES[item.status]} {item.class_id} on {where}"
+    lines = [f"Scan-vs-BIM finding: {item.status} {item.class_id}."]
+    if item.designed is not None:
+        d = item.designed
+        lines.append(f"Designed: {d.name or d.guid} (IFC {d.ifc_class}, GUID {d.guid}) at {_fmt(d.position)}"
+                     + (f" on design wall {d.wall_name}" if d.wall_name else "") + ".")
+    if item.detection is not None:
+        det = item.detection
+        lines.append(f"Found in the scan: detection {det.get('id')} at {_fmt(item.detected_position)}"
+                     f" (alpha {det.get('alpha')}, source {det.get('source')}).")
+    if item.status == "displaced":
+        lines.append(f"Deviation {item.deviation_m:.3f} m (tolerance {comparison.tolerance_m:.3f} m).")
+    elif item.status == "missing":
+        lines.append("Not found in the scan within "
+                     f"{comparison.max_displacement_m:.2f} m: not built, hidden, or not recognized.")
+    else:
+        lines.append("Not in the as-designed model within "
+                     f"{comparison.max_displacement_m:.2f} m of a designed object of its class.")
+    return title, " ".join(lines)
+
+
+def _viewpoint(comparison: Comparison, item: ComparisonItem) -> mdl.VisualizationInfo:
+    p = item.designed_position if item.designed is not None else item.detected_position
+    n = _normal(comparison, item)
+    if n is None:
+        eye = p + np.array([1.0, 1.0, 1.0]) * CAMERA_DISTANCE_M / np.sqrt(3)
+    else:
+        eye = p + CAMERA_DISTANCE_M * np.asarray(n, float)
+    direction = (p - eye) / np.linalg.norm(p - eye)
+    up = np.array([0.0, 0.0, 1.0])
+    up = up - np.dot(up, direction) * direction
+    up /= np.linalg.norm(up)
+    guids = [item.designed.guid] if item.designed is not None else []
+    return mdl.VisualizationInfo(
+        guid=str(uuid.uuid4()),
+        components=build_components(*guids),
+        perspective_camera=build_camera_from_vectors(list(map(float, eye)), list(map(float, direction)),
+                                                     list(map(float, up))),
+    )
+
+
+def build_bcf(comparison: Comparison, image_dir: Path | None = None, project_name: str = "Scan-vs-BIM") -> BcfXml:
+    """A BCF 2.1 document with one topic per finding."""
+    doc = BcfXml.create_new(project_name)
+    ifc_name = Path(comparison.design.path).name
+    now = datetime.datetime.now(datetime.UTC)
+    pictures: dict[str, tuple[np.ndarray, float]] = {}
+    for k, item in enumerate(comparison.findings):
+        title, description = topic_text(comparison, item)
+        topic = doc.add_topic(title, description, AUTHOR, topic_type="Issue", topic_status="Open")
+        topic.topic.labels = [item.status, item.class_id]
+        topic.topic.index = k + 1
+        topic.header = mdl.Header(file=[mdl.HeaderFile(
+            filename=ifc_name, ifc_project=comparison.design.project_guid, is_external=True,
+            reference=ifc_name, date=XmlDateTime.from_datetime(now))])
+        handler = VisualizationInfoHandler(_viewpoint(comparison, item))
+        snapshot = None
+        if item.wall in comparison.walls:
+            if item.wall not in pictures:
+                pictures[item.wall] = wall_picture(comparison, item.wall, image_dir)
+            snapshot = finding_snapshot(comparison, item, image_dir, picture=pictures[item.wall])
+        if snapshot:
+            handler.snapshot = snapshot
+            topic.add_visinfo_handler(handler, snapshot_filename="snapshot.png")
+        else:
+            topic.add_visinfo_handler(handler)
+    return doc
+
+
+def write_bcf(comparison: Comparison, path: Path, image_dir: Path | None = None) -> None:
+    """Write the findings' BCF zip to ``path`` (atomically)."""
+    path = Path(path)
+    doc = build_bcf(comparison, image_dir)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.partial-", suffix=".bcf", dir=path.parent)
+    os.close(fd)
+    try:
+        doc.save(Path(tmp))
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

@@ -1,0 +1,231 @@
+"""Scan-vs-BIM: the objects of an as-designed IFC against the detections of a scan.
+
+This is the future work named in the paper's conclusions (section 6): objects of the
+as-designed model that the scan does not show (possibly never built), and objects found
+in the scan that the design does not hold.
+
+Each designed object on a scanned wall is paired with at most one detection of its class
+(optimal assignment on 3D distance, scipy's ``linear_sum_assignment``), in two rounds:
+first pairs within ``tolerance_m`` (**found**, with the position deviation), then the rest
+within ``max_displacement_m`` (**displaced**). A designed object left unpaired is
+**missing**, a detection left unpaired is **unexpected**. A pair must face the same way
+(the design's host face and the scanned wall), so objects back to back on the two faces
+of a partition are not confused. Designed objects on no scanned wall are **not_scanned**
+(the scan cannot tell) and are no finding. Rejected detections are ignored.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from ..errors import InputError
+from ..io.atomic import atomic_output_dir, write_json_atomic
+from ..types import ModelLibrary, WallFrame
+from .design import AsDesigned, DesignedObject, locate_on_walls, read_as_designed
+from .export import load_json, parse_detections_document, selected_detections
+
+MAX_DISPLACEMENT_M = 1.0  # a designed object and a detection farther apart are two findings
+FACING_MIN_COS = 0.5  # a pair's normals must agree at least this much
+FINDING_KINDS = ("missing", "displaced", "unexpected")
+STATUSES = ("found", "displaced", "missing", "unexpected", "not_scanned")
+
+
+@dataclass
+class ComparisonItem:
+    """One designed object and/or one detection with the verdict."""
+
+    status: str  # one of STATUSES
+    class_id: str
+    designed: DesignedObject | None = None
+    detection: dict | None = None
+    design_wall: str | None = None  # scanned wall the designed object lies on
+    detection_wall: str | None = None  # scanned wall of the detection
+    deviation: np.ndarray | None = None  # detection position - designed position, metres
+
+    @property
+    def wall(self) -> str | None:
+        return self.design_wall or self.detection_wall
+
+    @property
+    def deviation_m(self) -> float | None:
+        return None if self.deviation is None else float(np.linalg.norm(self.deviation))
+
+    @property
+    def designed_position(self) -> np.ndarray | None:
+        return None if self.designed is None else self.designed.position
+
+    @property
+    def detected_position(self) -> np.ndarray | None:
+        return None if self.detection is None else np.asarray(self.detection["position"], float)
+
+    def to_dict(self, walls: dict[str, WallFrame]) -> dict:
+        def r(x: np.ndarray | None, n: int = 5) -> list[float] | None:
+            return None if x is None else [round(float(c), n) for c in x]
+
+        def uv(wid: str | None, p: np.ndarray | None) -> list[float] | None:
+            if wid is None or p is None or wid not in walls:
+                return None
+            return r(walls[wid].to_uvd(p[None])[0][:2], 4)
+
+        d = self.designed
+        det = self.detection
+        return {
+            "status": self.status, "class": self.class_id, "wall": self.wall,
+            "designed": None if d is None else {
+                "guid": d.guid, "name": d.name, "position": r(d.position), "design_wall": d.wall_name,
+                "design_wall_guid": d.wall_guid, "scan_wall": self.design_wall,
+                "uv": uv(self.design_wall, d.position), "matched_by": d.matched_by},
+            "detection": None if det is None else {
+                "id": det.get("id"), "position": r(self.detected_position), "wall": self.detection_wall,
+                "uv": uv(self.detection_wall, self.detected_position), "alpha": det.get("alpha"),
+                "source": det.get("source"), "review": (det.get("review") or {}).get("status", "pending")},
+            "deviation_m": None if self.deviation is None else round(self.deviation_m, 4),
+            "deviation": r(self.deviation, 4),
+        }
+
+
+@dataclass
+class Comparison:
+    """The verdicts of one as-designed file against one detections document."""
+
+    design: AsDesigned
+    walls: dict[str, WallFrame]
+    openings: list[dict]
+    items: list[ComparisonItem]
+    tolerance_m: float
+    max_displacement_m: float
+    detections_path: str | None = None
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def findings(self) -> list[ComparisonItem]:
+        """Missing, displaced and unexpected objects (what the BCF file holds)."""
+        return [it for it in self.items if it.status in FINDING_KINDS]
+
+    def summary(self) -> dict[str, int]:
+        return {s: sum(it.status == s for it in self.items) for s in STATUSES}
+
+    def to_dict(self) -> dict:
+        return {
+            "schema": "sbsc.comparison/1",
+            "as_designed": self.design.path, "detections": self.detections_path,
+            "tolerance_m": self.tolerance_m, "max_displacement_m": self.max_displacement_m,
+            "summary": self.summary(),
+            "expected_counts": self.design.expected_counts(),
+            "expected_by_wall": self.design.expected_by_wall(self.walls),
+            "wall_matches": self.design.wall_matches(self.walls),
+            "items": [it.to_dict(self.walls) for it in self.items],
+            "unmapped_design_elements": self.design.unmapped,
+        }
+
+
+def _assign(dist: np.ndarray, feasible: np.ndarray) -> list[tuple[int, int]]:
+    """Minimum-cost pairs among feasible entries of ``dist`` (rows x cols)."""
+    if dist.size == 0 or not feasible.any():
+        return []
+    big = 1e6
+    cost = np.where(feasible, dist, big)
+    rows, cols = linear_sum_assignment(cost)
+    return [(int(i), int(j)) for i, j in zip(rows, cols, strict=True) if feasible[i, j]]
+
+
+def compare(design: AsDesigned, document: dict, tolerance_m: float = 0.10, *,
+            max_displacement_m: float = MAX_DISPLACEMENT_M, accepted_only: bool = False,
+            detections_path: str | None = None) -> Comparison:
+    """Compare the designed objects with the detections of a contract-4 document."""
+    if not tolerance_m > 0:
+        raise InputError("tolerance", f"must be > 0, got {tolerance_m}")
+    max_displacement_m = max(max_displacement_m, tolerance_m)
+    doc = parse_detections_document(document, detections_path or "detections")
+    walls = doc.walls
+    dets = selected_detections(doc.detections, accepted_only)
+    det_walls = [d.get("wall") if d.get("wall") in walls else None for d in dets]
+    det_pos = np.array([d["position"] for d in dets], dtype=np.float64).reshape(-1, 3)
+    det_normal = [walls[w].normal if w else None for w in det_walls]
+
+    items: list[ComparisonItem] = []
+    scanned: list[int] = []
+    design_walls: list[str | None] = []
+    for k, o in enumerate(design.objects):
+        wid = locate_on_walls(o.position, o.normal, walls) if walls else None
+        design_walls.append(wid)
+        if walls and wid is None:
+            items.append(ComparisonItem("not_scanned", o.class_id, designed=o))
+        else:
+            scanned.append(k)
+
+    used_det: set[int] = set()
+    for cid in sorted({design.objects[k].class_id for k in scanned} | {d["class"] for d in dets}):
+        rows = [k for k in scanned if design.objects[k].class_id == cid]
+        cols = [j for j, d in enumerate(dets) if d["class"] == cid]
+        if rows and cols:
+            dpos = np.array([design.objects[k].position for k in rows])
+            dist = np.linalg.norm(dpos[:, None, :] - det_pos[cols][None, :, :], axis=2)
+            facing = np.ones_like(dist, dtype=bool)
+            for a, k in enumerate(rows):
+                n = design.objects[k].normal
+                for b, j in enumerate(cols):
+                    if n is not None and det_normal[j] is not None:
+                        facing[a, b] = float(np.dot(n, det_normal[j])) >= FACING_MIN_COS
+        else:
+            dist = np.zeros((len(rows), len(cols)))
+            facing = np.zeros_like(dist, dtype=bool)
+        free_r, free_c = set(range(len(rows))), set(range(len(cols)))
+        for status, limit in (("found", tolerance_m), ("displaced", max_displacement_m)):
+            mask = facing & (dist <= limit)
+            for a in range(len(rows)):
+                if a not in free_r:
+                    mask[a, :] = False
+            for b in range(len(cols)):
+                if b not in free_c:
+                    mask[:, b] = False
+            for a, b in _assign(dist, mask):
+                k, j = rows[a], cols[b]
+                o = design.objects[k]
+                items.append(ComparisonItem(status, cid, designed=o, detection=dets[j],
+                                            design_wall=design_walls[k], detection_wall=det_walls[j],
+                                            deviation=det_pos[j] - o.position))
+                free_r.discard(a)
+                free_c.discard(b)
+                used_det.add(j)
+        for a in sorted(free_r):
+            k = rows[a]
+            items.append(ComparisonItem("missing", cid, designed=design.objects[k], design_wall=design_walls[k]))
+    for j, d in enumerate(dets):
+        if j not in used_det:
+            items.append(ComparisonItem("unexpected", d["class"], detection=d, detection_wall=det_walls[j]))
+    order = {s: i for i, s in enumerate(("missing", "displaced", "unexpected", "found", "not_scanned"))}
+    items.sort(key=lambda it: (order[it.status], it.wall or "~", it.class_id))
+    return Comparison(design=design, walls=walls, openings=doc.openings, items=items, tolerance_m=float(tolerance_m),
+                      max_displacement_m=float(max_displacement_m), detections_path=detections_path)
+
+
+def compare_to_dir(as_designed: Path, detections: Path, out: Path, tolerance_m: float = 0.10,
+                   library: ModelLibrary | None = None) -> Comparison:
+    """``sbsc compare``: write ``comparison.json``, ``report.html``, ``findings.bcf`` and
+    ``expected.json`` (contract 3, from the design) into ``out``; nothing on error.
+
+    Orthoimages ``orthoimages/<wall>_colour.png`` beside the detections file are used for
+    the per-wall pictures when present.
+    """
+    from .bcf import write_bcf
+    from .report import write_report
+
+    as_designed, detections, out = Path(as_designed), Path(detections), Path(out)
+    if not tolerance_m > 0:
+        raise InputError("--tolerance", f"must be > 0, got {tolerance_m}")
+    raw = load_json(detections)
+    parse_detections_document(raw, str(detections))
+    design = read_as_designed(as_designed, library)
+    comparison = compare(design, raw, tolerance_m, detections_path=str(detections))
+    image_dir = detections.parent / "orthoimages"
+    with atomic_output_dir(out) as tmp:
+        write_json_atomic(tmp / "comparison.json", comparison.to_dict())
+        write_json_atomic(tmp / "expected.json", design.expected_document())
+        write_report(comparison, tmp / "report.html", image_dir=image_dir)
+        write_bcf(comparison, tmp / "findings.bcf", image_dir=image_dir)
+    return comparison

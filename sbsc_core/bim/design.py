@@ -1,0 +1,612 @@
+"""As-designed IFC: read the secondary components it holds, or write one from a ground truth.
+
+The paper (section 6) leaves open what to say about objects the as-designed model holds
+but the scan does not show, and about found objects the design does not hold. Reading the
+design gives the expected objects: per class (contract 3 counts, the ``expected.json`` of
+``sbsc detect``) and, where a scanned wall can be matched by geometry, per wall.
+
+Reading maps an element to a library class by, in order: the ``Class`` property of an
+sbsc property set; the IFC class + predefined type + ObjectType of the library's
+``model.json`` (an IfcBuildingElementProxy with the right ObjectType stands for a class the
+schema lacks, e.g. IfcSign in IFC4); among several classes of one IFC typing (the sockets),
+the type's or element's name/tag naming the class, then the footprint size closest to the
+model's. Each object's position is the centre of its body's footprint projected onto the
+face of its host wall (the wall it is connected to, else the nearest wall face in front of
+which it stands), as in contract 4.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import ifcopenshell
+import ifcopenshell.geom
+import ifcopenshell.util.element
+import ifcopenshell.util.placement
+import ifcopenshell.util.shape
+import ifcopenshell.util.unit
+import numpy as np
+
+from ..errors import InputError
+from ..types import ModelLibrary, WallFrame
+from . import PSET_DESIGN, PSET_RECOGNITION, ClassTyping, class_typings
+from .export import (
+    IfcModelBuilder,
+    add_walls_and_openings,
+    parse_detections_document,
+    storey_elevation,
+    write_ifc_atomic,
+)
+
+READABLE_SCHEMAS = ("IFC2X3", "IFC4", "IFC4X3")
+HOST_MAX_DISTANCE_M = 0.60  # an object's centre may stand this far in front of its wall face
+HOST_MARGIN_M = 0.10  # ... and this far beyond the face's edges
+SCAN_WALL_PLANE_TOL_M = 0.15  # a designed position is on a scanned wall within this distance
+SCAN_WALL_MARGIN_M = 0.10  # ... and this far beyond its edges
+_SKIP_CLASSES = ("IfcWall", "IfcFeatureElement", "IfcDoor", "IfcWindow", "IfcSlab", "IfcSpace",
+                 "IfcCovering", "IfcRoof", "IfcStair", "IfcColumn", "IfcBeam")
+
+
+@dataclass
+class DesignWall:
+    """A wall of the design with its two faces as contract-4 frames (front: -local Y)."""
+
+    guid: str
+    name: str
+    front: WallFrame
+    back: WallFrame
+    thickness_m: float
+
+    @property
+    def faces(self) -> tuple[WallFrame, WallFrame]:
+        return (self.front, self.back)
+
+
+@dataclass
+class DesignedObject:
+    """One secondary component of the design, mapped to a library class."""
+
+    guid: str
+    name: str
+    class_id: str
+    ifc_class: str
+    predefined_type: str | None
+    object_type: str | None
+    position: np.ndarray  # (3,) world: footprint centre on the host wall face (else body centre)
+    normal: np.ndarray | None  # the host face's normal (into the room), None without host
+    wall_guid: str | None
+    wall_name: str | None
+    u: float | None  # in the host face's frame
+    v: float | None
+    width_m: float | None
+    height_m: float | None
+    matched_by: str  # pset | typing | name | size | ambiguous
+
+    def to_dict(self) -> dict:
+        return {
+            "guid": self.guid, "name": self.name, "class": self.class_id, "ifc_class": self.ifc_class,
+            "predefined_type": self.predefined_type, "object_type": self.object_type,
+            "position": [round(float(x), 5) for x in self.position],
+            "normal": None if self.normal is None else [round(float(x), 5) for x in self.normal],
+            "wall_guid": self.wall_guid, "wall_name": self.wall_name,
+            "u": None if self.u is None else round(self.u, 5), "v": None if self.v is None else round(self.v, 5),
+            "width_m": None if self.width_m is None else round(self.width_m, 4),
+            "height_m": None if self.height_m is None else round(self.height_m, 4),
+            "matched_by": self.matched_by,
+        }
+
+
+@dataclass
+class AsDesigned:
+    """The secondary components of an as-designed IFC file."""
+
+    path: str
+    schema: str
+    project_guid: str | None
+    walls: list[DesignWall]
+    objects: list[DesignedObject]
+    unmapped: list[dict] = field(default_factory=list)  # {ifc_class, predefined_type, object_type, count}
+
+    def expected_counts(self) -> dict[str, int]:
+        return dict(sorted(Counter(o.class_id for o in self.objects).items()))
+
+    def expected_document(self) -> dict:
+        """Contract 3 ``expected.json``."""
+        return {"schema": "sbsc.expected/1", "counts": self.expected_counts()}
+
+    def scan_walls_of_objects(self, walls: dict[str, WallFrame]) -> list[str | None]:
+        """The scanned wall (contract-4 id) each object lies on, None when on none."""
+        return [locate_on_walls(o.position, o.normal, walls) for o in self.objects]
+
+    def expected_by_wall(self, walls: dict[str, WallFrame]) -> dict[str, dict[str, int]]:
+        """Per scanned wall, how many objects of each class the design puts on it."""
+        out: dict[str, Counter] = {}
+        for o, wid in zip(self.objects, self.scan_walls_of_objects(walls), strict=True):
+            if wid is not None:
+                out.setdefault(wid, Counter())[o.class_id] += 1
+        return {wid: dict(sorted(c.items())) for wid, c in sorted(out.items())}
+
+    def wall_matches(self, walls: dict[str, WallFrame]) -> dict[str, list[str]]:
+        """Design wall GUID -> scanned walls lying on one of its faces."""
+        out: dict[str, list[str]] = {}
+        for dw in self.walls:
+            hits = [wid for wid, f in walls.items() if any(_faces_match(face, f) for face in dw.faces)]
+            if hits:
+                out[dw.guid] = sorted(hits)
+        return out
+
+
+# --------------------------------------------------------------------------- geometry helpers
+
+
+def _faces_match(face: WallFrame, scan: WallFrame, angle_cos: float = 0.98) -> bool:
+    """A scanned wall lies on a design face: parallel, same side, close plane, overlap."""
+    if float(np.dot(face.normal, scan.normal)) < angle_cos:
+        return False
+    ends = np.stack([scan.origin + 0.5 * scan.height_m * scan.axis_v,
+                     scan.to_world(scan.width_m, 0.5 * scan.height_m)])
+    uvd = face.to_uvd(ends)
+    if np.abs(uvd[:, 2]).max() > SCAN_WALL_PLANE_TOL_M:
+        return False
+    lo, hi = uvd[:, 0].min(), uvd[:, 0].max()
+    return min(hi, face.width_m) - max(lo, 0.0) > 0.2 * min(scan.width_m, face.width_m)
+
+
+def locate_on_walls(position: np.ndarray, normal: np.ndarray | None, walls: dict[str, WallFrame],
+                    plane_tol: float = SCAN_WALL_PLANE_TOL_M, margin: float = SCAN_WALL_MARGIN_M) -> str | None:
+    """The wall whose face ``position`` lies on (within ``plane_tol`` of its plane, inside its
+    rectangle grown by ``margin``, facing the same way as ``normal`` when given)."""
+    best, best_d = None, np.inf
+    for wid, f in walls.items():
+        if normal is not None and float(np.dot(normal, f.normal)) < 0.5:
+            continue
+        u, v, d = f.to_uvd(np.asarray(position, float)[None])[0]
+        if abs(d) > plane_tol or not (-margin <= u <= f.width_m + margin and -margin <= v <= f.height_m + margin):
+            continue
+        if abs(d) < best_d:
+            best, best_d = wid, abs(d)
+    return best
+
+
+def _horizontal(x: np.ndarray) -> np.ndarray | None:
+    h = np.array([x[0], x[1], 0.0])
+    n = np.linalg.norm(h)
+    return h / n if n > 1e-9 else None
+
+
+def _wall_faces(matrix: np.ndarray, verts_world: np.ndarray) -> tuple[WallFrame, WallFrame, float]:
+    """Front/back face frames of a wall from its placement and world vertices."""
+    x = _horizontal(matrix[:3, 0])
+    if x is None:  # placement X vertical: take the main horizontal direction of the body
+        xy = verts_world[:, :2] - verts_world[:, :2].mean(0)
+        x = np.array([*np.linalg.svd(xy, full_matrices=False)[2][0], 0.0])
+    z = np.array([0.0, 0.0, 1.0])
+    y = np.cross(z, x)
+    o = matrix[:3, 3]
+    rel = verts_world - o
+    a, b, c = rel @ x, rel @ y, verts_world[:, 2]
+    a0, a1, b0, b1, c0, c1 = a.min(), a.max(), b.min(), b.max(), c.min(), c.max()
+    width, height = float(a1 - a0), float(c1 - c0)
+    front_o = o + a0 * x + b0 * y
+    front_o[2] = c0
+    back_o = o + a1 * x + b1 * y
+    back_o[2] = c0
+    front = WallFrame(front_o, x, z, -y, width, height)
+    back = WallFrame(back_o, -x, z, y, width, height)
+    return front, back, float(b1 - b0)
+
+
+def _norm_text(s: Any) -> str:
+    return re.sub(r"[^a-z0-9]", "", str(s or "").lower())
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def open_ifc(path: Path) -> ifcopenshell.file:
+    """Open an IFC file; InputError (one line naming the file) for anything unusable."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "no such file")
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(64)
+    except OSError as exc:
+        raise InputError(path, f"cannot read ({exc.strerror})") from None
+    if not head.lstrip().startswith(b"ISO-10303-21"):
+        raise InputError(path, "not an IFC file (expected an ISO-10303-21 STEP file)")
+    ifcopenshell.ifcopenshell_wrapper.get_log()  # drop messages of earlier reads
+    try:
+        f = ifcopenshell.open(str(path))
+    except ifcopenshell.SchemaError as exc:
+        raise InputError(path, f"unsupported IFC schema ({exc}; expected IFC2X3, IFC4 or IFC4X3)") from None
+    except Exception as exc:  # ifcopenshell raises several types for a broken file
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputError(path, f"not a readable IFC file ({msg})") from None
+    # the parser skips what it cannot read and logs it: a broken file must not pass as a design
+    errors = [ln for ln in ifcopenshell.ifcopenshell_wrapper.get_log().splitlines() if "[error]" in ln]
+    if errors:
+        first = re.sub(r"^\[error\]\s*(\[[^\]]*\]\s*)*", "", errors[0]).strip()
+        more = f" (and {len(errors) - 1} more errors)" if len(errors) > 1 else ""
+        raise InputError(path, f"malformed IFC file: {first}{more}")
+    schema = str(f.schema).upper()
+    if not any(schema.startswith(s) for s in READABLE_SCHEMAS):
+        raise InputError(path, f"unsupported IFC schema '{f.schema}' (expected IFC2X3, IFC4 or IFC4X3)")
+    if not f.by_type("IfcRoot"):
+        raise InputError(path, "malformed IFC file: no entities in its DATA section")
+    return f
+
+
+class _Typer:
+    """Maps IFC elements to library classes."""
+
+    def __init__(self, typings: dict[str, ClassTyping], file: ifcopenshell.file) -> None:
+        self.typings = typings
+        self.file = file
+
+    @staticmethod
+    def typing_of_element(el: Any) -> tuple[str, str | None, str | None]:
+        """(IFC class, predefined type, object type) with the type object's values first."""
+        t = ifcopenshell.util.element.get_type(el)
+        pre = getattr(t, "PredefinedType", None) if t is not None else None
+        if not pre or pre == "NOTDEFINED":
+            pre = getattr(el, "PredefinedType", None) or pre
+        obj = getattr(el, "ObjectType", None) or (getattr(t, "ElementType", None) if t is not None else None)
+        return el.is_a(), pre, obj
+
+    def _schema_has(self, name: str) -> bool:
+        try:
+            ifcopenshell.ifcopenshell_wrapper.schema_by_name(self.file.schema_identifier).declaration_by_name(name)
+        except RuntimeError:
+            return False
+        return True
+
+    def _typing_matches(self, el: Any, t: ClassTyping, pre: str | None, obj: str | None) -> bool:
+        labels = {_norm_text(x) for x in (obj, pre) if x}
+        if el.is_a("IfcBuildingElementProxy") and t.ifc_class != "IfcBuildingElementProxy":
+            # a proxy stands for the class through its ObjectType (IfcSign in IFC4)
+            want = _norm_text(t.object_type or t.predefined_type or t.ifc_class.removeprefix("Ifc"))
+            return bool(want) and want in labels
+        if not el.is_a(t.ifc_class):
+            return False
+        if t.predefined_type and t.predefined_type not in ("USERDEFINED", "NOTDEFINED"):
+            if pre != t.predefined_type and _norm_text(t.predefined_type) not in labels:
+                return False
+        if t.object_type and obj and _norm_text(obj) != _norm_text(t.object_type):
+            return False
+        if t.predefined_type == "USERDEFINED" and t.object_type and not obj:
+            return False
+        return True
+
+    def candidates(self, el: Any) -> list[str]:
+        _, pre, obj = self.typing_of_element(el)
+        return [cid for cid, t in sorted(self.typings.items()) if self._typing_matches(el, t, pre, obj)]
+
+    def pset_class(self, el: Any) -> str | None:
+        psets = ifcopenshell.util.element.get_psets(el)
+        for name in (PSET_RECOGNITION, PSET_DESIGN):
+            cid = (psets.get(name) or {}).get("Class")
+            if isinstance(cid, str) and cid in self.typings:
+                return cid
+        return None
+
+    def by_name(self, el: Any, cands: list[str]) -> list[str]:
+        t = ifcopenshell.util.element.get_type(el)
+        texts = [_norm_text(getattr(x, a, None)) for x in (t, el) if x is not None
+                 for a in ("Tag", "Name", "ObjectType", "ElementType")]
+        texts = [s for s in texts if s]
+        best, best_len = [], 0
+        for cid in cands:
+            keys = {_norm_text(cid), _norm_text(self.typings[cid].name)}
+            hit = max((len(k) for k in keys for s in texts if k and k in s), default=0)
+            if hit > best_len:
+                best, best_len = [cid], hit
+            elif hit and hit == best_len:
+                best.append(cid)
+        return best
+
+
+def _shape_settings() -> ifcopenshell.geom.settings:
+    s = ifcopenshell.geom.settings()
+    s.set("disable-opening-subtractions", True)
+    return s
+
+
+def _world_vertices(settings: ifcopenshell.geom.settings, el: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """(4x4 placement matrix, (N, 3) world vertices) in metres, None without a body."""
+    if not getattr(el, "Representation", None):
+        return None
+    try:
+        shape = ifcopenshell.geom.create_shape(settings, el)
+    except Exception:  # no body representation the geometry kernel can use
+        return None
+    m = np.asarray(ifcopenshell.util.shape.get_shape_matrix(shape), dtype=np.float64)
+    v = np.asarray(ifcopenshell.util.shape.get_vertices(shape.geometry), dtype=np.float64).reshape(-1, 3)
+    if v.size == 0:
+        return None
+    return m, v @ m[:3, :3].T + m[:3, 3]
+
+
+def _host_walls(el: Any) -> list[Any]:
+    hosts = []
+    for rel in list(getattr(el, "ConnectedFrom", None) or []) + list(getattr(el, "ConnectedTo", None) or []):
+        for other in (rel.RelatingElement, rel.RelatedElement):
+            if other is not None and other != el and other.is_a("IfcWall"):
+                hosts.append(other)
+    return hosts
+
+
+def _pick_face(centre: np.ndarray, faces: list[tuple[DesignWall, WallFrame]], strict: bool) -> tuple[DesignWall, WallFrame] | None:
+    """The face the body stands in front of: centre on its room side, nearest plane."""
+    best, best_d = None, np.inf
+    for dw, face in faces:
+        u, v, d = face.to_uvd(centre[None])[0]
+        if d < -0.02:
+            continue
+        inside = -HOST_MARGIN_M <= u <= face.width_m + HOST_MARGIN_M and -HOST_MARGIN_M <= v <= face.height_m + HOST_MARGIN_M
+        if strict and (d > HOST_MAX_DISTANCE_M or not inside):
+            continue
+        score = d + (0.0 if inside else 10.0)
+        if score < best_d:
+            best, best_d = (dw, face), score
+    return best
+
+
+def read_as_designed(path: Path, library: ModelLibrary | None = None, *,
+                     typings: dict[str, ClassTyping] | None = None) -> AsDesigned:
+    """The secondary components of an as-designed IFC file that map to library classes."""
+    path = Path(path)
+    f = open_ifc(path)
+    if not f.by_type("IfcBuildingStorey"):
+        raise InputError(path, "no IfcBuildingStorey (the design needs a storey holding the floor)")
+    typings = typings if typings is not None else class_typings(library)
+    settings = _shape_settings()
+    scale = ifcopenshell.util.unit.calculate_unit_scale(f)
+
+    walls: list[DesignWall] = []
+    wall_by_id: dict[int, DesignWall] = {}
+    for w in f.by_type("IfcWall"):
+        geo = _world_vertices(settings, w)
+        if geo is None:
+            continue
+        front, back, thick = _wall_faces(*geo)
+        dw = DesignWall(w.GlobalId, w.Name or w.GlobalId, front, back, thick)
+        walls.append(dw)
+        wall_by_id[w.id()] = dw
+    all_faces = [(dw, face) for dw in walls for face in dw.faces]
+
+    typer = _Typer(typings, f)
+    objects: list[DesignedObject] = []
+    unmapped_counts: Counter = Counter()
+    for el in f.by_type("IfcElement"):
+        if any(el.is_a(c) for c in _SKIP_CLASSES):
+            continue
+        ifc_class, pre, obj = typer.typing_of_element(el)
+        cid, how = typer.pset_class(el), "pset"
+        if cid is None:
+            cands = typer.candidates(el)
+            how = "typing"
+            if len(cands) > 1:
+                named = typer.by_name(el, cands)
+                if named:
+                    cands, how = named, "name"
+            cid = cands[0] if len(cands) == 1 else None
+            if cid is None and cands:
+                cid, how = cands[0], "ambiguous"  # refined by size below when a body exists
+        if cid is None:
+            unmapped_counts[(ifc_class, pre, obj)] += 1
+            continue
+
+        geo = _world_vertices(settings, el)  # only for mapped elements: a design has many others
+        if geo is not None:
+            verts = geo[1]
+            centre = (verts.min(0) + verts.max(0)) / 2
+        else:
+            m = ifcopenshell.util.placement.get_local_placement(el.ObjectPlacement) if el.ObjectPlacement else np.eye(4)
+            verts, centre = None, m[:3, 3] * scale
+        hosts = [wall_by_id[h.id()] for h in _host_walls(el) if h.id() in wall_by_id]
+        faces = [(dw, face) for dw in hosts for face in dw.faces]
+        picked = _pick_face(centre, faces, strict=False) if faces else _pick_face(centre, all_faces, strict=True)
+        position, normal, u, v, width, height = centre, None, None, None, None, None
+        wall_guid = wall_name = None
+        if picked is not None:
+            dw, face = picked
+            uvd = face.to_uvd(centre[None])[0]
+            position, normal = face.to_world(uvd[0], uvd[1], 0.0), face.normal
+            u, v = float(uvd[0]), float(uvd[1])
+            wall_guid, wall_name = dw.guid, dw.name
+            if verts is not None:
+                fv = face.to_uvd(verts)
+                width, height = float(np.ptp(fv[:, 0])), float(np.ptp(fv[:, 1]))
+        elif verts is not None:
+            ext = np.ptp(verts, axis=0)
+            width, height = float(max(ext[0], ext[1])), float(ext[2])
+        if how == "ambiguous" and width is not None:
+            cands = typer.candidates(el)
+            named = typer.by_name(el, cands) or cands
+            cid = min(named, key=lambda c: abs(typings[c].width_m - width) + abs(typings[c].height_m - height))
+            how = "size"
+        objects.append(DesignedObject(
+            guid=el.GlobalId, name=el.Name or "", class_id=cid, ifc_class=ifc_class, predefined_type=pre,
+            object_type=obj, position=np.asarray(position, float),
+            normal=None if normal is None else np.asarray(normal, float), wall_guid=wall_guid,
+            wall_name=wall_name, u=u, v=v, width_m=width, height_m=height, matched_by=how))
+    unmapped = [{"ifc_class": c, "predefined_type": p, "object_type": o, "count": n}
+                for (c, p, o), n in sorted(unmapped_counts.items(), key=lambda kv: (-kv[1], str(kv[0])))]
+    project = f.by_type("IfcProject")
+    return AsDesigned(path=str(path), schema=f.schema, project_guid=project[0].GlobalId if project else None,
+                      walls=walls, objects=objects, unmapped=unmapped)
+
+
+# --------------------------------------------------------------------------- writing a design
+
+
+@dataclass
+class _Placed:
+    class_id: str
+    wall: str | None
+    u: float
+    v: float
+    width: float
+    height: float
+    position: np.ndarray
+    normal: np.ndarray | None
+
+
+def _truth_objects(truth: dict, walls: dict[str, WallFrame], where: str) -> list[_Placed]:
+    objs = truth.get("objects")
+    if not isinstance(objs, list):
+        raise InputError(where, "'objects' must be a list")
+    out = []
+    for i, o in enumerate(objs):
+        at = f"{where}: objects[{i}]"
+        if not isinstance(o, dict) or not isinstance(o.get("class"), str):
+            raise InputError(at, "an object needs a string 'class'")
+        try:
+            pos = np.asarray(o["position"], dtype=np.float64)
+        except (KeyError, TypeError, ValueError):
+            raise InputError(at, "needs 'position' [x, y, z]") from None
+        if pos.shape != (3,) or not np.isfinite(pos).all():
+            raise InputError(at, "'position' must be 3 finite numbers")
+        wid = o.get("wall") if o.get("wall") in walls else None
+        if wid is not None:
+            u, v, _ = walls[wid].to_uvd(pos[None])[0]
+        else:
+            u = v = 0.0
+        n = o.get("normal")
+        out.append(_Placed(o["class"], wid, float(u), float(v), float(o.get("width_m") or 0.1),
+                           float(o.get("height_m") or 0.1), pos,
+                           None if n is None else np.asarray(n, dtype=np.float64)))
+    return out
+
+
+def _overlaps(a: tuple[float, float, float, float], b: tuple[float, float, float, float], gap: float) -> bool:
+    return not (a[1] + gap <= b[0] or b[1] + gap <= a[0] or a[3] + gap <= b[2] or b[3] + gap <= a[2])
+
+
+def _rect(u: float, v: float, w: float, h: float) -> tuple[float, float, float, float]:
+    return (u - w / 2, u + w / 2, v - h / 2, v + h / 2)
+
+
+def write_as_designed_ifc(truth_doc: dict, out: Path, *, seed: int = 0, n_moved: int = 3, n_removed: int = 2,
+                          n_added: int = 2, library: ModelLibrary | None = None, schema: str = "IFC4",
+                          shift_m: tuple[float, float] = (0.4, 0.8), separation_m: float = 1.2,
+                          typings: dict[str, ClassTyping] | None = None) -> dict:
+    """Write an as-designed IFC of a simulated scene with deliberate differences.
+
+    Starting from what is built (the ground truth, contract 5 with ``walls`` and per-object
+    ``wall``/``u``/``v``), ``n_removed`` built objects are left out of the design, ``n_moved``
+    are designed ``shift_m`` metres away along their wall, and ``n_added`` objects that are
+    not built are added. A moved or added designed position keeps ``separation_m`` from every
+    other built object of its class, so each difference has one unambiguous reading.
+
+    Returns ``{"as_designed": out.name, "design_differences": [...]}``, each difference
+    ``{"kind": "moved"|"removed"|"added", "class", "wall", "designed_position",
+    "built_position"}`` (null where it does not exist), to be stored in the ground truth.
+    """
+    from ..simulate.catalogue import CATALOGUE
+
+    out = Path(out)
+    where = "ground truth"
+    if not isinstance(truth_doc, dict):
+        raise InputError(where, "expected a JSON object")
+    parsed = parse_detections_document({"walls": truth_doc.get("walls") or [],
+                                        "openings": truth_doc.get("openings") or [], "detections": []}, where)
+    walls = parsed.walls
+    built = _truth_objects(truth_doc, walls, where)
+    typings = typings if typings is not None else class_typings(library)
+    rng = np.random.default_rng(seed)
+
+    def size(cid: str, obj: _Placed | None = None) -> tuple[float, float]:
+        if cid in typings:
+            return typings[cid].width_m, typings[cid].height_m
+        return (obj.width, obj.height) if obj else (0.1, 0.1)
+
+    occupied = {wid: [_rect(o.u, o.v, o.width, o.height) for o in built if o.wall == wid] for wid in walls}
+    holes = {wid: [(o["u_min"], o["u_max"], o["v_min"], o["v_max"]) for o in parsed.openings if o["wall"] == wid]
+             for wid in walls}
+
+    def far_from_class(pos: np.ndarray, cid: str, skip: _Placed | None) -> bool:
+        return all(np.linalg.norm(o.position - pos) >= separation_m for o in built
+                   if o.class_id == cid and o is not skip)
+
+    def fits(wid: str, rect: tuple[float, float, float, float], skip_rect: tuple | None = None) -> bool:
+        f = walls[wid]
+        if rect[0] < 0.05 or rect[1] > f.width_m - 0.05 or rect[2] < 0.02 or rect[3] > f.height_m - 0.02:
+            return False
+        if any(_overlaps(rect, h, 0.10) for h in holes[wid]):
+            return False
+        return not any(_overlaps(rect, r, 0.05) for r in occupied[wid] if r != skip_rect)
+
+    order = [int(i) for i in rng.permutation(len(built))]
+    # a removed object has no other built object of its class near it, so that its
+    # detection cannot pair with a designed neighbour that happens not to be recognized
+    isolated = [i for i in order if far_from_class(built[i].position, built[i].class_id, built[i])]
+    removed = set((isolated + [i for i in order if i not in isolated])[:n_removed])
+    moved: dict[int, _Placed] = {}
+    for i in order:
+        if i in removed:
+            continue
+        if len(moved) >= n_moved:
+            break
+        o = built[i]
+        if o.wall is None:
+            continue
+        w, h = size(o.class_id, o)
+        for _ in range(20):
+            shift = float(rng.uniform(*shift_m)) * (1 if rng.random() < 0.5 else -1)
+            u = o.u + shift
+            rect = _rect(u, o.v, w, h)
+            pos = walls[o.wall].to_world(u, o.v)
+            if fits(o.wall, rect, _rect(o.u, o.v, o.width, o.height)) and far_from_class(pos, o.class_id, o):
+                moved[i] = _Placed(o.class_id, o.wall, u, o.v, w, h, pos, walls[o.wall].normal)
+                occupied[o.wall].append(rect)
+                break
+    added: list[_Placed] = []
+    classes = sorted(typings) or sorted({o.class_id for o in built})
+    attempts = 0
+    while len(added) < n_added and attempts < 500 and walls:
+        attempts += 1
+        cid = classes[int(rng.integers(len(classes)))]
+        wid = sorted(walls)[int(rng.integers(len(walls)))]
+        w, h = size(cid)
+        same = [o.v for o in built if o.class_id == cid]
+        v = float(np.median(same)) if same else (CATALOGUE[cid].mount_height_m if cid in CATALOGUE else 1.2)
+        f = walls[wid]
+        if f.width_m < w + 0.2:
+            continue
+        u = float(rng.uniform(w / 2 + 0.1, f.width_m - w / 2 - 0.1))
+        rect = _rect(u, v, w, h)
+        pos = f.to_world(u, v)
+        if fits(wid, rect) and far_from_class(pos, cid, None) and all(
+                np.linalg.norm(a.position - pos) >= separation_m for a in added if a.class_id == cid):
+            added.append(_Placed(cid, wid, u, v, w, h, pos, f.normal))
+            occupied[wid].append(rect)
+
+    builder = IfcModelBuilder(schema, project_name="sbsc as-designed model (simulated)", typings=typings,
+                              storey_elevation=storey_elevation(walls),
+                              description="as-designed model written from a simulated scene, with deliberate differences")
+    add_walls_and_openings(builder, walls, parsed.openings)
+    designed = [moved.get(i, o) for i, o in enumerate(built) if i not in removed] + added
+    for k, o in enumerate(designed):
+        typing = builder.typing_of(o.class_id, o.width, o.height)
+        builder.add_component(o.class_id, o.position, wall_id=o.wall, normal=o.normal,
+                              name=f"{typing.name} {k + 1:03d}", tag=f"E{k + 1:03d}")
+    write_ifc_atomic(builder.finish(), out)
+
+    def p(x: np.ndarray | None) -> list[float] | None:
+        return None if x is None else [round(float(c), 5) for c in x]
+
+    diffs = [{"kind": "removed", "class": built[i].class_id, "wall": built[i].wall,
+              "designed_position": None, "built_position": p(built[i].position)} for i in sorted(removed)]
+    diffs += [{"kind": "moved", "class": built[i].class_id, "wall": built[i].wall,
+               "designed_position": p(m.position), "built_position": p(built[i].position),
+               "shift_m": round(float(np.linalg.norm(m.position - built[i].position)), 4)}
+              for i, m in sorted(moved.items())]
+    diffs += [{"kind": "added", "class": a.class_id, "wall": a.wall, "designed_position": p(a.position),
+               "built_position": None} for a in added]
+    return {"as_designed": out.name, "design_differences": diffs}

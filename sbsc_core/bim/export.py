@@ -1,0 +1,571 @@
+"""As-is IFC export of a detections document (contract 4) with ifcopenshell.
+
+The paper's output (section 6) is "the position (3D coordinates) of the objects
+recognized", meant to augment the as-is BIM model. This module writes that model:
+
+- IfcProject / IfcSite / IfcBuilding / IfcBuildingStorey, metres;
+- one IfcWall per wall face of the document, placed in its frame (local X = ``axis_u``,
+  Z = up, Y = -``normal`` so that the body lies behind the scanned face), a swept-solid
+  body ``width_m`` x thickness x ``height_m``;
+- each opening an IfcOpeningElement voiding its wall, filled by an IfcDoor / IfcWindow
+  (an opening seen from both sides of a partition gets one filling);
+- each object with the IFC class and predefined type of its library class (proxy with
+  ObjectType where the schema lacks the class, e.g. IfcSign in IFC4), placed relative to
+  its wall with the local origin at the footprint centre on the wall plane (the
+  detection's ``position``), a box body footprint x depth standing out into the room,
+  connected to its wall (IfcRelConnectsElements), contained in the storey, typed by one
+  shared type object per class, with the property set ``SBSC_Recognition``;
+- the sign-off as an IfcApproval associated with the project and the objects.
+
+:class:`IfcModelBuilder` is shared with :mod:`.design` (the as-designed writer).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import ifcopenshell
+import ifcopenshell.api.aggregate
+import ifcopenshell.api.context
+import ifcopenshell.api.feature
+import ifcopenshell.api.geometry
+import ifcopenshell.api.owner
+import ifcopenshell.api.project
+import ifcopenshell.api.pset
+import ifcopenshell.api.root
+import ifcopenshell.api.spatial
+import ifcopenshell.api.type
+import ifcopenshell.api.unit
+import ifcopenshell.guid
+import numpy as np
+
+from ..errors import InputError
+from ..types import ModelLibrary, WallFrame
+from . import DEFAULT_DEPTH_M, PSET_RECOGNITION, ClassTyping, class_typings, normalise_schema
+
+WALL_THICKNESS_M = 0.20  # thickness given to a wall face with no partner face behind it
+PARTNER_MAX_GAP_M = 0.60  # two opposite faces closer than this are one partition
+OPENING_CLEARANCE_M = 0.01  # an opening body sticks out of its wall by this on both sides
+DOOR_LEAF_M = 0.05  # thickness of the simple door / window body
+REVIEW_STATUSES = ("pending", "accepted", "rejected")
+
+
+# --------------------------------------------------------------------------- document
+
+
+@dataclass
+class DetectionsDocument:
+    """A checked contract-4 document: walls by id, openings and detections as dicts."""
+
+    walls: dict[str, WallFrame]
+    openings: list[dict]
+    detections: list[dict]
+    signoff: dict | None = None
+
+
+def _vec3(value: Any, where: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(where, "expected 3 numbers") from None
+    if arr.shape != (3,) or not np.isfinite(arr).all():
+        raise InputError(where, "expected 3 finite numbers")
+    return arr
+
+
+def _number(value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise InputError(where, f"expected a finite number, got {json.dumps(value)}")
+    return float(value)
+
+
+def review_status(det: dict) -> str:
+    """A detection's review status; without a ``review`` key it is pending."""
+    review = det.get("review") or {}
+    return str(review.get("status", "pending")) if isinstance(review, dict) else "pending"
+
+
+def parse_detections_document(doc: Any, where: str = "detections") -> DetectionsDocument:
+    """Check the parts of a contract-4 document that the BIM side uses."""
+    if not isinstance(doc, dict):
+        raise InputError(where, "expected a JSON object (a detections document)")
+    for key in ("walls", "detections"):
+        if not isinstance(doc.get(key), list):
+            raise InputError(where, f"'{key}' must be a list")
+    walls: dict[str, WallFrame] = {}
+    for i, w in enumerate(doc["walls"]):
+        at = f"{where}: walls[{i}]"
+        if not isinstance(w, dict) or not isinstance(w.get("id"), str) or not w["id"]:
+            raise InputError(at, "a wall needs a string 'id'")
+        for key in ("origin", "axis_u", "axis_v", "normal", "width_m", "height_m"):
+            if key not in w:
+                raise InputError(at, f"missing key '{key}'")
+        frame = WallFrame(
+            origin=_vec3(w["origin"], f"{at}.origin"), axis_u=_vec3(w["axis_u"], f"{at}.axis_u"),
+            axis_v=_vec3(w["axis_v"], f"{at}.axis_v"), normal=_vec3(w["normal"], f"{at}.normal"),
+            width_m=_number(w["width_m"], f"{at}.width_m"), height_m=_number(w["height_m"], f"{at}.height_m"),
+        )
+        if np.linalg.norm(frame.axis_u[:2]) < 1e-6 or frame.width_m <= 0 or frame.height_m <= 0:
+            raise InputError(at, "degenerate frame (axis_u vertical or zero size)")
+        if w["id"] in walls:
+            raise InputError(at, f"duplicate wall id '{w['id']}'")
+        walls[w["id"]] = frame
+    openings = doc.get("openings") or []
+    if not isinstance(openings, list):
+        raise InputError(where, "'openings' must be a list")
+    for i, o in enumerate(openings):
+        at = f"{where}: openings[{i}]"
+        if not isinstance(o, dict) or o.get("wall") not in walls:
+            raise InputError(at, "an opening needs the id of a listed 'wall'")
+        for key in ("u_min", "u_max", "v_min", "v_max"):
+            _number(o.get(key), f"{at}.{key}")
+        if o["u_max"] <= o["u_min"] or o["v_max"] <= o["v_min"]:
+            raise InputError(at, "empty opening (u_max <= u_min or v_max <= v_min)")
+    for i, d in enumerate(doc["detections"]):
+        at = f"{where}: detections[{i}]"
+        if not isinstance(d, dict) or not isinstance(d.get("class"), str) or not d["class"]:
+            raise InputError(at, "a detection needs a string 'class'")
+        _vec3(d.get("position"), f"{at}.position")
+        status = review_status(d)
+        if status not in REVIEW_STATUSES:
+            raise InputError(f"{at}.review.status", f"unknown status '{status}'")
+    signoff = doc.get("signoff") if isinstance(doc.get("signoff"), dict) else None
+    return DetectionsDocument(walls, list(openings), list(doc["detections"]), signoff)
+
+
+def load_json(path: Path) -> Any:
+    """Read a JSON file; InputError naming the file when it cannot be read or parsed."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "no such file")
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise InputError(path, "not UTF-8 text") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(path, f"invalid JSON (line {exc.lineno} column {exc.colno}: {exc.msg})") from None
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+def wall_matrix(frame: WallFrame) -> np.ndarray:
+    """4x4 world matrix of a wall: X along the wall, Z up, Y = Z x X (behind the face when
+    ``normal`` points into the room), origin at the frame's origin."""
+    z = np.array([0.0, 0.0, 1.0])
+    x = np.array([frame.axis_u[0], frame.axis_u[1], 0.0])
+    x /= np.linalg.norm(x)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, np.cross(z, x), z, frame.origin
+    return m
+
+
+def face_sign(frame: WallFrame) -> float:
+    """+1 when the wall's local Y points away from the room (the usual case), else -1."""
+    return 1.0 if float(np.dot(wall_matrix(frame)[:3, 1], frame.normal)) <= 0 else -1.0
+
+
+def wall_thicknesses(walls: dict[str, WallFrame], default: float = WALL_THICKNESS_M,
+                     max_gap: float = PARTNER_MAX_GAP_M) -> dict[str, float]:
+    """Thickness behind each face: half the gap to an opposite face behind it (the two
+    faces of one partition), else ``default``."""
+    out: dict[str, float] = {}
+    for wid, f in walls.items():
+        best = None
+        for oid, g in walls.items():
+            if oid == wid or float(np.dot(f.normal, g.normal)) > -0.97:
+                continue
+            gap = float(np.dot(f.origin - g.origin, f.normal))  # g lies behind f by gap
+            if not 0.01 < gap <= max_gap:
+                continue
+            gu = f.to_uvd(np.stack([g.origin, g.to_world(g.width_m, 0.0)]))[:, 0]
+            if min(gu.max(), f.width_m) - max(gu.min(), 0.0) <= 0.05:
+                continue
+            best = gap if best is None else min(best, gap)
+        out[wid] = default if best is None else best / 2.0
+    return out
+
+
+# --------------------------------------------------------------------------- builder
+
+
+def _enum_items(schema: ifcopenshell.ifcopenshell_wrapper.schema_definition, name: str) -> tuple[str, ...]:
+    try:
+        return tuple(schema.declaration_by_name(name).enumeration_items())
+    except (RuntimeError, AttributeError):
+        return ()
+
+
+class IfcModelBuilder:
+    """Writes one storey: walls, openings, secondary components, types and approvals."""
+
+    def __init__(self, schema: str = "IFC4", *, project_name: str = "sbsc as-is",
+                 storey_elevation: float = 0.0, typings: dict[str, ClassTyping] | None = None,
+                 description: str = "") -> None:
+        self.schema = normalise_schema(schema)
+        self.file = ifcopenshell.api.project.create_file(version=self.schema)
+        self._schema_def = ifcopenshell.ifcopenshell_wrapper.schema_by_name(self.file.schema_identifier)
+        f = self.file
+        self.project = ifcopenshell.api.root.create_entity(f, ifc_class="IfcProject", name=project_name)
+        if description:
+            self.project.Description = description
+        units = [ifcopenshell.api.unit.add_si_unit(f, unit_type=t)
+                 for t in ("LENGTHUNIT", "AREAUNIT", "VOLUMEUNIT", "PLANEANGLEUNIT")]
+        ifcopenshell.api.unit.assign_unit(f, units=units)
+        model = ifcopenshell.api.context.add_context(f, context_type="Model")
+        self.body = ifcopenshell.api.context.add_context(
+            f, context_type="Model", context_identifier="Body", target_view="MODEL_VIEW", parent=model)
+        self.site = ifcopenshell.api.root.create_entity(f, ifc_class="IfcSite", name="Site")
+        self.building = ifcopenshell.api.root.create_entity(f, ifc_class="IfcBuilding", name="Building")
+        self.storey = ifcopenshell.api.root.create_entity(f, ifc_class="IfcBuildingStorey", name="Scanned floor")
+        self.storey.Elevation = float(storey_elevation)
+        ifcopenshell.api.aggregate.assign_object(f, products=[self.site], relating_object=self.project)
+        ifcopenshell.api.aggregate.assign_object(f, products=[self.building], relating_object=self.site)
+        ifcopenshell.api.aggregate.assign_object(f, products=[self.storey], relating_object=self.building)
+        self.site.ObjectPlacement = self._placement(None, np.eye(4))
+        self.building.ObjectPlacement = self._placement(self.site.ObjectPlacement, np.eye(4))
+        self._storey_matrix = np.eye(4)
+        self._storey_matrix[2, 3] = float(storey_elevation)
+        self.storey.ObjectPlacement = self._placement(self.building.ObjectPlacement, self._storey_matrix)
+        self.typings = dict(typings or {})
+        self.walls: dict[str, Any] = {}
+        self.wall_frames: dict[str, WallFrame] = {}
+        self._wall_thickness: dict[str, float] = {}
+        self._types: dict[str, Any] = {}
+
+    # -- low level ------------------------------------------------------------------
+
+    def _axis2placement(self, m: np.ndarray) -> Any:
+        f = self.file
+        loc = f.createIfcCartesianPoint([float(x) for x in m[:3, 3]])
+        if np.allclose(m[:3, :3], np.eye(3), atol=1e-12):
+            return f.createIfcAxis2Placement3D(loc, None, None)
+        return f.createIfcAxis2Placement3D(
+            loc, f.createIfcDirection([float(x) for x in m[:3, 2]]),
+            f.createIfcDirection([float(x) for x in m[:3, 0]]))
+
+    def _placement(self, relative_to: Any, local: np.ndarray) -> Any:
+        return self.file.createIfcLocalPlacement(relative_to, self._axis2placement(local))
+
+    def _box_representation(self, size_x: float, size_y: float, size_z: float,
+                            corner: tuple[float, float, float]) -> Any:
+        """A swept-solid box ``size_x`` x ``size_y`` x ``size_z`` from ``corner`` (local)."""
+        f = self.file
+        profile = f.createIfcRectangleProfileDef(
+            "AREA", None,
+            f.createIfcAxis2Placement2D(f.createIfcCartesianPoint([corner[0] + size_x / 2,
+                                                                  corner[1] + size_y / 2]), None),
+            float(size_x), float(size_y))
+        solid = f.createIfcExtrudedAreaSolid(
+            profile, f.createIfcAxis2Placement3D(f.createIfcCartesianPoint([0.0, 0.0, float(corner[2])]),
+                                                 None, None),
+            f.createIfcDirection([0.0, 0.0, 1.0]), float(size_z))
+        return f.createIfcShapeRepresentation(self.body, "Body", "SweptSolid", [solid])
+
+    def _assign_body(self, product: Any, rep: Any) -> None:
+        ifcopenshell.api.geometry.assign_representation(self.file, product=product, representation=rep)
+
+    def _new_contained(self, ifc_class: str, predefined_type: str | None, name: str) -> Any:
+        """A new element contained in the storey.
+
+        Containment comes before the placement: ``spatial.assign_container`` rewrites an
+        existing placement relative to the storey, which would undo "relative to its wall".
+        """
+        el = ifcopenshell.api.root.create_entity(self.file, ifc_class=ifc_class,
+                                                 predefined_type=predefined_type, name=name)
+        ifcopenshell.api.spatial.assign_container(self.file, products=[el], relating_structure=self.storey)
+        return el
+
+    def _has_entity(self, name: str) -> bool:
+        try:
+            self._schema_def.declaration_by_name(name)
+        except RuntimeError:
+            return False
+        return True
+
+    # -- walls and openings ------------------------------------------------------
+
+    def add_wall(self, wall_id: str, frame: WallFrame, thickness: float = WALL_THICKNESS_M) -> Any:
+        """An IfcWall behind the face ``frame`` (contract-4 frame), named ``wall_id``."""
+        f = self.file
+        wall = self._new_contained("IfcWall", "NOTDEFINED", wall_id)
+        wall.Tag = wall_id
+        wall.Description = f"wall behind the scanned face {wall_id}"
+        local = np.linalg.inv(self._storey_matrix) @ wall_matrix(frame)
+        wall.ObjectPlacement = self._placement(self.storey.ObjectPlacement, local)
+        offset = 0.0 if face_sign(frame) > 0 else -thickness
+        rep = ifcopenshell.api.geometry.add_wall_representation(
+            f, context=self.body, length=float(frame.width_m), height=float(frame.height_m),
+            thickness=float(thickness), offset=offset)
+        self._assign_body(wall, rep)
+        self.walls[wall_id] = wall
+        self.wall_frames[wall_id] = frame
+        self._wall_thickness[wall_id] = float(thickness)
+        return wall
+
+    def add_opening(self, wall_id: str, kind: str, u_min: float, u_max: float, v_min: float,
+                    v_max: float, *, fill: bool = True, name: str | None = None) -> tuple[Any, Any | None]:
+        """An IfcOpeningElement through the wall, filled by an IfcDoor/IfcWindow if ``fill``."""
+        f = self.file
+        wall = self.walls[wall_id]
+        frame = self.wall_frames[wall_id]
+        t = self._wall_thickness[wall_id]
+        w, h = float(u_max - u_min), float(v_max - v_min)
+        opening = ifcopenshell.api.root.create_entity(f, ifc_class="IfcOpeningElement",
+                                                      predefined_type="OPENING",
+                                                      name=name or f"{kind} opening in {wall_id}")
+        local = np.eye(4)
+        local[:3, 3] = [float(u_min), 0.0, float(v_min)]
+        opening.ObjectPlacement = self._placement(wall.ObjectPlacement, local)
+        y0 = (-OPENING_CLEARANCE_M) if face_sign(frame) > 0 else (-t - OPENING_CLEARANCE_M)
+        self._assign_body(opening, self._box_representation(w, t + 2 * OPENING_CLEARANCE_M, h, (0.0, y0, 0.0)))
+        ifcopenshell.api.feature.add_feature(f, feature=opening, element=wall)
+        if not fill:
+            return opening, None
+        cls = "IfcWindow" if kind == "window" else "IfcDoor"
+        filling = self._new_contained(cls, cls[3:].upper(), f"{kind} in {wall_id}")
+        filling.OverallWidth, filling.OverallHeight = w, h
+        filling.ObjectPlacement = self._placement(opening.ObjectPlacement, np.eye(4))
+        leaf = min(DOOR_LEAF_M, t)
+        yc = (t / 2 if face_sign(frame) > 0 else -t / 2) - leaf / 2
+        self._assign_body(filling, self._box_representation(w, leaf, h, (0.0, yc, 0.0)))
+        ifcopenshell.api.feature.add_filling(f, opening=opening, element=filling)
+        return opening, filling
+
+    # -- secondary components ------------------------------------------------------
+
+    def resolve_typing(self, typing: ClassTyping) -> tuple[str, str | None, str | None]:
+        """(IFC class, PredefinedType, ObjectType) of a class in this schema.
+
+        A class missing from the schema (IfcSign in IFC4) becomes IfcBuildingElementProxy
+        USERDEFINED with the ObjectType; a predefined type missing from the class's enum
+        becomes USERDEFINED with that name as ObjectType.
+        """
+        cls, pre, obj = typing.ifc_class, typing.predefined_type, typing.object_type
+        if not self._has_entity(cls) or not self._has_entity(cls + "Type"):
+            label = obj or pre or cls.removeprefix("Ifc").upper()
+            return "IfcBuildingElementProxy", "USERDEFINED", label
+        items = _enum_items(self._schema_def, cls + "TypeEnum")
+        if pre is not None and items and pre not in items:
+            return cls, "USERDEFINED", obj or pre
+        if pre == "USERDEFINED" and not obj:
+            obj = typing.class_id.upper()
+        return cls, pre, obj
+
+    def type_for(self, typing: ClassTyping) -> Any:
+        """The one type object of a class (created on first use)."""
+        if typing.class_id in self._types:
+            return self._types[typing.class_id]
+        cls, pre, obj = self.resolve_typing(typing)
+        t = ifcopenshell.api.root.create_entity(self.file, ifc_class=cls + "Type", predefined_type=pre,
+                                                name=typing.name)
+        t.Tag = typing.class_id
+        t.Description = f"sbsc library class {typing.class_id}"
+        if obj:
+            t.ElementType = obj
+        self._types[typing.class_id] = t
+        return t
+
+    def typing_of(self, class_id: str, width_m: float = 0.1, height_m: float = 0.1) -> ClassTyping:
+        """The library typing of a class, or a proxy typing for a class the library lacks."""
+        if class_id in self.typings:
+            return self.typings[class_id]
+        t = ClassTyping(class_id, class_id, "IfcBuildingElementProxy", "USERDEFINED", class_id.upper(),
+                        float(width_m), float(height_m), DEFAULT_DEPTH_M)
+        self.typings[class_id] = t
+        return t
+
+    def add_component(self, class_id: str, position: np.ndarray, *, wall_id: str | None = None,
+                      normal: np.ndarray | None = None, name: str | None = None, tag: str | None = None,
+                      width_m: float | None = None, height_m: float | None = None,
+                      psets: dict[str, dict[str, Any]] | None = None) -> Any:
+        """One secondary component, its local origin at ``position`` (footprint centre on the
+        wall plane), its body a box footprint x depth standing out into the room."""
+        f = self.file
+        typing = self.typing_of(class_id, width_m or 0.1, height_m or 0.1)
+        cls, pre, obj = self.resolve_typing(typing)
+        element = self._new_contained(cls, pre, name or typing.name)
+        if tag:
+            element.Tag = tag
+        position = np.asarray(position, dtype=np.float64)
+        wall = self.walls.get(wall_id) if wall_id else None
+        if wall is not None:
+            frame = self.wall_frames[wall_id]
+            m = wall_matrix(frame)
+            local = np.eye(4)
+            local[:3, 3] = m[:3, :3].T @ (position - m[:3, 3])
+            element.ObjectPlacement = self._placement(wall.ObjectPlacement, local)
+            into_room = -face_sign(frame)  # local Y of the room side
+        else:
+            m = np.eye(4)
+            if normal is not None and np.linalg.norm(np.asarray(normal)[:2]) > 1e-6:
+                n = np.array([normal[0], normal[1], 0.0]) / np.linalg.norm(normal[:2])
+                m[:3, 0], m[:3, 1] = np.cross(n, [0.0, 0.0, 1.0]), -n
+            m[:3, 3] = position
+            element.ObjectPlacement = self._placement(self.storey.ObjectPlacement,
+                                                      np.linalg.inv(self._storey_matrix) @ m)
+            into_room = -1.0
+        w, h, d = typing.width_m, typing.height_m, typing.depth_m
+        y0 = -d if into_room < 0 else 0.0
+        self._assign_body(element, self._box_representation(w, d, h, (-w / 2, y0, -h / 2)))
+        # assign_type moves the predefined type to the type object (IFC4: the occurrence's
+        # PredefinedType is only used without a type); ObjectType is kept on both.
+        ifcopenshell.api.type.assign_type(f, related_objects=[element], relating_type=self.type_for(typing))
+        if obj:
+            element.ObjectType = obj
+        if wall is not None:
+            ifcopenshell.api.geometry.connect_element(f, relating_element=wall, related_element=element,
+                                                      description="mounted on")
+        for pset_name, props in (psets or {}).items():
+            values = {k: v for k, v in props.items() if v is not None}
+            if values:
+                pset = ifcopenshell.api.pset.add_pset(f, product=element, name=pset_name)
+                ifcopenshell.api.pset.edit_pset(f, pset=pset, properties=values)
+        return element
+
+    # -- approval and finishing -----------------------------------------------------
+
+    def add_approval(self, signoff: dict, related: Iterable[Any]) -> Any:
+        """The sign-off as an IfcApproval (Status APPROVED) given by its person, associated
+        with the project and ``related`` objects."""
+        f = self.file
+        by = str(signoff.get("by") or "unknown")
+        person = ifcopenshell.api.owner.add_person(f, identification=by, family_name=by, given_name=None)
+        counts = signoff.get("counts") or {}
+        qualifier = "; ".join(f"{k}={v}" for k, v in sorted(counts.items())) if isinstance(counts, dict) else str(counts)
+        approval = f.createIfcApproval(
+            Identifier="sbsc-signoff", Name="Sign-off of recognized secondary components",
+            Description=str(signoff.get("comment") or "") or None,
+            TimeOfApproval=str(signoff.get("at")) if signoff.get("at") else None,
+            Status="APPROVED", Level=None, Qualifier=qualifier or None,
+            RequestingApproval=None, GivingApproval=person)
+        f.createIfcRelAssociatesApproval(ifcopenshell.guid.new(), None, "sign-off", None,
+                                         [self.project, *related], approval)
+        return approval
+
+    def finish(self) -> ifcopenshell.file:
+        return self.file
+
+
+# --------------------------------------------------------------------------- openings
+
+
+def _same_opening(a: dict, fa: WallFrame, b: dict, fb: WallFrame, tol: float = 0.15) -> bool:
+    """Two openings on opposite faces that are one hole through a partition."""
+    if a.get("kind") != b.get("kind") or float(np.dot(fa.normal, fb.normal)) > -0.97:
+        return False
+    ca = fa.to_world((a["u_min"] + a["u_max"]) / 2, (a["v_min"] + a["v_max"]) / 2)
+    cb = fb.to_world((b["u_min"] + b["u_max"]) / 2, (b["v_min"] + b["v_max"]) / 2)
+    lateral = (ca - cb) - np.dot(ca - cb, fa.normal) * fa.normal
+    return (np.linalg.norm(lateral) < tol and abs(float(np.dot(ca - cb, fa.normal))) <= PARTNER_MAX_GAP_M
+            and abs((a["u_max"] - a["u_min"]) - (b["u_max"] - b["u_min"])) < tol)
+
+
+def add_walls_and_openings(builder: IfcModelBuilder, walls: dict[str, WallFrame], openings: list[dict]) -> None:
+    """Walls (thickness from partner faces) and their openings; one filling per hole."""
+    thickness = wall_thicknesses(walls)
+    for wid, frame in walls.items():
+        builder.add_wall(wid, frame, thickness[wid])
+    filled: list[dict] = []
+    for o in openings:
+        frame = walls[o["wall"]]
+        twin = any(_same_opening(o, frame, p, walls[p["wall"]]) for p in filled)
+        builder.add_opening(o["wall"], str(o.get("kind", "door")), o["u_min"], o["u_max"],
+                            o["v_min"], o["v_max"], fill=not twin)
+        if not twin:
+            filled.append(o)
+
+
+def storey_elevation(walls: dict[str, WallFrame]) -> float:
+    return float(min(f.origin[2] for f in walls.values())) if walls else 0.0
+
+
+# --------------------------------------------------------------------------- export
+
+
+def _recognition_pset(det: dict) -> dict[str, Any]:
+    review = det.get("review") if isinstance(det.get("review"), dict) else {}
+    def num(key: str) -> float | None:
+        v = det.get(key)
+        return float(v) if isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) else None
+    return {
+        "Class": det["class"], "DetectionId": str(det["id"]) if det.get("id") is not None else None,
+        "Wall": det.get("wall"), "U": num("u"), "V": num("v"),
+        "Alpha": num("alpha"), "RhoDepth": num("rho_depth"), "RhoColour": num("rho_colour"),
+        "Source": det.get("source"), "ReviewStatus": review_status(det),
+        "ReviewedBy": str(review["by"]) if review.get("by") else None,
+        "ReviewedAt": str(review["at"]) if review.get("at") else None,
+        "ReviewVersion": int(review["version"]) if isinstance(review.get("version"), int) else None,
+    }
+
+
+def selected_detections(detections: list[dict], accepted_only: bool) -> list[dict]:
+    """Accepted only, or everything not rejected (pending ones included)."""
+    keep = ("accepted",) if accepted_only else ("accepted", "pending")
+    return [d for d in detections if review_status(d) in keep]
+
+
+def export_ifc(document: dict, *, library: ModelLibrary | None = None, schema: str = "IFC4",
+               accepted_only: bool = False, signoff: dict | None = None,
+               typings: dict[str, ClassTyping] | None = None) -> ifcopenshell.file:
+    """The as-is IFC model of a detections document (contract 4).
+
+    Rejected detections are never written; ``accepted_only`` drops pending ones too.
+    ``signoff`` (``{"by", "at", "comment", "counts"}``, default: the document's
+    ``"signoff"``) becomes an IfcApproval.
+    """
+    schema = normalise_schema(schema)
+    doc = parse_detections_document(document)
+    typings = typings if typings is not None else class_typings(library)
+    builder = IfcModelBuilder(schema, project_name="sbsc as-is model", typings=typings,
+                              storey_elevation=storey_elevation(doc.walls),
+                              description="secondary building service components recognized in a scan")
+    add_walls_and_openings(builder, doc.walls, doc.openings)
+    elements = []
+    for det in selected_detections(doc.detections, accepted_only):
+        wall_id = det.get("wall") if det.get("wall") in doc.walls else None
+        label = str(det.get("id") or "")
+        typing = builder.typing_of(det["class"], det.get("width_m") or 0.1, det.get("height_m") or 0.1)
+        elements.append(builder.add_component(
+            det["class"], np.asarray(det["position"], float), wall_id=wall_id,
+            name=f"{typing.name} {label}".strip(), tag=label or None,
+            width_m=det.get("width_m"), height_m=det.get("height_m"),
+            psets={PSET_RECOGNITION: _recognition_pset(det)}))
+    signoff = signoff if signoff is not None else doc.signoff
+    if signoff:
+        builder.add_approval(signoff, elements)
+    return builder.finish()
+
+
+def write_ifc_atomic(model: ifcopenshell.file, out: Path) -> None:
+    """Write ``model`` to ``out`` via a temporary file and an atomic rename."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.partial-", suffix=".ifc", dir=out.parent)
+    os.close(fd)
+    try:
+        model.write(tmp)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def export_ifc_file(detections: Path, out: Path, schema: str = "IFC4", accepted_only: bool = False,
+                    models: Path | None = None) -> None:
+    """``sbsc export-ifc``: read ``detections``, write ``out`` (nothing on error)."""
+    detections = Path(detections)
+    schema = normalise_schema(schema, where="--schema")
+    typings = class_typings(models=Path(models)) if models is not None else class_typings()
+    raw = load_json(detections)
+    parse_detections_document(raw, where=str(detections))
+    model = export_ifc(raw, schema=schema, accepted_only=accepted_only, typings=typings)
+    write_ifc_atomic(model, out)
