@@ -20,13 +20,37 @@ from .errors import InputError
 class SegmentationSettings:
     """Floor, ceiling and walls (paper, section 3.1)."""
 
+    # floor and ceiling: the two maxima of the Z histogram
     z_bin_m: float = 0.02  # Z histogram bin for the floor / ceiling maxima
-    slab_margin_m: float = 0.08  # points this close to floor / ceiling are not wall points
-    xy_cell_m: float = 0.02  # XY grid cell for the wall projection image
-    wall_plane_tolerance_m: float = 0.04  # points within this of a wall plane belong to it
+    min_room_height_m: float = 1.8  # the two maxima are at least this far apart
+    min_level_fraction: float = 0.05  # the second maximum holds at least this x the first one
+    histogram_max_points: int = 2_000_000  # the histogram uses a regular subsample of this size
+    slab_margin_m: float = 0.08  # points this close to floor / ceiling are not used to fit walls
+    slab_tolerance_m: float = 0.015  # points this close to floor / ceiling belong to them, not to walls
+    # wall planes, fitted on a subsample of the points between floor and ceiling
+    fit_max_points: int = 6_000_000  # regular subsample of the wall band used for fitting
+    fit_cell_m: float = 0.10  # voxel in which a local plane (normal) is estimated
+    min_cell_points: int = 6  # voxels with fewer points give no normal
+    cell_planarity: float = 0.08  # smallest / middle eigenvalue of a planar voxel at most this
+    max_normal_z: float = 0.2  # |n_z| of a vertical surface at most this
+    angle_bin_deg: float = 0.5  # histogram of normal directions
+    angle_tolerance_deg: float = 4.0  # voxels within this of a dominant direction belong to it
+    offset_bin_m: float = 0.01  # histogram of plane offsets in one direction
+    wall_plane_tolerance_m: float = 0.03  # voxels / points within this of a wall plane belong to it
+    wall_gap_m: float = 1.2  # a plane with no points over a longer stretch is two walls
+    junction_tolerance_m: float = 0.15  # a wall ending this close to another splits it (T-junction)
+    xy_cell_m: float = 0.02  # XY grid of floor / ceiling points that tells the room side
+    facing_probe_m: tuple[float, float] = (0.025, 0.05)  # probed distances in front of / behind a wall
+    min_room_evidence: float = 0.05  # share of a wall's length with floor / ceiling points in front
     min_wall_length_m: float = 0.5
-    min_wall_height_fraction: float = 0.5  # of the floor-to-ceiling height
+    min_wall_height_fraction: float = 0.5  # of the floor-to-ceiling height, covered by the wall's points
+    # points of a wall
     object_depth_m: float = 0.30  # wall points include objects standing out this far
+    behind_depth_m: float = 0.05  # ... and points this far behind the wall plane
+    extent_margin_m: float = 0.6  # points this far beyond a free wall end are still looked at (< wall_gap_m / 2)
+    extent_gap_m: float = 0.3  # a free end is where the wall's points stop for longer than this
+    assign_cell_m: float = 0.25  # XY bucket used to find the points of each wall quickly
+    refit_max_points: int = 50_000  # points used for the final least-squares plane of each wall
 
 
 @dataclass
@@ -35,27 +59,57 @@ class OrthoimageSettings:
 
     pixel_m: float = 0.005
     depth_range_m: tuple[float, float] = (-0.06, 0.30)  # kept signed distances from the plane
+    depth_quantum_m: float = 0.0001  # depth resolution of the per-pixel median
+    fill_gaps_px: int = 3  # no-data pixels with data on every side within this radius are sampling gaps (0: off)
+    fill_min_fraction: float = 0.15  # ... filled when at least this fraction of the window has data
 
 
 @dataclass
 class ColourPrepSettings:
     """Illumination equalisation and highlight restoration (paper, section 3.2)."""
 
-    illumination_sigma_m: float = 0.25  # scale of the smooth illumination field
-    highlight_value: float = 0.92  # HSV value above which a pixel may be a highlight
-    highlight_saturation: float = 0.12
+    cell_m: float = 0.05  # the illumination field is estimated on cells of this size
+    illumination_window_m: float = 0.25  # median window of the field (keeps station steps sharp)
+    wall_depth_tolerance_m: float = 0.006  # cells standing out more than this are objects, not wall
+    chroma_tolerance: float = 0.035  # rg-chromaticity distance of a cell still taken as lit wall
+    min_cell_fraction: float = 0.3  # cells with less data than this fraction are not used
+    highlight_value: float = 0.92  # HSV value above which a pixel may be a specular highlight
+    highlight_saturation: float = 0.12  # ... when its saturation is below this
+    snap_tolerance: float = 0.1  # a pixel within this relative colour error of a nearby cell field takes it
 
 
 @dataclass
 class WallAreaSettings:
     """Visible wall area and openings (paper, section 3.3)."""
 
+    # visible wall area: coherent colour seeds, then segmentation by colour
     seed_window_px: int = 15
-    colour_tolerance: float = 18.0  # Lab distance to the wall colour still counted as wall
+    seed_min_valid: float = 0.8  # share of a seed window that has data
+    seed_colour_std: float = 4.0  # Lab standard deviation inside a coherent seed window at most
+    seed_depth_std_m: float = 0.004  # depth standard deviation inside a seed window at most
+    min_cluster_fraction: float = 0.2  # a seed colour cluster is wall if it holds this share of seeds
+    colour_tolerance: float = 12.0  # Lab distance (CIE76) to the wall colour still counted as wall
+    wall_depth_tolerance_m: float = 0.008  # |depth| of plain wall at most this
+    depth_median_px: int = 5  # median filter of the depth before the wall test
+    # openings: straight lines in colour and depth, rectangles, consistency checks
+    canny_low: float = 40.0  # Canny thresholds on the L channel (0-255 scale)
+    canny_high: float = 100.0
+    depth_step_m: float = 0.01  # depth discontinuity treated as an edge
+    min_line_m: float = 0.25  # shortest straight line used for rectangles
+    line_tolerance_px: int = 2  # an edge this close to a rectangle side supports it
+    min_side_support: float = 0.5  # fraction of each side covered by edges
+    recess_m: float = 0.02  # interior deeper than this behind the wall is "open" (hole, glass)
+    min_open_fraction: float = 0.6  # openings: interior share that is no data or recessed ...
+    min_door_other_fraction: float = 0.85  # ... or, for a closed door, of other colour than the wall
+    max_protruding_fraction: float = 0.15  # interior standing out of the wall (an object) at most
+    ring_m: float = 0.05  # band around a rectangle that must be wall (location consistency)
+    max_ring_open_fraction: float = 0.35
+    door_floor_tolerance_m: float = 0.12  # a door's bottom is at most this above the floor
     door_width_m: tuple[float, float] = (0.6, 2.2)
     door_height_m: tuple[float, float] = (1.8, 2.6)
     window_width_m: tuple[float, float] = (0.4, 3.5)
     window_height_m: tuple[float, float] = (0.4, 2.2)
+    window_min_sill_m: float = 0.15  # a window's bottom is at least this above the floor
 
 
 @dataclass
@@ -63,10 +117,32 @@ class DepthRecognitionSettings:
     """Recognition with geometry (paper, section 4.2)."""
 
     mu_d: float = 0.75  # cross-correlation threshold
-    min_relief_m: float = 0.004  # depth step treated as an edge
-    roi_min_px: int = 6
+    min_relief_m: float = 0.004  # depth step treated as an edge / relief region
+    canny_sigma_px: float = 1.0  # Gaussian smoothing of J_D before Canny
+    canny_high_fraction: float = 0.3  # Canny high threshold = this x min_relief_m per pixel
+    canny_low_ratio: float = 0.5  # Canny low threshold = this x the high one
+    noise_k: float = 4.0  # thresholds are at least this many robust sigmas of the wall's depth noise
+    noise_window_m: float = 0.01  # pixels this close to the plane are plain wall for the noise estimate
+    roi_min_px: int = 6  # RoIs whose longer side is shorter than this are noise
     roi_merge_overlap: float = 0.0  # RoIs overlapping by more than this are clustered
-    search_margin_px: int = 6  # extra pixels around a RoI searched by the correlation
+    roi_merge_gap_px: int = 2  # ... and so are RoIs closer than this
+    search_margin_px: int = 6  # a match's centre may lie this far outside its RoI
+    template_pad_px: int = 4  # wall-plane border added around each depth model
+    match_sigma_px: float = 1.0  # J_D and the models are both smoothed by this before correlating
+    min_template_relief_m: float = 0.002  # models flatter than this are not matched in depth
+    gain_range: tuple[float, float] = (0.5, 2.0)  # accepted scene / model relief amplitude ratio
+    rotations: tuple[int, ...] = (0, 90, 180, 270)  # in-plane model rotations tried (degrees)
+    rotation_margin: float = 0.05  # a rotated match must correlate this much better than upright
+    max_peaks_per_roi: int = 4  # instances of one class one RoI may hold
+    isolation_gap_px: int = 2  # side strips checked for relief start this far outside a match
+    isolation_width_px: int = 3  # ... and are this wide
+    isolation_relief_fraction: float = 0.5  # relief above this x the model's (median) counts
+    isolation_max_occupancy: float = 0.5  # a side strip with more relief: part of something larger
+    nms_overlap: float = 0.3  # same-class matches overlapping more than this are one match
+    refit_plane: bool = True  # remove a residual plane fitted to the visible wall
+    gap_fill_sigma_px: float = 1.0  # sampling gaps are filled by a normalised Gaussian of this size
+    gap_fill_min_weight: float = 0.3  # ... where known neighbours weigh at least this much
+    median_px: int = 3  # median filter of J_D against speckle (3 or 5; other values: off)
 
 
 @dataclass
@@ -74,9 +150,35 @@ class ColourRecognitionSettings:
     """Recognition with colour (paper, section 4.3)."""
 
     mu_c: float = 0.2  # minimum-distance classifier threshold (normalised descriptors)
-    threshold_offset: float = 25.0  # intensity offset from the wall area's mean
-    roi_min_px: int = 6
-    glcm_levels: int = 8
+    threshold_offset: float = 12.0  # minimum colour distance (CIE76 delta E) from the wall colour
+    noise_k: float = 4.0  # ... raised to this many robust sigmas of the wall's own colour noise
+    background_window_m: float = 0.6  # window of the local wall-colour estimate
+    flat_wall_m: float = 0.004  # without a usable wall area, pixels this flat count as wall
+    median_px: int = 3  # median filter of the colour image before thresholding
+    gap_fill_sigma_px: float = 1.0  # sampling gaps are filled by a normalised Gaussian of this size
+    gap_fill_min_weight: float = 0.3  # ... where known neighbours weigh at least this much
+    roi_min_px: int = 6  # RoIs whose longer side is shorter than this are noise
+    roi_min_area_px: int = 12  # ... and so are RoIs with fewer foreground pixels
+    roi_merge_gap_px: int = 2  # RoIs closer than this are clustered
+    max_roi_factor: float = 1.6  # RoIs larger than this x the largest footprint are refused
+    glcm_levels: int = 8  # grey levels of the co-occurrence matrix (equation 14)
+    cluster_merge_s: float = 0.05  # three-class clustering: S classes closer than this are one
+    cluster_merge_ab: float = 4.0  # ... and a / b classes closer than this (Lab units)
+    segment_cap: int = 10  # v5 (number of s2 segments in s1) normalised by this count
+    ab_scale: float = 100.0  # Lab a / b units mapped to 1 in the normalised descriptors
+    size_tolerance: float = 0.5  # relative difference allowed between RoI and model sizes
+    nearest_only: bool = True  # a RoI is a candidate of its nearest prototype only
+    depth_check_gain: float = 0.3  # a class with relief needs this much of it in the scan (0: off)
+    depth_check_min_relief_m: float = 0.008  # ... checked only for models with this much relief
+    train_blurs_px: tuple[float, ...] = (0.5, 1.0)  # blurs of the library views when learning
+    train_noise_samples: int = 2  # noisy copies per view and blur (noise measured on the wall)
+    train_threshold_factors: tuple[float, ...] = (0.8, 1.0, 1.25)  # foreground-threshold jitter
+    nearest_sample: bool = True  # rho_C to the nearest training pattern, not only to the mean
+    prototype_colour_step: float = 4.0  # walls whose colours round alike share learnt prototypes
+    refine_position: bool = True  # place the footprint by colour cross-correlation in the RoI
+    search_margin_px: int = 6  # a match's centre may lie this far outside its RoI
+    rotations: tuple[int, ...] = (0, 90, 180, 270)  # in-plane rotations tried when placing
+    rotation_margin: float = 0.05  # a rotated placement must correlate this much better
 
 
 @dataclass
@@ -86,6 +188,7 @@ class ConsensusSettings:
     exclusive_alpha: float = 0.5  # equation 15, case III
     min_alpha: float = 0.0  # cells at or below this are never selected
     suppress_overlap: float = 0.5  # cross-class suppression: max overlap of two accepted objects
+    prefer_depth: bool = True  # at equal alpha: both > depth only > colour only, then goodness
 
 
 @dataclass

@@ -221,6 +221,7 @@ class Candidate:
     centre: tuple[float, float]
     score: float
     roi: Box | None = None  # the RoI the match came from
+    rotation_deg: int = 0  # the model's in-plane rotation at the match (0, 90, 180, 270; counter-clockwise)
 
 
 @dataclass

@@ -1,0 +1,180 @@
+"""The 4D orthoimage J_CD of a wall: colour and depth at 5 mm (paper, section 3.2).
+
+Each point of the wall is expressed in the wall frame (u along the wall, v up, d the
+signed distance from the fitted wall plane, positive into the room) and binned into
+pixels of ``pixel_m``; row 0 is the top of the wall (see :mod:`sbsc_core.types`). Several
+points in one pixel are combined robustly: the depth is their median, the colour that of
+the point with the median luminance (a real measured colour; bright or dark outliers such
+as highlights or mixed edge returns are rejected). Both medians are computed for all
+pixels at once by sorting one packed integer key per point (pixel number, then the
+quantised value) - no Python loop over points.
+
+Pixels without points have ``mask`` False, depth NaN and colour 0: holes stay holes. Only
+sampling gaps - no-data pixels with data on every side within ``fill_gaps_px`` - are
+filled with the mean of their neighbours, so that a scan somewhat coarser than the pixel
+does not look like a sieve; the edges of openings and shadows do not move.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from .settings import OrthoimageSettings
+from .types import Orthoimage, PointCloud, Wall, WallFrame
+
+__all__ = ["build_orthoimage", "wall_coordinates", "rasterize_median", "fill_sampling_gaps"]
+
+
+def build_orthoimage(cloud: PointCloud, wall: Wall, settings: OrthoimageSettings | None = None) -> Orthoimage:
+    """Orthoimage J_CD of ``wall`` from its points ``wall.point_index`` of ``cloud``."""
+    s = settings or OrthoimageSettings()
+    fr = wall.frame
+    px = float(s.pixel_m)
+    h = max(1, math.ceil(fr.height_m / px - 1e-9))
+    w = max(1, math.ceil(fr.width_m / px - 1e-9))
+    idx = np.asarray(wall.point_index)
+    uvd = wall_coordinates(cloud.xyz[idx], fr, np.asarray(cloud.origin, np.float64))
+    d0, d1 = s.depth_range_m
+    col = np.floor(uvd[:, 0] * np.float32(1.0 / px)).astype(np.int32)
+    row = np.floor((np.float32(fr.height_m) - uvd[:, 1]) * np.float32(1.0 / px)).astype(np.int32)
+    keep = (col >= 0) & (col < w) & (row >= 0) & (row < h) & (uvd[:, 2] >= d0) & (uvd[:, 2] <= d1)
+    pixel = row[keep].astype(np.int64)
+    pixel *= w
+    pixel += col[keep]
+    del col, row
+    depth_pts = uvd[keep, 2]
+    del uvd
+    depth, colour, mask = rasterize_median(pixel, depth_pts, cloud.rgb[idx[keep]], (h, w), (d0, d1),
+                                           s.depth_quantum_m)
+    if s.fill_gaps_px > 0:
+        depth, colour, mask = fill_sampling_gaps(depth, colour, mask, s.fill_gaps_px, s.fill_min_fraction)
+    return Orthoimage(wall_id=wall.id, frame=fr, pixel_m=px, colour=colour, depth=depth, mask=mask)
+
+
+def wall_coordinates(xyz: np.ndarray, frame: WallFrame, cloud_origin: np.ndarray | None = None) -> np.ndarray:
+    """(N, 3) float32 columns u, v, d of float32 points given relative to ``cloud_origin``."""
+    o = frame.origin - (np.zeros(3) if cloud_origin is None else np.asarray(cloud_origin, np.float64))
+    xyz = np.asarray(xyz, np.float32)
+    out = np.empty((len(xyz), 3), np.float32)
+    for k, axis in enumerate((frame.axis_u, frame.axis_v, frame.normal)):
+        a = np.asarray(axis, np.float64)
+        col = xyz[:, 0] * np.float32(a[0])
+        col += xyz[:, 1] * np.float32(a[1])
+        col += xyz[:, 2] * np.float32(a[2])
+        col -= np.float32(o @ a)
+        out[:, k] = col
+    return out
+
+
+def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shape: tuple[int, int],
+                     depth_range: tuple[float, float], quantum: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-pixel median depth and the colour of the point with the median luminance.
+
+    ``pixel`` holds flat pixel numbers (row * width + col) of each point. Returns depth
+    (H, W) float32 with NaN where no point fell, colour (H, W, 3) uint8 with 0 there, and
+    the mask of pixels with data. The median of an even count is the mean of the two middle
+    values; depth is resolved to ``quantum``.
+    """
+    h, w = shape
+    npx = h * w
+    pixel = np.asarray(pixel, np.int64)
+    counts = np.bincount(pixel, minlength=npx)
+    mask = counts > 0
+    depth_img = np.full(npx, np.nan, np.float32)
+    colour = np.zeros((npx, 3), np.uint8)
+    if len(pixel):
+        start = (np.cumsum(counts) - counts)[mask]
+        n = counts[mask]
+        lo_i, hi_i = start + (n - 1) // 2, start + n // 2
+        # depth: sort (pixel, quantised depth) keys
+        nq = int(math.ceil((depth_range[1] - depth_range[0]) / quantum)) + 1
+        q = np.asarray(depth, np.float32) - np.float32(depth_range[0])
+        q *= np.float32(1.0 / quantum)
+        np.rint(q, out=q)
+        np.clip(q, 0, nq - 1, out=q)
+        key = pixel * nq
+        key += q.astype(np.int64)
+        del q
+        key.sort()
+        med = 0.5 * ((key[lo_i] % nq) + (key[hi_i] % nq))
+        depth_img[mask] = (depth_range[0] + med * quantum).astype(np.float32)
+        # colour: that of the point with the median luminance; the colour rides in the sort key
+        packed = rgb[:, 0].astype(np.int64)  # 24 bits r, g, b
+        packed <<= 8
+        packed |= rgb[:, 1]
+        packed <<= 8
+        packed |= rgb[:, 2]
+        luma = rgb[:, 0].astype(np.int64) * 77  # 0..65280, 16 bits
+        luma += rgb[:, 1].astype(np.int64) * 150
+        luma += rgb[:, 2].astype(np.int64) * 29
+        if npx < (1 << 22):
+            key = pixel << 40
+            luma <<= 24
+            key |= luma
+            del luma
+            key |= packed
+            del packed
+            key.sort()
+            c_lo, c_hi = key[lo_i] & 0xFFFFFF, key[hi_i] & 0xFFFFFF
+        else:  # too many pixels to pack: sort indices instead
+            key = pixel * 65536
+            key += luma
+            order = np.argsort(key)
+            c_lo, c_hi = packed[order[lo_i]], packed[order[hi_i]]
+        del key
+        for k, shift in enumerate((16, 8, 0)):
+            colour[mask, k] = ((((c_lo >> shift) & 255) + ((c_hi >> shift) & 255) + 1) // 2).astype(np.uint8)
+    return depth_img.reshape(h, w), colour.reshape(h, w, 3), mask.reshape(h, w)
+
+
+def fill_sampling_gaps(depth: np.ndarray, colour: np.ndarray, mask: np.ndarray, radius: int,
+                       min_fraction: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fill no-data pixels that lie *between* data: sampling gaps, not holes.
+
+    A no-data pixel is filled when each of the four quadrants of its (2r+1)^2 window
+    (a pinwheel split, each touching one axis) holds data and at least ``min_fraction`` of
+    the window has data; the value is the mean of the data in the window. A pixel at the
+    edge of a hole has data on one side only and stays empty, so openings and occlusion
+    shadows keep their size. Returns new arrays.
+    """
+    r = int(radius)
+    if r <= 0 or mask.all() or not mask.any():
+        return depth, colour, mask
+    h, w = mask.shape
+    ii = cv2.integral(np.pad(mask, r).astype(np.uint8), sdepth=cv2.CV_32S)
+
+    def window(r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        """Data count over rows r+r0 .. r+r1, cols c+c0 .. c+c1 (inclusive) for every pixel."""
+        a0, a1, b0, b1 = r + r0, r + r1 + 1, r + c0, r + c1 + 1
+        return ii[a1:a1 + h, b1:b1 + w] - ii[a0:a0 + h, b1:b1 + w] - ii[a1:a1 + h, b0:b0 + w] + ii[a0:a0 + h, b0:b0 + w]
+
+    k = 2 * r + 1
+    total = window(-r, r, -r, r)
+    fill = ~mask & (total >= min_fraction * (k * k - 1))
+    for q in ((-r, -1, -r, 0), (-r, 0, 1, r), (1, r, 0, r), (0, r, -r, -1)):  # a pinwheel of quadrants
+        fill &= window(*q) > 0
+    rows, cols = np.nonzero(fill)
+    if not len(rows):
+        return depth, colour, mask
+
+    def box(table: np.ndarray) -> np.ndarray:
+        """Sums over the whole window at the pixels to fill."""
+        return table[rows + k, cols + k] - table[rows, cols + k] - table[rows + k, cols] + table[rows, cols]
+
+    cnt = total[rows, cols].astype(np.float64)
+    d_ii = cv2.integral(np.pad(np.where(mask, depth, 0.0), r).astype(np.float64), sdepth=cv2.CV_64F)
+    c_ii = cv2.integral(np.pad(np.where(mask[..., None], colour, 0), ((r, r), (r, r), (0, 0))).astype(np.uint8),
+                        sdepth=cv2.CV_32S)
+    dsum = box(d_ii)
+    csum = box(c_ii)
+    depth = depth.copy()
+    colour = colour.copy()
+    mask = mask.copy()
+    depth[rows, cols] = (dsum / cnt).astype(np.float32)
+    colour[rows, cols] = np.clip(np.rint(csum / cnt[:, None]), 0, 255).astype(np.uint8)
+    mask[rows, cols] = True
+    return depth, colour, mask

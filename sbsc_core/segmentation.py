@@ -1,0 +1,607 @@
+"""Floor, ceiling and walls of a registered scan (paper, section 3.1).
+
+The floor and the ceiling are the two maxima of the Z histogram. Walls are found among
+the points between them: a regular subsample is cut into voxels, each voxel holding a
+planar patch gives a local normal (eigen-decomposition of its covariance, accumulated with
+``bincount``); vertical patches are grouped by direction (histogram of normal angles, so
+walls at any angle work) and, within a direction, by plane offset. A wall's room side -
+the side it was scanned from - is the side where the floor and ceiling continue; behind a
+wall face there is the wall's body, with no floor or ceiling points. Each room-facing
+side is therefore its own wall, a partition between two rooms gives two walls with
+opposite normals. Each plane is split along its length where its points stop for more
+than ``wall_gap_m`` and where another wall ends against it from the room side (a
+T-junction between two rooms: collinear walls of neighbouring rooms); a wall's end at a
+junction or a corner is the crossing of the two planes. Every point between floor and
+ceiling is then given to the wall whose plane it is closest to, among the walls whose slab
+(``behind_depth_m`` behind to ``object_depth_m`` in front, over the wall's length) holds
+it, and each wall is refitted by trimmed least squares on its own points; a free end (no
+wall met there) is where the wall's points stop. The frame follows contract 4.
+
+Everything is vectorized with numpy; the whole-floor cost is a few passes over the points
+plus one radix sort of 16-bit bucket numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import NoWallsError
+from .settings import SegmentationSettings
+from .types import PointCloud, Segmentation, Wall, WallFrame
+
+__all__ = ["segment_floor_ceiling_walls", "find_floor_ceiling", "fit_line_2d"]
+
+_DENSE_VOXELS = 1 << 24  # voxel grids up to this size are grouped with bincount, larger ones by sorting
+_CHUNK = 1 << 22  # points handled at once where temporaries would otherwise grow with the wall
+
+
+@dataclass
+class _Segment:
+    """A wall candidate in the cloud's relative XY frame: n . p = s on the plane."""
+
+    n: np.ndarray  # (2,) unit normal, into the room once oriented
+    s: float
+    cells: np.ndarray  # (k, 3) centroids of its planar voxels
+    u0: float = 0.0
+    u1: float = 0.0
+    e0: np.ndarray | None = None  # fixed end points (XY) where the wall meets another one, else free ends
+    e1: np.ndarray | None = None
+
+    @property
+    def t(self) -> np.ndarray:
+        """Horizontal axis u = z x n (to the right seen from the room)."""
+        return np.array([-self.n[1], self.n[0]])
+
+    def extents(self, pad: float) -> None:
+        u = self.cells[:, :2] @ self.t
+        self.u0, self.u1 = float(u.min()) - pad, float(u.max()) + pad
+
+    def flip(self) -> None:
+        self.n, self.s = -self.n, -self.s
+        self.u0, self.u1 = -self.u1, -self.u0
+        self.e0, self.e1 = self.e1, self.e0
+
+    def point(self, u: float, d: float = 0.0) -> np.ndarray:
+        return (self.s + d) * self.n + u * self.t
+
+
+# --------------------------------------------------------------------------- public
+
+
+def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSettings | None = None) -> Segmentation:
+    """Floor and ceiling levels and the walls of ``cloud`` with their frames and points.
+
+    Walls get ids ``W01, W02, ...`` ordered by their centre (north to south, then west to
+    east, in plan) and their direction. Raises :class:`~sbsc_core.errors.NoWallsError`
+    when the cloud has no floor / ceiling pair or no wall.
+    """
+    s = settings or SegmentationSettings()
+    n = len(cloud)
+    if n == 0:
+        raise NoWallsError("no walls found: the scan has no points")
+    xyz = cloud.xyz
+    floor, ceiling = find_floor_ceiling(xyz[:, 2], s)
+    height = ceiling - floor
+
+    # subsample of the wall band for fitting
+    step = max(1, math.ceil(n / (2 * s.fit_max_points)))
+    sample = xyz[::step]
+    zs = sample[:, 2]
+    band = sample[(zs > floor + s.slab_margin_m) & (zs < ceiling - s.slab_margin_m)]
+    if len(band) > s.fit_max_points:
+        band = band[:: math.ceil(len(band) / s.fit_max_points)]
+    cells = _planar_cells(band, s)
+    segs = _wall_planes(cells, floor, height, s)
+    if not segs:
+        raise NoWallsError("no walls found: no vertical plane between floor and ceiling is large enough")
+    slab = sample[(np.abs(zs - floor) < s.slab_tolerance_m) | (np.abs(zs - ceiling) < s.slab_tolerance_m)]
+    segs = _orient(segs, slab[:, :2].astype(np.float64), s)
+    segs = _split_at_junctions(segs, s)
+    _snap_corners(segs, s)
+    segs = [g for g in segs if _big_enough(g, floor, height, s)]
+    if not segs:
+        raise NoWallsError("no walls found: no wall face is long and high enough")
+    del sample, band, slab
+
+    index = _assign_points(xyz, segs, floor + s.slab_tolerance_m, ceiling - s.slab_tolerance_m, s)
+    walls: list[tuple[WallFrame, np.ndarray]] = []
+    for seg, idx in zip(segs, index, strict=True):
+        frame = _final_frame(xyz, idx, seg, floor, height, cloud.origin, s)
+        if frame is not None and frame.width_m >= s.min_wall_length_m:
+            walls.append((frame, idx))
+    if not walls:
+        raise NoWallsError("no walls found: no wall kept its points")
+    walls.sort(key=_order_key)
+    out = [Wall(id=f"W{i + 1:02d}", frame=f, point_index=idx) for i, (f, idx) in enumerate(walls)]
+    z0 = float(cloud.origin[2])
+    return Segmentation(floor_z=floor + z0, ceiling_z=ceiling + z0, walls=out)
+
+
+def find_floor_ceiling(z: np.ndarray, settings: SegmentationSettings | None = None) -> tuple[float, float]:
+    """(floor, ceiling): the two maxima of the Z histogram, at least ``min_room_height_m`` apart.
+
+    Each level is refined as the median Z of the points within 1.5 bins of its maximum.
+    Works in whatever frame ``z`` is given. Raises NoWallsError without two levels.
+    """
+    s = settings or SegmentationSettings()
+    z = np.asarray(z)
+    zs = z[:: max(1, math.ceil(len(z) / s.histogram_max_points))]
+    zs = zs[np.isfinite(zs)].astype(np.float64)
+    if len(zs) == 0:
+        raise NoWallsError("no walls found: the scan has no points")
+    lo, b = float(zs.min()), s.z_bin_m
+    counts = np.bincount(((zs - lo) / b).astype(np.int64)).astype(np.float64)
+    smooth = np.convolve(counts, np.ones(3), mode="same")
+    p1 = int(np.argmax(smooth))
+    sep = int(math.ceil(s.min_room_height_m / b))
+    far = smooth.copy()
+    far[max(0, p1 - sep + 1): p1 + sep] = 0.0
+    p2 = int(np.argmax(far))
+    if far[p2] <= 0 or far[p2] < s.min_level_fraction * smooth[p1]:
+        raise NoWallsError("no walls found: the Z histogram has no floor and ceiling pair "
+                           f"(one level at z = {lo + (p1 + 0.5) * b:.2f} m only)")
+    levels = []
+    for p in sorted((p1, p2)):
+        c = lo + (p + 0.5) * b
+        levels.append(float(np.median(zs[np.abs(zs - c) <= 1.5 * b])))
+    return levels[0], levels[1]
+
+
+def fit_line_2d(xy: np.ndarray, tolerances: tuple[float, ...] = ()) -> tuple[np.ndarray, float]:
+    """Total least-squares line through 2-D points: (unit normal n, offset s) with n . p = s.
+
+    With ``tolerances`` the fit is repeated on the points within each tolerance of the
+    previous line (trimmed least squares; objects on a wall do not pull its plane).
+    """
+    pts = np.asarray(xy, np.float64)
+    n, s = _pca_line(pts)
+    for tol in tolerances:
+        keep = np.abs(pts @ n - s) <= tol
+        if keep.sum() < 3:
+            break
+        n2, s2 = _pca_line(pts[keep])
+        if n2 @ n < 0:
+            n2, s2 = -n2, -s2
+        n, s = n2, s2
+    return n, s
+
+
+# --------------------------------------------------------------------------- planes
+
+
+def _pca_line(pts: np.ndarray) -> tuple[np.ndarray, float]:
+    m = pts.mean(axis=0)
+    q = pts - m
+    w, v = np.linalg.eigh(q.T @ q)
+    n = v[:, 0]
+    return n, float(n @ m)
+
+
+def _planar_cells(p: np.ndarray, s: SegmentationSettings) -> dict[str, np.ndarray]:
+    """Centroid, unit normal and point count of every planar, vertical voxel of ``p``."""
+    empty = {"c": np.zeros((0, 3)), "n": np.zeros((0, 3)), "count": np.zeros(0)}
+    if len(p) == 0:
+        return empty
+    cell = s.fit_cell_m
+    ijk = np.floor(p * np.float32(1.0 / cell)).astype(np.int32)
+    q = p.astype(np.float32) - ijk * np.float32(cell)  # local coordinates in the voxel, 0..cell
+    base = ijk.min(axis=0)
+    dims = (ijk.max(axis=0) - base + 1).astype(np.int64)
+    key = (ijk[:, 0] - base[0]).astype(np.int64) * (dims[1] * dims[2])
+    key += (ijk[:, 1] - base[1]).astype(np.int64) * dims[2]
+    key += ijk[:, 2] - base[2]
+    if int(np.prod(dims)) <= _DENSE_VOXELS:  # linear-time grouping
+        full = np.bincount(key)
+        occupied = np.flatnonzero(full)
+        lut = np.zeros(len(full), np.int64)
+        lut[occupied] = np.arange(len(occupied))
+        inv, cnt = lut[key], full[occupied]
+        del full, lut
+    else:
+        _, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+    del key
+    k = len(cnt)
+    mean = np.stack([np.bincount(inv, q[:, a], k) for a in range(3)], axis=1) / cnt[:, None]
+    cov = np.empty((k, 3, 3))
+    for a in range(3):
+        for b in range(a, 3):
+            cov[:, a, b] = cov[:, b, a] = np.bincount(inv, q[:, a] * q[:, b], k) / cnt - mean[:, a] * mean[:, b]
+    first = np.zeros(k, np.int64)
+    first[inv[::-1]] = np.arange(len(inv))[::-1]
+    centre = mean + ijk[first].astype(np.float64) * cell
+    ok = cnt >= s.min_cell_points
+    w, v = np.linalg.eigh(cov[ok])
+    normal = v[:, :, 0]
+    planar = (w[:, 0] <= s.cell_planarity * w[:, 1]) & (w[:, 1] >= (0.1 * cell) ** 2)
+    vertical = np.abs(normal[:, 2]) <= s.max_normal_z
+    sel = planar & vertical
+    return {"c": centre[ok][sel], "n": normal[sel], "count": cnt[ok][sel].astype(np.float64)}
+
+
+def _min_cells(height: float, s: SegmentationSettings) -> float:
+    """Voxels of the smallest wall we accept (a third of its area, for holes and sparse scans)."""
+    return max(6.0, (s.min_wall_length_m / s.fit_cell_m) * (s.min_wall_height_fraction * height / s.fit_cell_m) / 3)
+
+
+def _wall_planes(cells: dict[str, np.ndarray], floor: float, height: float, s: SegmentationSettings) -> list[_Segment]:
+    """Vertical planes: dominant normal directions, then offset maxima, then runs along u."""
+    c, nrm = cells["c"], cells["n"]
+    if len(c) == 0:
+        return []
+    min_cells = _min_cells(height, s)
+    theta = np.arctan2(nrm[:, 1], nrm[:, 0]) % np.pi
+    nb = int(round(180.0 / s.angle_bin_deg))
+    tol = math.radians(s.angle_tolerance_deg)
+    free = np.ones(len(c), bool)
+    planes: list[tuple[np.ndarray, float]] = []
+    while free.any():
+        h = np.bincount((theta[free] / np.pi * nb).astype(np.int64) % nb, minlength=nb).astype(np.float64)
+        win = max(1, int(round(s.angle_tolerance_deg / s.angle_bin_deg / 2)))
+        hs = sum(np.roll(h, k) for k in range(-win, win + 1))
+        p = int(np.argmax(hs))
+        if hs[p] < min_cells:
+            break
+        th = (p + 0.5) * np.pi / nb
+        for _ in range(2):
+            diff = (theta - th + np.pi / 2) % np.pi - np.pi / 2
+            mem = free & (np.abs(diff) < tol)
+            if not mem.any():
+                break
+            th = th + float(np.mean(diff[mem]))
+        diff = (theta - th + np.pi / 2) % np.pi - np.pi / 2
+        mem = free & (np.abs(diff) < tol)
+        free &= ~mem
+        if mem.sum() < min_cells:
+            continue
+        planes += _offset_planes(c[mem], th, min_cells, s)
+    if not planes:
+        return []
+    # refine each plane on its cells, then give every vertical cell to its nearest plane
+    refined = []
+    for n0, s0 in planes:
+        d = c[:, :2] @ n0 - s0
+        near = (np.abs(d) <= s.wall_plane_tolerance_m) & (np.abs(nrm[:, :2] @ n0) >= math.cos(3 * tol))
+        if near.sum() >= 3:
+            n1, s1 = fit_line_2d(c[near, :2], (s.wall_plane_tolerance_m, s.wall_plane_tolerance_m / 2))
+            if n1 @ n0 < 0:
+                n1, s1 = -n1, -s1
+            refined.append((n1, s1))
+    if not refined:
+        return []
+    ns = np.array([p[0] for p in refined])
+    ss = np.array([p[1] for p in refined])
+    dist = np.abs(c[:, :2] @ ns.T - ss[None, :])  # (cells, planes)
+    aligned = np.abs(nrm[:, :2] @ ns.T) >= math.cos(3 * tol)
+    dist[~aligned] = np.inf
+    best = np.argmin(dist, axis=1)
+    ok = dist[np.arange(len(c)), best] <= s.wall_plane_tolerance_m
+    segs: list[_Segment] = []
+    for k in range(len(refined)):
+        mine = c[ok & (best == k)]
+        if len(mine) < min_cells:
+            continue
+        seg = _Segment(ns[k], float(ss[k]), mine)
+        segs += _runs(seg, s)
+    return [g for g in segs if _big_enough(g, floor, height, s)]
+
+
+def _offset_planes(c: np.ndarray, th: float, min_cells: float, s: SegmentationSettings
+                   ) -> list[tuple[np.ndarray, float]]:
+    """Maxima of the offset histogram of the cells of one direction: (normal, offset) each."""
+    n0 = np.array([math.cos(th), math.sin(th)])
+    off = c[:, :2] @ n0
+    lo, b = float(off.min()), s.offset_bin_m
+    idx = ((off - lo) / b).astype(np.int64)
+    h = np.bincount(idx).astype(np.float64)
+    win = max(1, int(round(s.wall_plane_tolerance_m / 2 / b)))
+    hs = np.convolve(h, np.ones(2 * win + 1), mode="same")
+    out = []
+    while True:
+        p = int(np.argmax(hs))
+        if hs[p] < min_cells:
+            break
+        centre = float(np.median(off[np.abs(idx - p) <= win]))  # the window holds hs[p] > 0 cells
+        out.append((n0, float(np.median(off[np.abs(off - centre) <= win * b]))))
+        hs[max(0, p - 2 * win): p + 2 * win + 1] = 0.0
+    return out
+
+
+def _runs(seg: _Segment, s: SegmentationSettings) -> list[_Segment]:
+    """Split a plane where its cells stop for more than ``wall_gap_m`` along u."""
+    u = seg.cells[:, :2] @ seg.t
+    order = np.argsort(u)
+    cuts = np.flatnonzero(np.diff(u[order]) > s.wall_gap_m) + 1
+    out = []
+    for part in np.split(order, cuts):
+        g = _Segment(seg.n.copy(), seg.s, seg.cells[part])
+        g.extents(s.fit_cell_m / 2)
+        out.append(g)
+    return out
+
+
+def _big_enough(g: _Segment, floor: float, height: float, s: SegmentationSettings) -> bool:
+    if len(g.cells) == 0 or g.u1 - g.u0 < s.min_wall_length_m:
+        return False
+    layers = np.unique(np.floor((g.cells[:, 2] - floor) / s.fit_cell_m))
+    return len(layers) * s.fit_cell_m >= s.min_wall_height_fraction * height
+
+
+# --------------------------------------------------------------------------- room side
+
+
+def _orient(segs: list[_Segment], slab_xy: np.ndarray, s: SegmentationSettings) -> list[_Segment]:
+    """Turn each normal towards the side where floor / ceiling points continue (the room).
+
+    A plane with no floor or ceiling in front of it over at least ``min_room_evidence`` of
+    its length (something seen through a door or a window, outside the scanned rooms) is
+    dropped; when the scan has no floor / ceiling points at all, walls face its middle.
+    """
+    kept = []
+    if len(slab_xy) == 0:
+        centre = np.mean([g.cells[:, :2].mean(axis=0) for g in segs], axis=0)
+        occ = None
+    else:
+        cell = s.xy_cell_m
+        lo = slab_xy.min(axis=0) - cell
+        ij = ((slab_xy - lo) / cell).astype(np.int64)
+        shape = tuple(ij.max(axis=0) + 2)
+        occ = np.zeros(shape, bool)
+        occ[ij[:, 0], ij[:, 1]] = True
+        centre = slab_xy.mean(axis=0)
+    probes = np.linspace(s.facing_probe_m[0], s.facing_probe_m[1], 4)
+    for g in segs:
+        if occ is None:  # nothing but walls: face the middle of the scan
+            if float(centre @ g.n - g.s) < 0:
+                g.flip()
+            kept.append(g)
+            continue
+        u = np.arange(g.u0, g.u1, s.xy_cell_m)
+        seen = []
+        for sign in (1.0, -1.0):
+            hit = np.zeros(len(u), bool)
+            for d in probes:
+                pts = (g.s + sign * d) * g.n[None, :] + u[:, None] * g.t[None, :]
+                ij = np.floor((pts - lo) / s.xy_cell_m).astype(np.int64)
+                inside = (ij >= 0).all(axis=1) & (ij[:, 0] < occ.shape[0]) & (ij[:, 1] < occ.shape[1])
+                hit[inside] |= occ[ij[inside, 0], ij[inside, 1]]
+            seen.append(float(hit.mean()) if len(u) else 0.0)
+        if max(seen) < s.min_room_evidence:
+            continue
+        if seen[1] > seen[0]:
+            g.flip()
+        kept.append(g)
+    return kept
+
+
+def _split_at_junctions(segs: list[_Segment], s: SegmentationSettings) -> list[_Segment]:
+    """Split a wall where another wall ends against it from the room side (T-junction).
+
+    The pieces end exactly on the other wall's plane (the voxels next to a junction are
+    not planar, so the voxel extents stop short of it).
+    """
+    tol = s.junction_tolerance_m
+    reach = tol + s.fit_cell_m  # voxel extents stop short of a junction
+    out = []
+    for i, g in enumerate(segs):
+        cuts = []
+        for j, h in enumerate(segs):
+            if i == j or abs(float(g.n @ h.n)) > math.cos(math.radians(30)):
+                continue
+            ends = [h.point(h.u0), h.point(h.u1)]
+            for e, other in ((ends[0], ends[1]), (ends[1], ends[0])):
+                d_end, d_other = float(e @ g.n - g.s), float(other @ g.n - g.s)
+                if abs(d_end) <= reach and d_other > reach:
+                    u = _crossing(g, h)
+                    if g.u0 + tol < u < g.u1 - tol:
+                        cuts.append(u)
+        if not cuts:
+            out.append(g)
+            continue
+        cuts = np.sort(cuts)
+        u = g.cells[:, :2] @ g.t
+        piece = np.searchsorted(cuts, u)
+        for k in np.unique(piece):
+            h = _Segment(g.n.copy(), g.s, g.cells[piece == k], e0=g.e0, e1=g.e1)
+            h.extents(s.fit_cell_m / 2)
+            if k > 0:
+                h.u0 = float(cuts[k - 1])
+                h.e0 = h.point(h.u0)
+            if k < len(cuts):
+                h.u1 = float(cuts[k])
+                h.e1 = h.point(h.u1)
+            out.append(h)
+    return out
+
+
+def _snap_corners(segs: list[_Segment], s: SegmentationSettings) -> None:
+    """Move a free wall end onto the plane of a wall of the same room that it meets there.
+
+    Voxel extents stop short of a corner (the corner voxels are not planar, sparse scans
+    leave some voxels without a normal); the end is set to the corner itself.
+    """
+    reach = s.junction_tolerance_m + s.fit_cell_m
+    for i, g in enumerate(segs):
+        for end in (0, 1):
+            if (g.e0, g.e1)[end] is not None:
+                continue
+            u_end = (g.u0, g.u1)[end]
+            best = None
+            for j, h in enumerate(segs):
+                if i == j or abs(float(g.n @ h.n)) > math.cos(math.radians(30)):
+                    continue
+                u = _crossing(g, h)
+                x = g.point(u)
+                uh = float(x @ h.t)
+                if abs(u - u_end) > reach or not h.u0 - reach <= uh <= h.u1 + reach:
+                    continue
+                g_front = float(g.point(0.5 * (g.u0 + g.u1)) @ h.n - h.s) > 0
+                h_front = float(h.point(0.5 * (h.u0 + h.u1)) @ g.n - g.s) > 0
+                near_h_end = min(abs(uh - h.u0), abs(uh - h.u1)) <= reach
+                # inside corner or T (g stands in h's room), or outside corner (both ends meet)
+                if g_front or (not h_front and near_h_end):
+                    if best is None or abs(u - u_end) < abs(best - u_end):
+                        best = u
+            if best is not None:
+                if end == 0 and best < g.u1:
+                    g.u0, g.e0 = best, g.point(best)
+                elif end == 1 and best > g.u0:
+                    g.u1, g.e1 = best, g.point(best)
+
+
+def _crossing(g: _Segment, h: _Segment) -> float:
+    """u along ``g`` where the (non-parallel) plane of ``h`` crosses it."""
+    # points g.point(u) with h.n . p = h.s:  (g.s g.n + u g.t) . h.n = h.s
+    return float((h.s - g.s * (g.n @ h.n)) / (g.t @ h.n))
+
+
+# --------------------------------------------------------------------------- points
+
+
+def _margins(g: _Segment, s: SegmentationSettings) -> tuple[float, float]:
+    """How far beyond each end points are looked at: little at a junction, more at a free end."""
+    fixed = s.wall_plane_tolerance_m
+    return (s.extent_margin_m if g.e0 is None else fixed, s.extent_margin_m if g.e1 is None else fixed)
+
+
+def _region_cells(g: _Segment, s: SegmentationSettings, lo: np.ndarray, nx: int, ny: int) -> np.ndarray:
+    """Bucket numbers (y * nx + x) touched by the wall's slab."""
+    step = s.assign_cell_m / 2
+    m0, m1 = _margins(g, s)
+    us = np.arange(g.u0 - m0, g.u1 + m1 + step, step)
+    ds = np.arange(-s.behind_depth_m, s.object_depth_m + step, step)
+    uu, dd = np.meshgrid(us, ds)
+    pts = (g.s + dd.ravel())[:, None] * g.n[None, :] + uu.ravel()[:, None] * g.t[None, :]
+    ij = np.floor((pts - lo) / s.assign_cell_m).astype(np.int64)
+    ij[:, 0] = np.clip(ij[:, 0], 0, nx - 1)
+    ij[:, 1] = np.clip(ij[:, 1], 0, ny - 1)
+    return np.unique(ij[:, 1] * nx + ij[:, 0])
+
+
+def _band_index(z: np.ndarray, z_lo: float, z_hi: float, chunk: int = 1 << 23) -> np.ndarray:
+    """Indices of the points with z_lo < z < z_hi (int32 when they fit), chunk by chunk."""
+    dtype = np.int32 if len(z) < 2**31 - 1 else np.int64
+    parts = []
+    for a in range(0, len(z), chunk):
+        zc = z[a: a + chunk]
+        parts.append((np.flatnonzero((zc > z_lo) & (zc < z_hi)) + a).astype(dtype))
+    return np.concatenate(parts) if parts else np.zeros(0, dtype)
+
+
+def _bucket(a: np.ndarray, lo: float, cell: float, n: int) -> np.ndarray:
+    """int32 bucket numbers 0..n-1 of float32 coordinates."""
+    t = a - np.float32(lo)
+    t *= np.float32(1.0 / cell)
+    out = t.astype(np.int32)
+    del t
+    np.minimum(out, n - 1, out=out)
+    return out
+
+
+def _assign_points(xyz: np.ndarray, segs: list[_Segment], z_lo: float, z_hi: float,
+                   s: SegmentationSettings) -> list[np.ndarray]:
+    """Indices of the points of each wall: in its slab and nearer to its plane than to any other's."""
+    band = _band_index(xyz[:, 2], z_lo, z_hi)
+    if len(band) == 0:
+        return [np.zeros(0, np.int64) for _ in segs]
+    x = xyz[band, 0]
+    y = xyz[band, 1]
+    cell = s.assign_cell_m
+    lo = np.array([float(x.min()), float(y.min())])
+    nx = int((float(x.max()) - lo[0]) / cell) + 1
+    ny = int((float(y.max()) - lo[1]) / cell) + 1
+    key = _bucket(x, lo[0], cell, nx)
+    key += _bucket(y, lo[1], cell, ny) * np.int32(nx)  # nx * ny buckets: far below 2**31
+    regions = [_region_cells(g, s, lo, nx, ny) for g in segs]
+    touched = np.unique(np.concatenate(regions))
+    lut = np.zeros(nx * ny, np.int32)
+    lut[touched] = np.arange(1, len(touched) + 1, dtype=np.int32)
+    bucket = lut[key]
+    del key
+    if len(touched) < 65535:
+        bucket = bucket.astype(np.uint16)  # radix sort
+    order = np.argsort(bucket, kind="stable")
+    if len(band) < 2**31 - 1:
+        order = order.astype(np.int32)
+    starts = np.concatenate([[0], np.cumsum(np.bincount(bucket, minlength=len(touched) + 1))])
+    del bucket
+    best = np.full(len(band), np.inf, np.float32)
+    owner = np.full(len(band), -1, np.int16 if len(segs) < 32767 else np.int32)
+    for w, (g, cells) in enumerate(zip(segs, regions, strict=True)):
+        ids = lut[cells]
+        every = np.concatenate([order[starts[b]: starts[b + 1]] for b in ids])
+        m0, m1 = _margins(g, s)
+        for a in range(0, len(every), _CHUNK):  # bounded temporaries on long walls
+            cand = every[a: a + _CHUNK]
+            px, py = x[cand], y[cand]
+            d = px * np.float32(g.n[0]) + py * np.float32(g.n[1]) - np.float32(g.s)
+            u = px * np.float32(g.t[0]) + py * np.float32(g.t[1])
+            del px, py
+            ok = (d >= -s.behind_depth_m) & (d <= s.object_depth_m) & (u >= g.u0 - m0) & (u <= g.u1 + m1)
+            cand = cand[ok]
+            ad = np.abs(d[ok])
+            better = ad < best[cand]
+            best[cand[better]] = ad[better]
+            owner[cand[better]] = w
+    del best, order, x, y
+    grouped = np.argsort(owner, kind="stable")
+    bounds = np.concatenate([[0], np.cumsum(np.bincount(owner.astype(np.int64) + 1, minlength=len(segs) + 1))])
+    return [band[grouped[bounds[w + 1]: bounds[w + 2]]].astype(np.int64) for w in range(len(segs))]
+
+
+def _final_frame(xyz: np.ndarray, idx: np.ndarray, g: _Segment, floor: float, height: float,
+                 origin: np.ndarray, s: SegmentationSettings) -> WallFrame | None:
+    """Trimmed least-squares plane on the wall's own points, extents and contract-4 frame."""
+    if len(idx) < 10:
+        return None
+    sub = idx[:: max(1, math.ceil(len(idx) / s.refit_max_points))]
+    xy = xyz[sub, :2].astype(np.float64)
+    tol = s.wall_plane_tolerance_m
+    near = np.abs(xy @ g.n - g.s) <= tol
+    if near.sum() >= 10:
+        n, off = fit_line_2d(xy[near], (tol, tol / 2, tol / 4))
+        if n @ g.n < 0:
+            n, off = -n, -off
+    else:
+        n, off = g.n, g.s
+    t = np.array([-n[1], n[0]])
+    x, y = xyz[idx, 0], xyz[idx, 1]
+    d = x * np.float32(n[0]) + y * np.float32(n[1]) - np.float32(off)
+    on = np.abs(d) <= tol
+    if on.sum() < 10:
+        return None
+    u = x[on] * np.float32(t[0]) + y[on] * np.float32(t[1])
+    f0, f1 = _free_extent(u, float(g.point(0.5 * (g.u0 + g.u1)) @ t), s.extent_gap_m)
+    u0 = f0 if g.e0 is None else float(g.e0 @ t)
+    u1 = f1 if g.e1 is None else float(g.e1 @ t)
+    if u1 - u0 <= 0:
+        return None
+    corner = np.array([*(off * n + u0 * t), floor]) + origin
+    return WallFrame(origin=corner, axis_u=np.array([t[0], t[1], 0.0]), axis_v=np.array([0.0, 0.0, 1.0]),
+                     normal=np.array([n[0], n[1], 0.0]), width_m=u1 - u0, height_m=height)
+
+
+def _free_extent(u: np.ndarray, centre: float, gap: float) -> tuple[float, float]:
+    """Ends of the run of points along u around ``centre`` with no empty stretch above ``gap``.
+
+    Stray points (beyond a gap) do not stretch the wall.
+    """
+    bin_m = min(0.01, gap / 2)
+    lo = float(u.min())
+    occ = np.bincount(((u - lo) / bin_m).astype(np.int64)) > 0
+    full = np.flatnonzero(occ)
+    k = int(np.clip(np.searchsorted(full, (centre - lo) / bin_m), 0, len(full) - 1))
+    breaks = np.flatnonzero(np.diff(full) * bin_m > gap)
+    first = full[breaks[breaks < k][-1] + 1] if (breaks < k).any() else full[0]
+    last = full[breaks[breaks >= k][0]] if (breaks >= k).any() else full[-1]
+    inside = u[(u >= lo + first * bin_m) & (u < lo + (last + 1) * bin_m)]
+    return float(inside.min()), float(inside.max())
+
+
+def _order_key(item: tuple[WallFrame, np.ndarray]) -> tuple[float, float, float]:
+    f = item[0]
+    centre = f.origin + 0.5 * f.width_m * f.axis_u
+    angle = math.degrees(math.atan2(f.normal[1], f.normal[0])) % 360.0
+    return (-round(float(centre[1]), 1), round(float(centre[0]), 1), round(angle, 1))

@@ -1,0 +1,142 @@
+"""The 4D orthoimage J_CD (paper, section 3.2): depth, colour, holes, robust medians."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from sbsc_core.orthoimage import build_orthoimage, rasterize_median
+from sbsc_core.settings import OrthoimageSettings
+from sbsc_core.types import PointCloud, Wall, WallFrame
+
+WALL_RGB = (200, 190, 180)
+
+
+def _wall(angle_deg: float = 30.0, width: float = 1.2, height: float = 1.0) -> WallFrame:
+    a = math.radians(angle_deg)
+    u = np.array([math.cos(a), math.sin(a), 0.0])
+    n = np.cross(u, [0.0, 0.0, 1.0])
+    return WallFrame(origin=np.array([12.0, -7.0, 3.0]), axis_u=u, axis_v=np.array([0.0, 0.0, 1.0]),
+                     normal=n, width_m=width, height_m=height)
+
+
+def _cloud(frame: WallFrame, uvd: np.ndarray, rgb: np.ndarray, origin=(10.0, -5.0, 2.0)) -> tuple[PointCloud, Wall]:
+    world = frame.to_world(uvd[:, 0], uvd[:, 1], uvd[:, 2])
+    org = np.asarray(origin, float)
+    cloud = PointCloud((world - org).astype(np.float32), rgb.astype(np.uint8), org)
+    return cloud, Wall("W07", frame, np.arange(len(world), dtype=np.int64))
+
+
+def _grid(frame: WallFrame, step: float, rng: np.random.Generator) -> np.ndarray:
+    u, v = np.meshgrid(np.arange(step / 2, frame.width_m, step), np.arange(step / 2, frame.height_m, step))
+    u = u.ravel() + rng.uniform(-0.2, 0.2, u.size) * step
+    v = v.ravel() + rng.uniform(-0.2, 0.2, v.size) * step
+    return np.column_stack([u, v, rng.normal(0.0, 0.001, u.size)])
+
+
+def test_box_depth_at_the_right_place_on_a_rotated_wall() -> None:
+    rng = np.random.default_rng(0)
+    fr = _wall()
+    uvd = _grid(fr, 0.0025, rng)
+    box = (uvd[:, 0] > 0.40) & (uvd[:, 0] < 0.60) & (uvd[:, 1] > 0.30) & (uvd[:, 1] < 0.40)
+    uvd[box, 2] += 0.05
+    rgb = np.tile(WALL_RGB, (len(uvd), 1))
+    rgb[box] = (30, 40, 200)
+    cloud, wall = _cloud(fr, uvd, rgb)
+    o = build_orthoimage(cloud, wall, OrthoimageSettings())
+    assert o.wall_id == "W07" and o.pixel_m == 0.005
+    assert o.shape == (200, 240)
+    assert o.mask.all()
+    high = o.depth > 0.025
+    r, c = np.nonzero(high)
+    u, v = o.pixel_to_uv(r, c)
+    assert u.min() == pytest.approx(0.40, abs=0.006) and u.max() == pytest.approx(0.60, abs=0.006)
+    assert v.min() == pytest.approx(0.30, abs=0.006) and v.max() == pytest.approx(0.40, abs=0.006)
+    assert np.median(o.depth[high]) == pytest.approx(0.05, abs=0.001)
+    assert abs(np.median(o.depth[~high])) < 0.001
+    assert np.all(o.colour[high][:, 2] > 150) and np.all(np.abs(o.colour[~high].astype(int) - WALL_RGB).max(axis=1) <= 1)
+    # row 0 is the top of the wall: the box (v 0.30-0.40 of 1.0 m) is in the lower half
+    assert r.min() > 100
+
+
+def test_holes_stay_holes_sampling_gaps_are_filled() -> None:
+    rng = np.random.default_rng(1)
+    fr = _wall(angle_deg=-75.0)
+    uvd = _grid(fr, 0.004, rng)
+    hole = (uvd[:, 0] > 0.5) & (uvd[:, 0] < 0.6) & (uvd[:, 1] > 0.5) & (uvd[:, 1] < 0.6)
+    gap = (np.abs(uvd[:, 0] - 0.2025) < 0.0025) & (np.abs(uvd[:, 1] - 0.2025) < 0.0025)  # one pixel
+    keep = ~hole & ~gap
+    cloud, wall = _cloud(fr, uvd[keep], np.tile(WALL_RGB, (keep.sum(), 1)))
+    o = build_orthoimage(cloud, wall, OrthoimageSettings())
+    r0, r1 = int((1.0 - 0.6) / 0.005) + 1, int((1.0 - 0.5) / 0.005) - 1
+    c0, c1 = int(0.5 / 0.005) + 1, int(0.6 / 0.005) - 1
+    assert not o.mask[r0:r1, c0:c1].any()
+    assert np.isnan(o.depth[r0:r1, c0:c1]).all()
+    assert (o.colour[r0:r1, c0:c1] == 0).all()
+    # the isolated missing pixel was a sampling gap: filled from its neighbours
+    assert o.mask[int((1.0 - 0.2025) / 0.005), int(0.2025 / 0.005)]
+    off = build_orthoimage(cloud, wall, OrthoimageSettings(fill_gaps_px=0))
+    assert not off.mask[int((1.0 - 0.2025) / 0.005), int(0.2025 / 0.005)]
+    assert off.mask.sum() < o.mask.sum()
+
+
+def test_median_is_robust_to_outliers_and_depth_range_applies() -> None:
+    rng = np.random.default_rng(2)
+    fr = _wall(width=0.5, height=0.5)
+    base = _grid(fr, 0.005, rng)
+    parts, cols = [], []
+    for k in range(5):  # five points per pixel, one of them an outlier
+        p = base.copy()
+        p[:, :2] += rng.uniform(-0.0015, 0.0015, (len(p), 2))
+        c = np.tile(WALL_RGB, (len(p), 1))
+        if k == 0:
+            p[:, 2] += 0.08  # a stray point in front
+            c[:] = (255, 0, 0)
+        parts.append(p)
+        cols.append(c)
+    far = base[:500].copy()
+    far[:, 2] = -0.5  # seen through a hole: outside the depth range, ignored
+    uvd = np.concatenate([*parts, far])
+    rgb = np.concatenate([*cols, np.zeros((500, 3))])
+    cloud, wall = _cloud(fr, uvd, rgb)
+    o = build_orthoimage(cloud, wall, OrthoimageSettings(fill_gaps_px=0))
+    assert o.mask.mean() > 0.95
+    assert np.nanmax(np.abs(o.depth)) < 0.005
+    assert np.abs(o.colour[o.mask].astype(int) - WALL_RGB).max() <= 1
+
+
+def test_rasterize_median_even_counts_and_empty_pixels() -> None:
+    pixel = np.array([0, 0, 3, 3, 3, 5])
+    depth = np.array([0.01, 0.03, 0.0, 0.02, 0.2, -0.01])
+    rgb = np.array([[10, 20, 30], [30, 40, 50], [1, 1, 1], [3, 3, 3], [250, 250, 250], [7, 8, 9]])
+    d, c, m = rasterize_median(pixel, depth, rgb, (2, 3), (-0.06, 0.3), 0.0001)
+    np.testing.assert_array_equal(m.ravel(), [True, False, False, True, False, True])
+    assert d.ravel()[0] == pytest.approx(0.02, abs=1e-4)
+    assert d.ravel()[3] == pytest.approx(0.02, abs=1e-4)
+    assert d.ravel()[5] == pytest.approx(-0.01, abs=1e-4)
+    np.testing.assert_array_equal(c.reshape(-1, 3)[0], [20, 30, 40])
+    np.testing.assert_array_equal(c.reshape(-1, 3)[3], [3, 3, 3])
+    assert np.isnan(d.ravel()[1]) and (c.reshape(-1, 3)[1] == 0).all()
+
+
+def test_sparse_scan_is_filled_but_hole_edges_do_not_move() -> None:
+    """Points every ~2.2 pixels: the sieve is closed, a 30 cm hole keeps its exact edges."""
+    rng = np.random.default_rng(3)
+    fr = _wall(angle_deg=10.0, width=1.0, height=1.0)
+    uvd = _grid(fr, 0.011, rng)
+    hole = (uvd[:, 0] > 0.30) & (uvd[:, 0] < 0.60) & (uvd[:, 1] > 0.30) & (uvd[:, 1] < 0.60)
+    cloud, wall = _cloud(fr, uvd[~hole], np.tile(WALL_RGB, ((~hole).sum(), 1)))
+    raw = build_orthoimage(cloud, wall, OrthoimageSettings(fill_gaps_px=0))
+    o = build_orthoimage(cloud, wall, OrthoimageSettings())
+    outside = np.ones(o.shape, bool)
+    outside[int(0.38 / 0.005):int(0.72 / 0.005), int(0.28 / 0.005):int(0.62 / 0.005)] = False
+    outside[:3] = outside[-3:] = False
+    outside[:, :3] = outside[:, -3:] = False
+    assert raw.mask[outside].mean() < 0.3
+    assert o.mask[outside].mean() > 0.97
+    assert np.nanmax(np.abs(o.depth)) < 0.005
+    # no pixel more than 1.5 cm (= one point spacing) inside the hole got data
+    inner = (slice(int(0.415 / 0.005), int(0.685 / 0.005)), slice(int(0.315 / 0.005), int(0.585 / 0.005)))
+    assert not o.mask[inner].any()
