@@ -1,0 +1,223 @@
+"""The 15 global colour and shape descriptors of a region (paper, section 4.3, equations 1-14).
+
+Given an RGB image and a foreground mask:
+
+* the saturation S (HSV) and the a and b components (CIE Lab) of the foreground are each
+  clustered into three classes ("drastic clustering", 1-D k-means); classes closer than
+  ``cluster_merge_s`` / ``cluster_merge_ab`` are merged (noise is not a colour); the
+  classes are ranked by their number of pixels, so the first and second class
+  prototypes {s1, s2} are the two principal values of the component;
+* v1 = s1, v2 = s2 (eq. 1, 2); v3 = <s1> / <I3S>, the share of foreground pixels in class
+  s1 (eq. 3); v4 = <s2(s1)> / <s1>, the pixels of class s2 contained in the regions of
+  class s1 (a region being the convex hull of a connected part of s1), relative to the
+  pixels of s1 (eq. 4);
+  v5 = the number of connected segments of s2 contained in the regions of s1;
+* v6..v9 and v10..v13 are v1..v4 for the a and b components (eq. 5-12);
+* v14 = 4 pi A / P^2, the roundness of the foreground (eq. 13), measured on its outer
+  contours (polygon through the boundary pixel centres, so that a square gives pi/4 at
+  any scale);
+* v15 = sum p(i, j)^2, the energy of the grey-level co-occurrence matrix (eq. 14) of the
+  foreground's lightness quantised to ``glcm_levels`` levels, over the four directions
+  0, 45, 90 and 135 degrees at distance 1, symmetric, counting only pairs of foreground
+  pixels (so a rotation by 90 degrees leaves it unchanged).
+
+Every descriptor is invariant to rotations by 90 degrees and nearly so to scale.
+
+``normalise_descriptors`` maps a pattern onto comparable unit ranges (S, ratios, roundness
+and energy are already in [0, 1]; a and b are divided by ``ab_scale``; the segment count
+by ``segment_cap``), and ``descriptor_distance`` is the Euclidean distance of two
+normalised patterns divided by sqrt(15), i.e. their root-mean-square difference, the
+rho_C compared with mu_C = 0.2.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from .settings import ColourRecognitionSettings
+
+N_DESCRIPTORS = 15
+NAMES = ("s1", "s2", "s1_share", "s2_in_s1", "s2_segments",
+         "a1", "a2", "a1_share", "a2_in_a1",
+         "b1", "b2", "b1_share", "b2_in_b1",
+         "roundness", "glcm_energy")
+_EIGHT = np.ones((3, 3), bool)
+
+
+def rgb_to_hsv_lab(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(HSV with S, V in [0, 1] and H in degrees, Lab with L in [0, 100]) as float32."""
+    f = np.ascontiguousarray(np.asarray(rgb)[..., :3], dtype=np.float32) / 255.0
+    return cv2.cvtColor(f, cv2.COLOR_RGB2HSV), cv2.cvtColor(f, cv2.COLOR_RGB2Lab)
+
+
+def _nearest(x: np.ndarray, sorted_centres: np.ndarray) -> np.ndarray:
+    """Index of the nearest of ascending ``sorted_centres`` for each value of ``x``."""
+    bounds = 0.5 * (sorted_centres[1:] + sorted_centres[:-1])
+    return np.searchsorted(bounds, x)
+
+
+def kmeans_1d(values: np.ndarray, k: int = 3, merge_tol: float = 0.0, bins: int = 256,
+              iterations: int = 50) -> tuple[np.ndarray, np.ndarray]:
+    """Deterministic 1-D k-means: (centres (m,), labels (n,)), m <= k classes.
+
+    Lloyd's algorithm on a ``bins``-bin histogram of the values (quantile start), then
+    classes whose centres are closer than ``merge_tol`` are merged: a nearly uniform
+    component is one class, not three classes of noise, so the ranking of the classes
+    (and with it the descriptors) does not flip on noise.
+    """
+    x = np.asarray(values, np.float64).ravel()
+    if x.size == 0:
+        return np.zeros(1), np.zeros(0, int)
+    lo, hi = float(x.min()), float(x.max())
+    if hi - lo <= max(merge_tol, 1e-9):
+        return np.array([x.mean()]), np.zeros(x.size, int)
+    hist, edges = np.histogram(x, bins=bins, range=(lo, hi))
+    mids = 0.5 * (edges[:-1] + edges[1:])
+    cdf = np.cumsum(hist) / hist.sum()
+    centres = np.interp((np.arange(k) + 0.5) / k, cdf, mids)
+    for _ in range(iterations):
+        lab = _nearest(mids, centres)
+        w = np.bincount(lab, weights=hist, minlength=k)
+        sums = np.bincount(lab, weights=hist * mids, minlength=k)
+        new = np.sort(np.where(w > 0, sums / np.maximum(w, 1e-12), centres))
+        done = float(np.abs(new - centres).max()) <= 1e-9 * (hi - lo)
+        centres = new
+        if done:
+            break
+    w = np.bincount(_nearest(mids, centres), weights=hist, minlength=k)
+    centres = centres[w > 0]
+    if merge_tol > 0 and centres.size > 1:
+        groups = [[centres[0]]]
+        for c in centres[1:]:
+            if c - groups[-1][-1] < merge_tol:
+                groups[-1].append(c)
+            else:
+                groups.append([c])
+        if len(groups) < centres.size:
+            centres = np.array([np.mean(g) for g in groups])
+    labels = _nearest(x, centres)
+    counts = np.bincount(labels, minlength=centres.size)
+    sums = np.bincount(labels, weights=x, minlength=centres.size)
+    centres = np.where(counts > 0, sums / np.maximum(counts, 1), centres)
+    return centres, labels
+
+
+def hull_regions(mask: np.ndarray) -> np.ndarray:
+    """The regions of ``mask``: each outer contour's convex hull, filled.
+
+    "Contained in the regions of s1" then survives a ring broken by a gap of missing data or
+    noise, which filling holes alone does not.
+    """
+    m = np.ascontiguousarray(mask, dtype=np.uint8)
+    contours, _ = cv2.findContours(m, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    out = np.zeros_like(m)
+    if contours:
+        cv2.fillPoly(out, [cv2.convexHull(c) for c in contours], 1)
+    return (out > 0) | mask
+
+
+def prototype_descriptors(channel: np.ndarray, mask: np.ndarray, with_segments: bool,
+                          merge_tol: float = 0.0) -> list[float]:
+    """v1..v4 (and v5 when ``with_segments``) of one component (equations 1-4).
+
+    With a single class (a uniform component) the second prototype is the first, and
+    no pixel of it lies inside the first's regions.
+    """
+    vals = channel[mask]
+    n = vals.size
+    if n == 0:
+        return [0.0] * (5 if with_segments else 4)
+    centres, labels = kmeans_1d(vals, 3, merge_tol)
+    counts = np.bincount(labels, minlength=centres.size)
+    order = np.lexsort((centres, -counts))  # most populous first, ties by value
+    first = int(order[0])
+    if centres.size < 2:
+        return [float(centres[first]), float(centres[first]), 1.0, 0.0] + ([0.0] if with_segments else [])
+    second = int(order[1])
+    lab_img = np.full(mask.shape, -1, int)
+    lab_img[mask] = labels
+    m1 = lab_img == first
+    n1 = int(m1.sum())
+    m2 = lab_img == second
+    regions1 = hull_regions(m1)
+    inside = m2 & regions1
+    v1 = float(centres[first])
+    v2 = float(centres[second]) if counts[second] > 0 else v1
+    v3 = n1 / n
+    v4 = float(inside.sum()) / n1 if n1 else 0.0
+    out = [v1, v2, v3, v4]
+    if with_segments:
+        _, nseg = ndimage.label(inside, structure=_EIGHT)
+        out.append(float(nseg))
+    return out
+
+
+def roundness(mask: np.ndarray) -> float:
+    """4 pi A / P^2 of the outer contours of ``mask`` (equation 13); 0 for degenerate shapes."""
+    m = np.ascontiguousarray(mask, dtype=np.uint8)
+    contours, _ = cv2.findContours(m, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    area = sum(cv2.contourArea(c) for c in contours)
+    perim = sum(cv2.arcLength(c, True) for c in contours)
+    if perim <= 0 or area <= 0:
+        return 0.0
+    return float(min(1.0, 4.0 * np.pi * area / perim ** 2))
+
+
+def glcm_energy(lightness: np.ndarray, mask: np.ndarray, levels: int) -> float:
+    """Energy of the symmetric 4-direction grey-level co-occurrence matrix (equation 14).
+
+    ``lightness`` is Lab L in [0, 100]; only pairs of two foreground pixels count.
+    """
+    q = np.clip((lightness / 100.0 * levels).astype(int), 0, levels - 1)
+    h, w = q.shape
+    counts = np.zeros(levels * levels, np.float64)
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        r0, r1 = 0, h - dr
+        c0, c1 = max(0, -dc), w - max(0, dc)
+        a = q[r0:r1, c0:c1]
+        b = q[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
+        ok = mask[r0:r1, c0:c1] & mask[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
+        ia, ib = a[ok], b[ok]
+        counts += np.bincount(ia * levels + ib, minlength=levels * levels)
+        counts += np.bincount(ib * levels + ia, minlength=levels * levels)
+    total = counts.sum()
+    if total <= 0:
+        return 1.0
+    p = counts / total
+    return float((p * p).sum())
+
+
+def global_descriptors(rgb: np.ndarray, mask: np.ndarray,
+                       settings: ColourRecognitionSettings | None = None) -> np.ndarray:
+    """The pattern V = (v1, ..., v15) of the foreground ``mask`` of ``rgb`` (equations 1-14)."""
+    s = settings or ColourRecognitionSettings()
+    mask = np.asarray(mask, bool)
+    if mask.shape != rgb.shape[:2]:
+        raise ValueError(f"mask {mask.shape} does not match image {rgb.shape[:2]}")
+    hsv, lab = rgb_to_hsv_lab(rgb)
+    v = prototype_descriptors(hsv[..., 1], mask, True, s.cluster_merge_s)
+    v += prototype_descriptors(lab[..., 1], mask, False, s.cluster_merge_ab)
+    v += prototype_descriptors(lab[..., 2], mask, False, s.cluster_merge_ab)
+    v.append(roundness(mask))
+    v.append(glcm_energy(lab[..., 0], mask, s.glcm_levels) if mask.any() else 0.0)
+    return np.asarray(v, np.float64)
+
+
+def normalise_descriptors(v: np.ndarray, settings: ColourRecognitionSettings | None = None) -> np.ndarray:
+    """Map raw patterns (..., 15) onto unit ranges so that each descriptor weighs alike."""
+    s = settings or ColourRecognitionSettings()
+    out = np.array(v, np.float64, copy=True)
+    out[..., 4] = np.minimum(out[..., 4], s.segment_cap) / s.segment_cap
+    for i in (5, 6, 9, 10):
+        out[..., i] = out[..., i] / s.ab_scale
+    for i in (2, 3, 7, 8, 11, 12, 13, 14):
+        out[..., i] = np.clip(out[..., i], 0.0, 1.0)
+    return out
+
+
+def descriptor_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray | float:
+    """rho_C: RMS difference of normalised patterns (Euclidean / sqrt(15)); broadcasts."""
+    d = np.sqrt(np.sum((np.asarray(a) - np.asarray(b)) ** 2, axis=-1) / N_DESCRIPTORS)
+    return float(d) if np.ndim(d) == 0 else d

@@ -1,0 +1,268 @@
+"""Consensus of depth and colour recognition, and positioning (paper, section 4.4).
+
+For one object class, the candidates {D} (depth) and {C} (colour) fill the Recognition
+Coherence Matrix Psi: one row per depth candidate plus a "none" row, one column per
+colour candidate plus a "none" column. Each cell is the Recognition Coherence Level alpha
+of equation 15:
+
+* (I)   alpha = <B_C u B_D> / <B_CD> when the two footprints intersect: the pixels of
+        their union over the pixels of the box enclosing both (1 for identical boxes);
+* (II)  alpha = 0 when they do not intersect (or lie on different walls);
+* (III) alpha = 0.5 (``exclusive_alpha``) in the "none" row / column: the object was
+        found by one recognizer only.
+
+The decision is iterative (paper, Figure 13): the highest cell is a recognized instance;
+its row and column are removed, except for an exclusive cell (case III), where only that
+cell is set to 0 so the "none" row / column stays available to the other candidates (the
+selected candidate's own row or column is removed as well, so one candidate is never
+counted twice); this stops when Psi is null or the expected number of instances is
+reached. Ties are broken by the recognizers' goodness (below).
+
+The position of an instance is equation 16, c = (rho_D c_D + w_C c_C) / (rho_D + w_C).
+rho_C is a distance (lower is better), so its weight is w_C = 1 - rho_C (in [0.8, 1] for
+accepted candidates with mu_C = 0.2, comparable with rho_D in [0.75, 1]); an exclusive
+detection has the other weight 0, i.e. the candidate's own centre.
+
+``suppress_conflicts`` adds what the paper leaves to the expected counts: when every class
+of the library is searched, one place on a wall holds one object, so of two accepted
+instances (of any classes) whose footprints overlap by more than ``suppress_overlap``
+(intersection over the smaller footprint) only the better one stays, by alpha, then by
+the kind of evidence (with ``prefer_depth``: found in both, then depth only, then colour
+only: at equal alpha the geometry, which is metric and shape-specific, contradicts a
+colour-only class whose depth model did not match there) and then by goodness.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .depth_recognition import box_at, box_overlap
+from .settings import ConsensusSettings
+from .types import Box, Candidate
+
+
+@dataclass
+class ConsensusHit:
+    """One recognized instance of a class after consensus (pixel coordinates of its wall)."""
+
+    class_id: str
+    wall_id: str
+    centre: tuple[float, float]  # (row, col), equation 16
+    alpha: float
+    rho_depth: float | None
+    rho_colour: float | None
+    source: str  # "both" | "depth" | "colour"
+    depth: Candidate | None = None
+    colour: Candidate | None = None
+    box: Box | None = None  # the footprint at ``centre``
+    rotation_deg: int = 0
+
+    @property
+    def goodness(self) -> float:
+        """The recognizers' mean goodness: rho_D and 1 - rho_C (each in [0, 1])."""
+        w = []
+        if self.rho_depth is not None:
+            w.append(max(0.0, self.rho_depth))
+        if self.rho_colour is not None:
+            w.append(max(0.0, 1.0 - self.rho_colour))
+        return float(np.mean(w)) if w else 0.0
+
+
+# At equal alpha, depth evidence (metric, shape-specific) outranks the colour descriptors:
+# a colour-only class whose depth model did not match where depth found another class is
+# contradicted by the geometry, while a depth-only class is merely not salient in colour.
+_SOURCE_PRIORITY = {"both": 2, "depth": 1, "colour": 0}
+
+
+def _weights(d: Candidate | None, c: Candidate | None) -> np.ndarray:
+    """(w_D, w_C) of equation 16: rho_D and 1 - rho_C, 0 for a missing candidate."""
+    w_d = 0.0 if d is None else max(0.0, float(d.score))
+    w_c = 0.0 if c is None else max(0.0, 1.0 - float(c.score))
+    return np.array([w_d, w_c])
+
+
+def coherence_level(b_c: Box, b_d: Box) -> float:
+    """alpha of equation 15, cases I and II, for a colour box ``b_c`` and a depth box ``b_d``."""
+    inter = b_c.intersection(b_d)
+    if inter <= 0:
+        return 0.0
+    union = b_c.area + b_d.area - inter
+    return float(union / b_c.union_box(b_d).area)
+
+
+def coherence_matrix(depth: list[Candidate], colour: list[Candidate],
+                     settings: ConsensusSettings) -> np.ndarray:
+    """Psi: (len(depth) + 1) x (len(colour) + 1); the last row / column is "none" (case III)."""
+    psi = np.zeros((len(depth) + 1, len(colour) + 1))
+    for i, d in enumerate(depth):
+        for j, c in enumerate(colour):
+            if d.wall_id == c.wall_id:
+                psi[i, j] = coherence_level(c.box, d.box)
+    psi[: len(depth), len(colour)] = settings.exclusive_alpha
+    psi[len(depth), : len(colour)] = settings.exclusive_alpha
+    return psi
+
+
+def weighted_centre(d: Candidate | None, c: Candidate | None) -> tuple[float, float]:
+    """Equation 16: (w_D c_D + w_C c_C) / (w_D + w_C); the plain mean if both weights are 0."""
+    pts = [x for x in (d, c) if x is not None]
+    if not pts:
+        raise ValueError("no candidate")
+    if len(pts) == 1:
+        return float(pts[0].centre[0]), float(pts[0].centre[1])
+    w = _weights(d, c)
+    cd = np.asarray(d.centre, float) if d is not None else np.zeros(2)
+    cc = np.asarray(c.centre, float) if c is not None else np.zeros(2)
+    if w.sum() <= 0:
+        m = np.mean([np.asarray(x.centre, float) for x in pts], axis=0)
+        return float(m[0]), float(m[1])
+    m = (w[0] * cd + w[1] * cc) / w.sum()
+    return float(m[0]), float(m[1])
+
+
+def make_hit(d: Candidate | None, c: Candidate | None, alpha: float) -> ConsensusHit:
+    """A ConsensusHit from a selected cell of Psi."""
+    ref = d if d is not None else c
+    assert ref is not None
+    centre = weighted_centre(d, c)
+    source = "both" if d is not None and c is not None else ("depth" if d is not None else "colour")
+    return ConsensusHit(
+        class_id=ref.class_id, wall_id=ref.wall_id, centre=centre, alpha=float(alpha),
+        rho_depth=None if d is None else float(d.score),
+        rho_colour=None if c is None else float(c.score),
+        source=source, depth=d, colour=c,
+        box=box_at(centre, ref.box.height, ref.box.width), rotation_deg=ref.rotation_deg,
+    )
+
+
+def _cell_rank(depth: list[Candidate], colour: list[Candidate], i: int, j: int,
+               settings: ConsensusSettings) -> float:
+    """Tie-break of equal cells: a pair before a depth-only before a colour-only cell (if
+    ``prefer_depth``), then by the recognizers' goodness (rho_D, 1 - rho_C)."""
+    d = depth[i] if i < len(depth) else None
+    c = colour[j] if j < len(colour) else None
+    source = "both" if d is not None and c is not None else ("depth" if d is not None else "colour")
+    prio = _SOURCE_PRIORITY[source] if settings.prefer_depth else 0
+    return 10.0 * prio + float(_weights(d, c).sum())
+
+
+class _Selection:
+    """The iterative selection on one class's Psi (paper, Figure 13)."""
+
+    def __init__(self, depth: list[Candidate], colour: list[Candidate], settings: ConsensusSettings) -> None:
+        self.depth, self.colour, self.settings = depth, colour, settings
+        self.psi = coherence_matrix(depth, colour, settings)
+        nd, nc = len(depth), len(colour)
+        self.rank = np.array([[_cell_rank(depth, colour, i, j, settings) for j in range(nc + 1)]
+                              for i in range(nd + 1)])
+
+    def best(self) -> tuple[float, float, int, int] | None:
+        """(alpha, tie-break rank, row, column) of the best cell, None when Psi is null."""
+        best = self.psi.max() if self.psi.size else 0.0
+        if not best > self.settings.min_alpha:
+            return None
+        ties = np.argwhere(self.psi >= best - 1e-12)
+        i, j = max((tuple(int(v) for v in x) for x in ties), key=lambda ij: (self.rank[ij], -ij[0], -ij[1]))
+        return float(best), float(self.rank[i, j]), i, j
+
+    def hit(self, i: int, j: int) -> ConsensusHit:
+        d = self.depth[i] if i < len(self.depth) else None
+        c = self.colour[j] if j < len(self.colour) else None
+        return make_hit(d, c, self.psi[i, j])
+
+    def take(self, i: int, j: int) -> None:
+        """Remove the selected cell's row and column (an exclusive cell: only its candidate)."""
+        if i < len(self.depth):  # D_i is used up (also after an exclusive (D_i, none))
+            self.psi[i, :] = 0.0
+        if j < len(self.colour):
+            self.psi[:, j] = 0.0
+
+    def drop(self, i: int, j: int) -> None:
+        self.psi[i, j] = 0.0
+
+
+def consensus(depth: list[Candidate], colour: list[Candidate], expected_count: int | None,
+              settings: ConsensusSettings) -> list[ConsensusHit]:
+    """The recognized instances of ONE class over all walls (section 4.4, Figure 13).
+
+    ``expected_count`` None means no limit (stop when Psi is null); 0 means none.
+    """
+    if expected_count is not None and expected_count <= 0:
+        return []
+    sel = _Selection(depth, colour, settings)
+    hits: list[ConsensusHit] = []
+    while expected_count is None or len(hits) < expected_count:
+        cell = sel.best()
+        if cell is None:
+            break
+        hits.append(sel.hit(cell[2], cell[3]))
+        sel.take(cell[2], cell[3])
+    return hits
+
+
+def consensus_all(depth: list[Candidate], colour: list[Candidate], expected: dict[str, int] | None,
+                  settings: ConsensusSettings, classes: list[str] | None = None) -> dict[str, list[ConsensusHit]]:
+    """Consensus of every class at once, with the cross-class rule built in.
+
+    The same iterative selection as :func:`consensus`, but over the matrices of all classes
+    together: the best cell of any class is taken next (alpha, then the tie-break), and it is
+    accepted only when its footprint does not overlap an already accepted instance by more
+    than ``suppress_overlap`` (then only that cell is dropped). So an instance that loses a
+    place to another class does not use up its class's expected count, and its candidates
+    stay available. ``expected`` None searches every class without a count limit.
+    """
+    names = sorted({c.class_id for c in depth} | {c.class_id for c in colour} | set(classes or []))
+    if expected is not None:
+        names = [n for n in names if expected.get(n, 0) > 0]
+    sels = {n: _Selection([c for c in depth if c.class_id == n], [c for c in colour if c.class_id == n], settings)
+            for n in names}
+    left = {n: (None if expected is None else int(expected[n])) for n in names}
+    out: dict[str, list[ConsensusHit]] = {n: [] for n in sorted(set(names) | set(classes or []))}
+    kept: list[ConsensusHit] = []
+    while True:
+        cells = [(sel.best(), n) for n, sel in sels.items() if left[n] is None or left[n] > 0]
+        cells = [(c, n) for c, n in cells if c is not None]
+        if not cells:
+            break
+        (alpha, rank, i, j), n = max(cells, key=lambda x: (x[0][0], x[0][1], x[1]))
+        hit = sels[n].hit(i, j)
+        if _conflicts(hit, kept, settings):
+            sels[n].drop(i, j)
+            continue
+        sels[n].take(i, j)
+        kept.append(hit)
+        out[n].append(hit)
+        if left[n] is not None:
+            left[n] -= 1
+    return out
+
+
+def _conflicts(hit: ConsensusHit, kept: list[ConsensusHit], settings: ConsensusSettings) -> bool:
+    return hit.box is not None and any(
+        k.wall_id == hit.wall_id and k.box is not None and box_overlap(k.box, hit.box) > settings.suppress_overlap
+        for k in kept)
+
+
+def suppress_conflicts(hits_by_class: dict[str, list[ConsensusHit]],
+                       settings: ConsensusSettings) -> dict[str, list[ConsensusHit]]:
+    """One place holds one object: of overlapping hits (any classes, same wall) keep the best.
+
+    Hits are ranked by alpha, then (``prefer_depth``) both > depth > colour, then goodness; a
+    hit is dropped when its footprint overlaps an already kept one by more than
+    ``suppress_overlap`` of the smaller footprint.
+    """
+    order = sorted(
+        ((cls, h) for cls, hs in hits_by_class.items() for h in hs),
+        key=lambda ch: (-ch[1].alpha, -(_SOURCE_PRIORITY.get(ch[1].source, 0) if settings.prefer_depth else 0),
+                        -ch[1].goodness, ch[0], ch[1].wall_id, ch[1].centre),
+    )
+    kept: list[ConsensusHit] = []
+    out: dict[str, list[ConsensusHit]] = {cls: [] for cls in hits_by_class}
+    for cls, h in order:
+        if _conflicts(h, kept, settings):
+            continue
+        kept.append(h)
+        out[cls].append(h)
+    return out

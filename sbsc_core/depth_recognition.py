@@ -1,0 +1,459 @@
+"""Recognition with geometry (paper, section 4.2, Algorithm I).
+
+Two stages on the depth image J_D of one wall:
+
+1. **RoIs.** A Canny filter on J_D finds the depth discontinuities; closed boundary
+   regions become rectangles, and overlapping rectangles (parts of one complex object)
+   are clustered into one RoI (paper, Figure 3).
+2. **Matching.** Every expected class's depth model is cross-correlated with the RoIs
+   (normalised cross-correlation, ``cv2.TM_CCOEFF_NORMED``); matches with a coefficient
+   rho_D >= mu_D (0.75) form the candidate list {D} of the class, with the position of the
+   best match (paper, Figure 4).
+
+Additions to the paper, each a named setting:
+
+* Canny's two thresholds are physical (a fraction of ``min_relief_m`` per pixel, raised to
+  ``noise_k`` sigmas of the gradient noise measured on the plain wall) instead of Matlab's
+  automatic ones, so plain noisy walls produce no edges; the regions standing out by more
+  than ``min_relief_m`` (or ``noise_k`` sigmas) are added to the edge map, so smooth reliefs
+  whose outline is soft still give a RoI.
+* No-data pixels and openings are set to the wall plane (0 m) so that holes in the scan
+  do not create discontinuities (the paper's Figure 16 problem), and a residual plane
+  fitted to the visible wall is removed.
+* Each depth model is padded with a border of wall plane (``template_pad_px``): a model
+  then only correlates where the object stands alone on the wall, not on a part of a
+  larger object with a similar local shape.
+* Depth is metric, so the relief amplitude must agree as well: the least-squares gain
+  between scene and model must lie in ``gain_range`` (the correlation alone is blind to
+  scale in depth).
+* Models are also tried rotated in the wall plane (``rotations``), lifting the paper's
+  stated limitation that depth matching is not rotation invariant; several instances per
+  RoI are found by non-maximum suppression on the correlation map.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import cv2
+import numpy as np
+
+from .settings import DepthRecognitionSettings
+from .templates import ModelTemplate
+from .types import Box, Candidate, Orthoimage, WallArea
+
+_DEPTH_UNIT_M = 1e-5  # int16 gradient unit for cv2.Canny(dx, dy, ...)
+
+
+# --------------------------------------------------------------------------- J_D
+
+
+def fill_gaps(values: np.ndarray, ok: np.ndarray, sigma_px: float, min_weight: float
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Fill small gaps of a sparse image by normalised convolution (Gaussian ``sigma_px``).
+
+    ``values`` is (H, W) or (H, W, C); pixels outside ``ok`` whose Gaussian-weighted share of
+    known neighbours is at least ``min_weight`` get the weighted mean of those neighbours.
+    Returns (filled float32 values, new ok mask); larger holes are left as they are.
+    """
+    if sigma_px <= 0 or ok.all() or not ok.any():
+        return np.asarray(values, np.float32), ok
+    w = cv2.GaussianBlur(ok.astype(np.float32), (0, 0), sigma_px)
+    v = np.where(ok[..., None] if values.ndim == 3 else ok, values, 0).astype(np.float32)
+    num = cv2.GaussianBlur(v, (0, 0), sigma_px)
+    fill = ~ok & (w >= min_weight)
+    out = np.asarray(values, np.float32).copy()
+    den = np.maximum(w, 1e-6)
+    out[fill] = (num / (den[..., None] if values.ndim == 3 else den))[fill]
+    return out, ok | fill
+
+
+def depth_image(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSettings) -> np.ndarray:
+    """The depth image J_D: metres out of the wall plane; openings and larger holes at 0.
+
+    Sampling gaps of a sparse scan are filled from their neighbours (``gap_fill_sigma_px``)
+    so that they neither break an object's relief nor create false discontinuities.
+    """
+    d = np.asarray(ortho.depth, np.float32)
+    ok = np.isfinite(d)
+    opening = np.zeros(d.shape, bool)
+    if area.opening_mask is not None and area.opening_mask.shape == d.shape:
+        opening = area.opening_mask
+    ok &= ~opening
+    d, ok = fill_gaps(np.where(ok, d, 0.0), ok, settings.gap_fill_sigma_px, settings.gap_fill_min_weight)
+    ok &= ~opening
+    out = np.where(ok, d, 0.0).astype(np.float32)
+    if settings.median_px in (3, 5):  # speckle (outliers, isolated no-data pixels) off
+        out = cv2.medianBlur(out, settings.median_px)
+    if settings.refit_plane:
+        plane = _residual_plane(out, ok & area.visible if area.visible.shape == d.shape else ok)
+        if plane is not None:
+            out = np.where(ok, out - plane, 0.0).astype(np.float32)
+    return out
+
+
+def _residual_plane(d: np.ndarray, use: np.ndarray, max_samples: int = 20000) -> np.ndarray | None:
+    """Robust least-squares plane d = a r + b c + e over ``use`` pixels (None if too few)."""
+    rr, cc = np.nonzero(use)
+    if rr.size < 100:
+        return None
+    if rr.size > max_samples:
+        pick = np.random.default_rng(0).choice(rr.size, max_samples, replace=False)
+        rr, cc = rr[pick], cc[pick]
+    z = d[rr, cc].astype(np.float64)
+    a = np.column_stack([rr, cc, np.ones_like(rr)]).astype(np.float64)
+    keep = np.ones(z.size, bool)
+    coef = np.zeros(3)
+    for _ in range(3):
+        coef, *_ = np.linalg.lstsq(a[keep], z[keep], rcond=None)
+        res = z - a @ coef
+        mad = np.median(np.abs(res[keep] - np.median(res[keep]))) * 1.4826 + 1e-6
+        keep = np.abs(res) < 3.0 * mad
+        if keep.sum() < 50:
+            return None
+    h, w = d.shape
+    r = np.arange(h, dtype=np.float32)[:, None]
+    c = np.arange(w, dtype=np.float32)[None, :]
+    return (coef[0] * r + coef[1] * c + coef[2]).astype(np.float32)
+
+
+# --------------------------------------------------------------------------- RoIs
+
+
+def _robust_sigma(x: np.ndarray) -> float:
+    if x.size < 50:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
+def _smooth(jd: np.ndarray, sigma: float) -> np.ndarray:
+    return cv2.GaussianBlur(jd, (0, 0), sigma) if sigma > 0 else jd
+
+
+def relief_thresholds(jd: np.ndarray, wall: np.ndarray, settings: DepthRecognitionSettings
+                      ) -> tuple[float, float]:
+    """(relief threshold in m, Canny high threshold in m per pixel) for J_D.
+
+    Each is the physical minimum from the settings, raised to ``noise_k`` robust sigmas of
+    the smoothed depth / its gradient measured on the plain wall (``wall`` pixels), so a
+    noisy scan does not turn into edges everywhere.
+    """
+    sm = _smooth(jd, settings.canny_sigma_px)
+    gx = cv2.Sobel(sm, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    relief = max(settings.min_relief_m, settings.noise_k * _robust_sigma(sm[wall]))
+    grad = max(settings.canny_high_fraction * settings.min_relief_m, settings.noise_k * _robust_sigma(gx[wall]))
+    return relief, grad
+
+
+def relief_edges(jd: np.ndarray, settings: DepthRecognitionSettings, high_m_per_px: float | None = None
+                 ) -> np.ndarray:
+    """J_D,Canny: Canny edges of J_D with thresholds in metres of relief per pixel (bool)."""
+    sm = _smooth(jd, settings.canny_sigma_px)
+    gx = cv2.Sobel(sm, cv2.CV_32F, 1, 0, ksize=3) / 8.0  # metres per pixel
+    gy = cv2.Sobel(sm, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    dx = np.clip(np.round(gx / _DEPTH_UNIT_M), -32767, 32767).astype(np.int16)
+    dy = np.clip(np.round(gy / _DEPTH_UNIT_M), -32767, 32767).astype(np.int16)
+    if high_m_per_px is None:
+        high_m_per_px = settings.canny_high_fraction * settings.min_relief_m
+    high = high_m_per_px / _DEPTH_UNIT_M
+    return cv2.Canny(dx, dy, settings.canny_low_ratio * high, high, L2gradient=True) > 0
+
+
+def boxes_from_mask(mask: np.ndarray, min_side_px: int, min_area_px: int = 1) -> list[Box]:
+    """Bounding rectangles of the 8-connected regions of ``mask`` that are large enough."""
+    n, _, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    out = []
+    for i in range(1, n):
+        x, y, w, h, a = (int(v) for v in stats[i])
+        if max(w, h) >= min_side_px and a >= min_area_px:
+            out.append(Box(y, x, y + h, x + w))
+    return out
+
+
+def cluster_boxes(boxes: list[Box], gap_px: int = 0, min_overlap: float = 0.0) -> list[Box]:
+    """Merge boxes that overlap (or lie within ``gap_px``) until none do (paper, Figure 3 e).
+
+    With ``min_overlap`` > 0 two boxes are merged only when their intersection exceeds
+    that fraction of the smaller one.
+    """
+    work = list(boxes)
+    changed = True
+    while changed:
+        changed = False
+        out: list[Box] = []
+        for b in work:
+            merged = True
+            while merged:
+                merged = False
+                for i, o in enumerate(out):
+                    grown = Box(o.r0 - gap_px, o.c0 - gap_px, o.r1 + gap_px, o.c1 + gap_px)
+                    inter = grown.intersection(b)
+                    if inter > 0 and (min_overlap <= 0 or o.intersection(b) > min_overlap * min(o.area, b.area)):
+                        b = o.union_box(b)
+                        out.pop(i)
+                        merged = changed = True
+                        break
+            out.append(b)
+        work = out
+    return sorted(work, key=lambda b: (b.r0, b.c0, b.r1, b.c1))
+
+
+def depth_rois(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSettings) -> list[Box]:
+    """RoIs of J_D: closed regions of depth discontinuities, clustered (section 4.2)."""
+    jd = depth_image(ortho, area, settings)
+    return _rois_from_jd(jd, _plain_wall(ortho, area, jd, settings), settings)
+
+
+def _plain_wall(ortho: Orthoimage, area: WallArea, jd: np.ndarray, settings: DepthRecognitionSettings
+                ) -> np.ndarray:
+    """Pixels for the noise estimate: scanned, near the plane and (if it is usable) visible wall."""
+    wall = np.isfinite(ortho.depth) & (np.abs(jd) < settings.noise_window_m)
+    if area.visible.shape == jd.shape and (wall & area.visible).sum() >= 100:
+        wall &= area.visible
+    return wall
+
+
+def _rois_from_jd(jd: np.ndarray, wall: np.ndarray, settings: DepthRecognitionSettings) -> list[Box]:
+    relief_m, grad_m = relief_thresholds(jd, wall, settings)
+    edges = relief_edges(jd, settings, grad_m)
+    relief = np.abs(_smooth(jd, settings.canny_sigma_px)) >= relief_m
+    relief = cv2.morphologyEx(relief.astype(np.uint8), cv2.MORPH_OPEN, np.ones((2, 2), np.uint8)) > 0
+    closed = cv2.morphologyEx((edges | relief).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    boxes = boxes_from_mask(closed > 0, settings.roi_min_px)
+    return cluster_boxes(boxes, settings.roi_merge_gap_px, settings.roi_merge_overlap)
+
+
+# --------------------------------------------------------------------------- matching
+
+
+def rotated_variants(img: np.ndarray, rotations: tuple[int, ...]) -> list[tuple[int, np.ndarray]]:
+    """(degrees, image) for each distinct in-plane rotation (counter-clockwise, multiples of 90)."""
+    out: list[tuple[int, np.ndarray]] = []
+    for deg in rotations:
+        if deg % 90:
+            raise ValueError(f"rotation {deg} is not a multiple of 90 degrees")
+        r = np.ascontiguousarray(np.rot90(img, (deg // 90) % 4))
+        if any(o.shape == r.shape and np.allclose(o, r, atol=1e-6, equal_nan=True) for _, o in out):
+            continue
+        out.append((deg % 360, r))
+    return out
+
+
+def _subpixel(res: np.ndarray, y: int, x: int) -> tuple[float, float]:
+    """Parabolic refinement of a correlation peak (offsets in pixels, within +-0.5)."""
+    def fit(a: float, b: float, c: float) -> float:
+        den = a - 2.0 * b + c
+        if not np.isfinite(den) or den >= 0:
+            return 0.0
+        return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+
+    dy = fit(res[y - 1, x], res[y, x], res[y + 1, x]) if 0 < y < res.shape[0] - 1 else 0.0
+    dx = fit(res[y, x - 1], res[y, x], res[y, x + 1]) if 0 < x < res.shape[1] - 1 else 0.0
+    return dy, dx
+
+
+def box_at(centre: tuple[float, float], h: int, w: int) -> Box:
+    """The h x w footprint whose centre is nearest to ``centre`` (row, col)."""
+    r0 = int(np.floor(centre[0] - (h - 1) / 2.0 + 0.5))
+    c0 = int(np.floor(centre[1] - (w - 1) / 2.0 + 0.5))
+    return Box(r0, c0, r0 + h, c0 + w)
+
+
+def box_overlap(a: Box, b: Box) -> float:
+    """Intersection over the smaller area (1 when one box lies inside the other)."""
+    small = min(a.area, b.area)
+    return a.intersection(b) / small if small > 0 else 0.0
+
+
+def nms(cands: list[Candidate], overlap: float, higher_is_better: bool = True,
+        upright_bonus: float = 0.0) -> list[Candidate]:
+    """Keep the best of candidates of one class whose boxes overlap by more than ``overlap``.
+
+    Unrotated candidates rank ``upright_bonus`` higher (objects are usually mounted upright).
+    """
+    sign = 1.0 if higher_is_better else -1.0
+    order = sorted(cands, key=lambda c: -(sign * c.score + (upright_bonus if c.rotation_deg == 0 else 0.0)))
+    kept: list[Candidate] = []
+    for c in order:
+        if all(k.wall_id != c.wall_id or k.class_id != c.class_id or box_overlap(k.box, c.box) <= overlap
+               for k in kept):
+            kept.append(c)
+    return kept
+
+
+def padded_template(template: np.ndarray, pad_px: int, sigma_px: float = 0.0) -> np.ndarray:
+    """``template`` with a border of ``pad_px`` zeros (the wall), Gaussian-smoothed if asked."""
+    tp = cv2.copyMakeBorder(np.ascontiguousarray(template, dtype=np.float32), pad_px, pad_px, pad_px, pad_px,
+                            cv2.BORDER_CONSTANT, value=0)
+    if sigma_px > 0:
+        tp = cv2.GaussianBlur(tp, (0, 0), sigma_px, borderType=cv2.BORDER_CONSTANT)
+    return tp
+
+
+def crop_padded(image: np.ndarray, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+    """``image[r0:r1, c0:c1]`` where the parts outside the image are zeros."""
+    h, w = image.shape[:2]
+    out = np.zeros((r1 - r0, c1 - c0) + image.shape[2:], image.dtype)
+    a, b = max(r0, 0), min(r1, h)
+    c, d = max(c0, 0), min(c1, w)
+    if a < b and c < d:
+        out[a - r0:b - r0, c - c0:d - c0] = image[a:b, c:d]
+    return out
+
+
+def match_template_in_rois(
+    image: np.ndarray,
+    template: np.ndarray,
+    rois: list[Box],
+    threshold: float,
+    pad_px: int,
+    margin_px: int,
+    max_peaks: int,
+    sigma_px: float = 0.0,
+    gain_range: tuple[float, float] | None = None,
+    min_energy: float = 0.0,
+    accept: Callable[[float, float, float], bool] | None = None,
+) -> list[tuple[float, float, float, Box, float]]:
+    """Normalised cross-correlation of ``template`` (padded by ``pad_px`` of zeros) around RoIs.
+
+    ``image`` is (H, W) or (H, W, C) float32 with the background at 0 (already smoothed by
+    ``sigma_px`` if the template is to be). For every RoI, the template's centre may lie
+    anywhere in the RoI grown by ``margin_px``; the correlation map's peaks >= ``threshold``
+    are returned greedily (each suppresses a neighbourhood of half the template), at most
+    ``max_peaks`` per RoI, as (score, row, col, roi, gain) with a sub-pixel centre in image
+    pixel coordinates and the least-squares amplitude ``gain`` of the image patch relative
+    to the (padded) template; peaks whose gain is outside ``gain_range`` are skipped, and
+    windows whose energy (sum of squared deviations) is at most ``min_energy`` are never
+    peaks (their correlation is undefined), and so are those that ``accept(row, col, gain)``
+    refuses.
+    """
+    h, w = template.shape[:2]
+    tp = padded_template(template, pad_px, sigma_px)
+    ph, pw = tp.shape[:2]
+    t0 = tp - tp.reshape(ph * pw, -1).mean(axis=0)
+    tt = float((t0 * t0).sum())
+    if tt < 1e-18:
+        return []
+    cy_off = pad_px + (h - 1) / 2.0  # template centre relative to the padded top-left
+    cx_off = pad_px + (w - 1) / 2.0
+    out = []
+    for roi in rois:
+        # range of template centres (image coordinates), then of padded top-lefts
+        cr0, cr1 = roi.r0 - margin_px, roi.r1 - 1 + margin_px
+        cc0, cc1 = roi.c0 - margin_px, roi.c1 - 1 + margin_px
+        tl_r0 = int(np.floor(cr0 - cy_off)) - 1
+        tl_r1 = int(np.ceil(cr1 - cy_off)) + 1
+        tl_c0 = int(np.floor(cc0 - cx_off)) - 1
+        tl_c1 = int(np.ceil(cc1 - cx_off)) + 1
+        r_a, r_b = tl_r0, tl_r1 + ph
+        c_a, c_b = tl_c0, tl_c1 + pw
+        region = crop_padded(image, r_a, r_b, c_a, c_b)
+        res = cv2.matchTemplate(region, tp, cv2.TM_CCOEFF_NORMED)
+        res = np.nan_to_num(res, nan=-1.0, posinf=-1.0, neginf=-1.0)
+        ys = np.arange(res.shape[0]) + r_a + cy_off
+        xs = np.arange(res.shape[1]) + c_a + cx_off
+        valid = ((ys >= cr0) & (ys <= cr1))[:, None] & ((xs >= cc0) & (xs <= cc1))[None, :]
+        valid &= _window_energy(region, ph, pw) > min_energy  # a flat patch has no defined correlation
+        work = np.where(valid, res, -np.inf)
+        found = 0
+        hy, hx = max(1, h // 2), max(1, w // 2)
+        while found < max_peaks:
+            y, x = np.unravel_index(int(np.argmax(work)), work.shape)
+            score = float(work[y, x])
+            if not np.isfinite(score) or score < threshold:
+                break
+            patch = region[y:y + ph, x:x + pw]
+            gain = float((t0 * (patch - patch.reshape(ph * pw, -1).mean(axis=0))).sum() / tt)
+            ok = gain_range is None or gain_range[0] <= gain <= gain_range[1]
+            if ok:
+                dy, dx = _subpixel(res, int(y), int(x))
+                r, c = float(ys[y] + dy), float(xs[x] + dx)
+                ok = accept is None or accept(r, c, gain)
+            if ok:
+                out.append((score, r, c, roi, gain))
+                found += 1
+                work[max(0, y - hy): y + hy + 1, max(0, x - hx): x + hx + 1] = -np.inf
+            else:  # a wrong amplitude or context: not this class here, look on
+                work[y, x] = -np.inf
+    return out
+
+
+def _window_energy(region: np.ndarray, ph: int, pw: int) -> np.ndarray:
+    """Sum of squared deviations from the mean of every ph x pw window (top-left indexed)."""
+    x = region.astype(np.float64)
+    if x.ndim == 2:
+        x = x[..., None]
+    n = ph * pw
+    total = np.zeros((x.shape[0] - ph + 1, x.shape[1] - pw + 1))
+    for ch in range(x.shape[2]):
+        s1 = cv2.integral(np.ascontiguousarray(x[..., ch]))
+        s2 = cv2.integral(np.ascontiguousarray(x[..., ch] ** 2))
+        a = s1[ph:, pw:] - s1[:-ph, pw:] - s1[ph:, :-pw] + s1[:-ph, :-pw]
+        b = s2[ph:, pw:] - s2[:-ph, pw:] - s2[ph:, :-pw] + s2[:-ph, :-pw]
+        total += b - a * a / n
+    return total
+
+
+def isolation(jd: np.ndarray, box: Box, threshold_m: float, gap_px: int, width_px: int) -> float:
+    """The largest share, over the four sides of ``box``, of a strip of relief above ``threshold_m``.
+
+    Each strip runs along one side at ``gap_px`` .. ``gap_px + width_px`` pixels outside the
+    footprint (the gap leaves the object's own blurred edge out). An object standing alone
+    on the wall has flat strips (share ~0); a model matched on a part of something larger
+    (a door casing, one half of a double socket) has relief continuing into a strip.
+    """
+    out = 0.0
+    g, wd = gap_px, width_px
+    sides = (Box(box.r0 - g - wd, box.c0, box.r0 - g, box.c1), Box(box.r1 + g, box.c0, box.r1 + g + wd, box.c1),
+             Box(box.r0, box.c0 - g - wd, box.r1, box.c0 - g), Box(box.r0, box.c1 + g, box.r1, box.c1 + g + wd))
+    for sb in sides:
+        strip = crop_padded(jd, sb.r0, sb.r1, sb.c0, sb.c1)
+        if strip.size:
+            out = max(out, float(np.mean(np.abs(strip) > threshold_m)))
+    return out
+
+
+def match_depth(
+    ortho: Orthoimage,
+    area: WallArea,
+    rois: list[Box],
+    templates: dict[str, ModelTemplate],
+    settings: DepthRecognitionSettings,
+) -> list[Candidate]:
+    """Candidates {D} of every class with a depth model: rho_D >= mu_D around the RoIs.
+
+    ``score`` is rho_D, ``box`` the (possibly rotated) footprint at the best match and
+    ``centre`` its sub-pixel centre; several instances per class and wall are possible.
+    """
+    if not rois:
+        return []
+    jd = depth_image(ortho, area, settings)
+    noise_relief, _ = relief_thresholds(jd, _plain_wall(ortho, area, jd, settings), settings)
+    jm = _smooth(jd, settings.match_sigma_px)
+    flat_m = 1e-5  # a window whose relief varies by less than this is flat (exactly 0 in openings)
+    out: list[Candidate] = []
+    for cid in sorted(templates):
+        t = templates[cid]
+        model = t.depth_filled()
+        if model is None or t.relief_m() < settings.min_template_relief_m:
+            continue
+        found: list[Candidate] = []
+        for deg, rot in rotated_variants(model, settings.rotations):
+            h, w = rot.shape
+            min_energy = (h + 2 * settings.template_pad_px) * (w + 2 * settings.template_pad_px) * flat_m ** 2
+            relief = float(np.median(np.abs(rot[np.abs(rot) > 0.1 * np.abs(rot).max()])))
+
+            def isolated(r: float, c: float, gain: float, h: int = h, w: int = w, relief: float = relief) -> bool:
+                thr = max(settings.isolation_relief_fraction * relief * gain, noise_relief)
+                return isolation(jm, box_at((r, c), h, w), thr, settings.isolation_gap_px,
+                                 settings.isolation_width_px) <= settings.isolation_max_occupancy
+
+            peaks = match_template_in_rois(jm, rot, rois, settings.mu_d, settings.template_pad_px,
+                                           settings.search_margin_px, settings.max_peaks_per_roi,
+                                           settings.match_sigma_px, settings.gain_range, min_energy,
+                                           isolated)
+            for score, r, c, roi, _gain in peaks:
+                box = box_at((r, c), h, w)
+                found.append(Candidate(cid, ortho.wall_id, "depth", box, (r, c), score, roi, deg))
+        out.extend(nms(found, settings.nms_overlap, upright_bonus=settings.rotation_margin))
+    return out

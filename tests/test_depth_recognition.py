@@ -1,0 +1,133 @@
+"""Recognition with geometry (depth_recognition.py, paper section 4.2)."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from sbsc_core.depth_recognition import cluster_boxes, depth_rois, match_depth
+from sbsc_core.settings import DepthRecognitionSettings
+from sbsc_core.templates import make_templates
+from sbsc_core.types import Box
+from tests.recognition_synth import PIXEL_M, make_wall, paste, synthetic_library
+
+PLACES = [("socket", (50.3, 60.7), 0), ("panel", (150.0, 200.0), 0), ("knob", (60.0, 300.0), 0),
+          ("arrow", (200.0, 400.0), 90), ("arrow", (250.0, 80.0), 180), ("sign", (100.0, 420.0), 0),
+          ("socket", (230.0, 300.0), 0)]
+
+
+@pytest.fixture(scope="module")
+def scene():
+    templates = make_templates(synthetic_library(), PIXEL_M)
+    ortho, area = make_wall(seed=1)
+    for i, (cid, centre, rot) in enumerate(PLACES):
+        paste(ortho, area, templates[cid], centre, rot, seed=i)
+    return templates, ortho, area
+
+
+def _contains(box: Box, r: float, c: float) -> bool:
+    return box.r0 <= r < box.r1 and box.c0 <= c < box.c1
+
+
+def test_rois_cover_each_protruding_object_and_nothing_else(scene) -> None:
+    templates, ortho, area = scene
+    rois = depth_rois(ortho, area, DepthRecognitionSettings())
+    protruding = [p for p in PLACES if templates[p[0]].depth is not None]
+    for cid, (r, c), _ in protruding:
+        assert sum(_contains(b, r, c) for b in rois) == 1, cid
+    # one RoI per object: the flat sign, the no-data holes and the noise give none
+    assert len(rois) == len(protruding)
+
+
+def test_plain_wall_with_holes_has_no_roi() -> None:
+    ortho, area = make_wall(seed=3, holes=12)
+    assert depth_rois(ortho, area, DepthRecognitionSettings()) == []
+
+
+def test_true_class_matches_with_high_rho_and_subpixel_centre(scene) -> None:
+    templates, ortho, area = scene
+    s = DepthRecognitionSettings()
+    cands = match_depth(ortho, area, depth_rois(ortho, area, s), templates, s)
+    for cid, (r, c), rot in PLACES:
+        if templates[cid].depth is None:
+            continue
+        best = max((x for x in cands if x.class_id == cid and np.hypot(x.centre[0] - r, x.centre[1] - c) < 3),
+                   key=lambda x: x.score, default=None)
+        assert best is not None, (cid, r, c)
+        assert best.score > 0.9
+        assert np.hypot(best.centre[0] - r, best.centre[1] - c) < 1.0
+        assert best.source == "depth" and best.wall_id == "W01"
+        if cid == "arrow":  # asymmetric: the rotation is recovered and the box turned
+            assert best.rotation_deg == rot
+            assert (best.box.height, best.box.width) == ((30, 16) if rot % 180 else (16, 30))
+
+
+def test_wrong_class_stays_below_mu_d(scene) -> None:
+    templates, ortho, area = scene
+    s = DepthRecognitionSettings()
+    cands = match_depth(ortho, area, depth_rois(ortho, area, s), templates, s)
+    # the panel (40 x 60 px) is nowhere near a socket, a knob or an arrow
+    for cid, (r, c), _ in PLACES:
+        if cid in ("socket", "knob"):
+            assert not any(x.class_id == "panel" and _contains(x.box, r, c) for x in cands)
+    panel_r, panel_c = 150.0, 200.0
+    assert not any(x.class_id in ("socket", "knob") and _contains(x.box, panel_r, panel_c) for x in cands)
+    # every candidate passed the threshold
+    assert all(x.score >= s.mu_d for x in cands)
+
+
+def test_without_rotations_a_turned_asymmetric_object_is_missed(scene) -> None:
+    templates, ortho, area = scene
+    s = replace(DepthRecognitionSettings(), rotations=(0,))
+    cands = match_depth(ortho, area, depth_rois(ortho, area, s), templates, s)
+    assert not any(x.class_id == "arrow" and np.hypot(x.centre[0] - 200, x.centre[1] - 400) < 3 for x in cands)
+
+
+def test_relief_amplitude_must_agree() -> None:
+    templates = make_templates(synthetic_library(), PIXEL_M)
+    ortho, area = make_wall(seed=5, holes=0)
+    weak = replace(templates["panel"], depth=templates["panel"].depth * 0.3)  # same shape, 30 % relief
+    paste(ortho, area, weak, (120.0, 250.0), seed=1)
+    s = DepthRecognitionSettings()
+    rois = depth_rois(ortho, area, s)
+    assert len(rois) == 1
+    assert not [x for x in match_depth(ortho, area, rois, templates, s) if x.class_id == "panel"]
+    loose = replace(s, gain_range=(0.1, 10.0))
+    assert [x for x in match_depth(ortho, area, rois, templates, loose) if x.class_id == "panel"]
+
+
+def test_two_instances_in_one_roi_are_both_found() -> None:
+    templates = make_templates(synthetic_library(), PIXEL_M)
+    ortho, area = make_wall(seed=6, holes=0)
+    paste(ortho, area, templates["socket"], (100.0, 100.0), seed=1)
+    paste(ortho, area, templates["socket"], (100.0, 122.0), seed=2)
+    ortho.depth[99:101, 107:116] = 0.006  # a cable between them: one clustered RoI
+    s = DepthRecognitionSettings()
+    rois = depth_rois(ortho, area, s)
+    assert len(rois) == 1
+    socks = [x for x in match_depth(ortho, area, rois, templates, s) if x.class_id == "socket"]
+    assert sorted(round(x.centre[1]) for x in socks) == [100, 122]
+
+
+def test_a_part_of_something_larger_is_not_an_instance() -> None:
+    """Isolation: relief continuing past a side of the footprint (a casing, a double socket)."""
+    templates = make_templates(synthetic_library(), PIXEL_M)
+    ortho, area = make_wall(seed=8, holes=0)
+    paste(ortho, area, templates["socket"], (100.0, 100.0), seed=1)
+    paste(ortho, area, templates["socket"], (100.0, 116.0), seed=2)  # touching: a double plate
+    s = DepthRecognitionSettings()
+    rois = depth_rois(ortho, area, s)
+    socks = [x for x in match_depth(ortho, area, rois, templates, s) if x.class_id == "socket"]
+    assert socks == []
+    loose = replace(s, isolation_max_occupancy=1.0)
+    socks = [x for x in match_depth(ortho, area, rois, templates, loose) if x.class_id == "socket"]
+    cols = sorted(x.centre[1] for x in socks)
+    assert len(cols) == 2 and abs(cols[0] - 100) < 2 and abs(cols[1] - 116) < 2
+
+
+def test_cluster_boxes_merges_overlapping_and_touching() -> None:
+    boxes = [Box(0, 0, 10, 10), Box(5, 5, 15, 15), Box(30, 30, 40, 40), Box(16, 0, 20, 4), Box(100, 100, 101, 101)]
+    out = cluster_boxes(boxes, gap_px=2)
+    assert Box(0, 0, 20, 15) in out  # (0..15) grown by 2 touches (16..20)
+    assert Box(30, 30, 40, 40) in out and len(out) == 3
+    assert len(cluster_boxes(boxes, gap_px=0)) == 4
