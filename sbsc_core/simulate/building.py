@@ -1,0 +1,266 @@
+"""A scene description turned into a coloured triangle mesh plus its ground truth.
+
+The mesh holds the floor and ceiling slabs, every room-side wall face with its holes, the
+reveals of the openings (in the frame colour), door casings on both faces of a door, a
+window frame inside each window reveal, and the objects built by
+:func:`sbsc_core.simulate.objects.build_object` placed on their walls. Objects carry their
+index as triangle label; the building carries -1.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..types import WallFrame
+from . import mesh as M
+from .catalogue import CATALOGUE, CLASS_ORDER
+from .mesh import ColouredMesh
+from .scene import (
+    Layout,
+    OpeningPlacement,
+    RoomSpec,
+    SceneDescription,
+    WallFace,
+    outline_cells,
+    validate_scene,
+)
+
+ObjectBuilder = Callable[[str], ColouredMesh]
+
+CASING_DEPTH_M = 0.015  # how far a door casing stands out of the wall
+WINDOW_PROFILE_M = 0.06  # width and depth of a window frame's profile
+
+
+@dataclass
+class PlacedObject:
+    """One object of the scene in the world (contract 5 plus its wall and u, v)."""
+
+    index: int
+    class_id: str
+    wall: str
+    u: float
+    v: float
+    position: np.ndarray  # (3,) centre of the footprint on the wall plane
+    normal: np.ndarray  # (3,) wall normal, into the room
+    width_m: float
+    height_m: float
+
+    def to_truth(self) -> dict:
+        return {
+            "class": self.class_id,
+            "position": [round(float(x), 5) for x in self.position],
+            "normal": [round(float(x), 6) for x in self.normal],
+            "width_m": round(self.width_m, 4),
+            "height_m": round(self.height_m, 4),
+            "wall": self.wall,
+            "u": round(self.u, 5),
+            "v": round(self.v, 5),
+        }
+
+
+@dataclass
+class Building:
+    scene: SceneDescription
+    layout: Layout
+    mesh: ColouredMesh
+    objects: list[PlacedObject]
+    stations: np.ndarray  # (S, 3) scanner origins, world
+
+    def truth_document(self) -> dict:
+        """``ground_truth.json`` (contract 5, extended with walls and openings)."""
+        return {
+            "schema": "sbsc.truth/1",
+            "scene": self.scene.name,
+            "objects": [o.to_truth() for o in self.objects],
+            "walls": [{"id": w.id, "room": w.room, **w.frame.to_dict()} for w in self.layout.walls.values()],
+            "openings": [o.to_dict() for o in self.layout.openings],
+            "stations": [[round(float(x), 4) for x in s] for s in self.stations],
+        }
+
+    def expected_document(self) -> dict:
+        """``expected.json`` (contract 3): instances per class present in the scene."""
+        counts = {c: 0 for c in CLASS_ORDER}
+        for o in self.objects:
+            counts[o.class_id] = counts.get(o.class_id, 0) + 1
+        return {"schema": "sbsc.expected/1", "counts": {c: n for c, n in counts.items() if n}}
+
+
+def build_building(scene: SceneDescription, object_builder: ObjectBuilder | None = None) -> Building:
+    """Mesh and truth of a (validated) description."""
+    if object_builder is None:
+        from .objects import build_object as object_builder
+    layout = validate_scene(scene)
+    parts: list[ColouredMesh] = [_slabs(scene)]
+    for wall in layout.walls.values():
+        parts.append(wall_face_mesh(wall, layout.openings_on(wall.id)))
+    first = {}
+    for o in layout.openings:
+        first.setdefault(o.spec_index, o)
+    for o in layout.openings:
+        parts.append(_casing(layout.walls[o.wall].frame, o, scene))
+    for o in first.values():
+        parts.append(_reveal(layout.walls[o.wall].frame, o, scene))
+    objects = []
+    for p in scene.objects:
+        wall = layout.walls[p.wall]
+        spec = CATALOGUE[p.class_id]
+        local = object_builder(p.class_id)
+        parts.append(local.transformed(_rotation(wall.frame), wall.frame.to_world(p.u, p.v)).labelled(p.index))
+        objects.append(PlacedObject(p.index, p.class_id, p.wall, p.u, p.v, wall.frame.to_world(p.u, p.v),
+                                    wall.frame.normal.copy(), spec.width_m, spec.height_m))
+    return Building(scene, layout, M.merge(parts), objects, station_positions(scene))
+
+
+def station_positions(scene: SceneDescription) -> np.ndarray:
+    """The description's stations, or a plan of about one per ``station_spacing_m`` per room."""
+    if scene.stations:
+        return np.array([s.xyz for s in scene.stations], float)
+    out = []
+    for room in scene.rooms:
+        for xy in plan_stations(room, scene.scanner.station_spacing_m):
+            out.append((xy[0], xy[1], scene.scanner.height_m))
+    return np.array(out, float).reshape(-1, 3)
+
+
+def plan_stations(room: RoomSpec, spacing_m: float, clearance_m: float = 1.8) -> list[tuple[float, float]]:
+    """Station positions for a room: a grid over each rectangle of the room.
+
+    Stations keep ``clearance_m`` from the walls where the room allows (about the distance
+    at which a scanner 1.5 m high with a -40 degree field still sees the foot of a wall)
+    and are about ``spacing_m`` apart. In a narrow strip (a corridor) they zigzag across it
+    so that each long wall is also seen from its far side.
+    """
+    out: list[tuple[float, float]] = []
+    for x0, y0, x1, y1 in _merged_cells(room):
+        xs = _axis_positions(x0, x1, spacing_m, clearance_m)
+        ys = _axis_positions(y0, y1, spacing_m, clearance_m)
+        for i, x in enumerate(xs):
+            for j, y in enumerate(ys):
+                if len(ys) == 1 and len(xs) > 1 and y1 - y0 < 1.5 * clearance_m:
+                    y += (y1 - y0) * (0.15 if i % 2 else -0.15)
+                elif len(xs) == 1 and len(ys) > 1 and x1 - x0 < 1.5 * clearance_m:
+                    x += (x1 - x0) * (0.15 if j % 2 else -0.15)
+                out.append((round(x, 3), round(y, 3)))
+    return out
+
+
+def _axis_positions(a: float, b: float, spacing_m: float, clearance_m: float) -> list[float]:
+    """About (b - a) / spacing_m positions evenly over a..b, kept ``clearance_m`` from the ends."""
+    n = max(1, round((b - a) / spacing_m))
+    pos = a + (np.arange(n) + 0.5) * (b - a) / n
+    if b - a > 2 * clearance_m:
+        pos = np.clip(pos, a + clearance_m, b - clearance_m)
+    return [float(x) for x in pos]
+
+
+def wall_face_mesh(wall: WallFace, holes: list[OpeningPlacement]) -> ColouredMesh:
+    """The wall's rectangle minus its holes, as grid-cell quads in the wall's paint."""
+    fr = wall.frame
+    us = {0.0, fr.width_m}
+    vs = {0.0, fr.height_m}
+    for h in holes:
+        us |= {min(max(h.u_min, 0.0), fr.width_m), min(max(h.u_max, 0.0), fr.width_m)}
+        vs |= {min(max(h.v_min, 0.0), fr.height_m), min(max(h.v_max, 0.0), fr.height_m)}
+    us_, vs_ = sorted(us), sorted(vs)
+    quads = []
+    for u0, u1 in zip(us_[:-1], us_[1:], strict=True):
+        for v0, v1 in zip(vs_[:-1], vs_[1:], strict=True):
+            uc, vc = (u0 + u1) / 2, (v0 + v1) / 2
+            if any(h.u_min < uc < h.u_max and h.v_min < vc < h.v_max for h in holes):
+                continue
+            quads.append(M.quad(fr.to_world(u0, v0), (u1 - u0) * fr.axis_u, (v1 - v0) * fr.axis_v, wall.paint))
+    return M.merge(quads)
+
+
+def _rotation(fr: WallFrame) -> np.ndarray:
+    """Object-local (x right, y up, z out of the wall) to world."""
+    return np.column_stack([fr.axis_u, fr.axis_v, fr.normal])
+
+
+def _local_box(fr: WallFrame, u0: float, u1: float, v0: float, v1: float, d0: float, d1: float,
+               colour) -> ColouredMesh:
+    """A box given in the wall's (u, v, d) coordinates."""
+    b = M.box((u1 - u0, v1 - v0, d1 - d0), colour, ((u0 + u1) / 2, (v0 + v1) / 2, (d0 + d1) / 2))
+    return b.transformed(_rotation(fr), fr.origin)
+
+
+def _casing(fr: WallFrame, o: OpeningPlacement, scene: SceneDescription) -> ColouredMesh:
+    """Door casing (a frame standing out of the wall) around a door on one face."""
+    fw = scene.door_frame_width_m
+    if o.kind != "door" or fw <= 0:
+        return ColouredMesh.empty()
+    c = scene.colours["door_frame"]
+    top = o.v_max + fw
+    return M.merge([
+        _local_box(fr, o.u_min - fw, o.u_min, 0.0, top, 0.0, CASING_DEPTH_M, c),
+        _local_box(fr, o.u_max, o.u_max + fw, 0.0, top, 0.0, CASING_DEPTH_M, c),
+        _local_box(fr, o.u_min, o.u_max, o.v_max, top, 0.0, CASING_DEPTH_M, c),
+    ])
+
+
+def _reveal(fr: WallFrame, o: OpeningPlacement, scene: SceneDescription) -> ColouredMesh:
+    """The faces inside the hole through the wall (and a window frame in a window)."""
+    d = o.depth_m
+    c = scene.colours["door_frame" if o.kind == "door" else "window_frame"]
+    u0, u1, v0, v1 = o.u_min, o.u_max, o.v_min, o.v_max
+    n, up, along = fr.normal, fr.axis_v, fr.axis_u
+    parts = [
+        M.quad(fr.to_world(u0, v0, -d), d * n, (v1 - v0) * up, c),
+        M.quad(fr.to_world(u1, v0, -d), (v1 - v0) * up, d * n, c),
+        M.quad(fr.to_world(u0, v1, -d), (u1 - u0) * along, d * n, c),
+    ]
+    if v0 > 0:
+        parts.append(M.quad(fr.to_world(u0, v0, -d), d * n, (u1 - u0) * along, c))
+    if o.kind == "window":
+        p = min(WINDOW_PROFILE_M, (u1 - u0) / 4, (v1 - v0) / 4)
+        dm0, dm1 = -d / 2 - p / 2, -d / 2 + p / 2
+        parts += [
+            _local_box(fr, u0, u0 + p, v0, v1, dm0, dm1, c),
+            _local_box(fr, u1 - p, u1, v0, v1, dm0, dm1, c),
+            _local_box(fr, u0 + p, u1 - p, v0, v0 + p, dm0, dm1, c),
+            _local_box(fr, u0 + p, u1 - p, v1 - p, v1, dm0, dm1, c),
+            _local_box(fr, (u0 + u1 - p) / 2, (u0 + u1 + p) / 2, v0 + p, v1 - p, dm0, dm1, c),
+        ]
+    return M.merge(parts)
+
+
+def _slabs(scene: SceneDescription) -> ColouredMesh:
+    """Floor and ceiling over the whole floor plate (walls stand on / reach up to them)."""
+    pts = np.concatenate([np.asarray(r.outline, float) for r in scene.rooms])
+    t = scene.exterior_wall_thickness_m
+    x0, y0 = pts.min(axis=0) - t
+    x1, y1 = pts.max(axis=0) + t
+    h = scene.ceiling_height_m
+    floor = M.quad((x0, y0, 0.0), (x1 - x0, 0, 0), (0, y1 - y0, 0), scene.colours["floor"])
+    ceiling = M.quad((x0, y0, h), (0, y1 - y0, 0), (x1 - x0, 0, 0), scene.colours["ceiling"])
+    return M.merge([floor, ceiling])
+
+
+def _merged_cells(room: RoomSpec) -> list[tuple[float, float, float, float]]:
+    """The room split into few rectangles: grid cells merged along x, then runs along y."""
+    cells = outline_cells(room.outline)
+    rows: dict[tuple[float, float], list[tuple[float, float]]] = {}
+    for x0, y0, x1, y1 in cells:
+        rows.setdefault((y0, y1), []).append((x0, x1))
+    strips = []
+    for (y0, y1), xs in rows.items():
+        xs.sort()
+        cur = list(xs[0])
+        for a, b in xs[1:]:
+            if abs(a - cur[1]) < 1e-9:
+                cur[1] = b
+            else:
+                strips.append((cur[0], y0, cur[1], y1))
+                cur = [a, b]
+        strips.append((cur[0], y0, cur[1], y1))
+    strips.sort(key=lambda s: (s[0], s[2], s[1]))
+    merged: list[list[float]] = []
+    for s in strips:
+        if merged and merged[-1][0] == s[0] and merged[-1][2] == s[2] and abs(merged[-1][3] - s[1]) < 1e-9:
+            merged[-1][3] = s[3]
+        else:
+            merged.append(list(s))
+    return [(m[0], m[1], m[2], m[3]) for m in merged]
