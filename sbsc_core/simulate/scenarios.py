@@ -397,7 +397,7 @@ def save_wall_images(sim_dir: Path, wall_ids: list[str], out_dir: Path, pixel_m:
         for kind, img in zip(("colour", "depth"), wall_images(wall_view(cloud.xyz, cloud.rgb, local, pixel_m)),
                              strict=True):
             path = out_dir / f"wall_{wid}_{kind}.png"
-            cv2.imwrite(str(path), img[..., ::-1])
+            cv2.imwrite(str(path), img[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 9])
             written.append(path)
     return written
 

@@ -1,0 +1,1 @@
+"""The REST API (contract 7): one router per concern, all under ``/api``."""

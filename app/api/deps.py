@@ -1,0 +1,171 @@
+"""Dependencies shared by the routers: settings, database sessions, the caller and its role."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Request
+from fastapi.concurrency import run_in_threadpool
+from sqlalchemy.orm import Session
+
+from ..auth import Principal, authenticate, hash_token
+from ..config import AppSettings
+from ..db import Database
+from ..jobs import JobManager
+from ..models import ROLES, Project
+from ..thumbnails import ImageCache
+
+
+async def get_settings(request: Request) -> AppSettings:
+    return request.app.state.settings
+
+
+async def get_database(request: Request) -> Database:
+    return request.app.state.db
+
+
+async def get_jobs(request: Request) -> JobManager:
+    return request.app.state.jobs
+
+
+async def get_image_cache(request: Request) -> ImageCache:
+    return request.app.state.images
+
+
+def read_session(db: Annotated[Database, Depends(get_database)]) -> Iterator[Session]:
+    """A session for reading (its transaction is rolled back at the end).
+
+    Writes never use a dependency: a yield dependency may finish after the response has
+    been sent, so endpoints that write commit in ``with db.write()`` before they answer.
+    """
+    with db.read() as session:
+        yield session
+
+
+Settings = Annotated[AppSettings, Depends(get_settings)]
+DB = Annotated[Database, Depends(get_database)]
+Jobs = Annotated[JobManager, Depends(get_jobs)]
+Images = Annotated[ImageCache, Depends(get_image_cache)]
+ReadSession = Annotated[Session, Depends(read_session)]
+
+
+class TokenCache:
+    """Recently verified tokens (by their hash) -> caller, for ``ttl_s`` seconds."""
+
+    def __init__(self, ttl_s: float = 30.0, maxsize: int = 1000) -> None:
+        self.ttl_s, self.maxsize = ttl_s, maxsize
+        self._items: dict[str, tuple[float, Principal]] = {}
+        self._lock = threading.Lock()
+
+    def get(self, token: str) -> Principal | None:
+        key = hash_token(token)
+        with self._lock:
+            hit = self._items.get(key)
+        if hit is None or hit[0] < time.monotonic():
+            return None
+        return hit[1]
+
+    def put(self, token: str, user: Principal) -> None:
+        with self._lock:
+            if len(self._items) >= self.maxsize:
+                self._items.clear()
+            self._items[hash_token(token)] = (time.monotonic() + self.ttl_s, user)
+
+
+def _unauthorized(detail: str) -> HTTPException:
+    return HTTPException(401, detail, headers={"WWW-Authenticate": "Bearer"})
+
+
+async def current_user(request: Request, db: DB) -> Principal:
+    """The caller named by ``Authorization: Bearer TOKEN``; 401 without a valid token.
+
+    Valid tokens are remembered for a few seconds (``app.state.auth_cache``) so that a
+    busy reviewer does not cost a user lookup per request.
+    """
+    header = request.headers.get("authorization", "")
+    scheme, _, token = header.partition(" ")
+    if not header:
+        raise _unauthorized("missing API token (send 'Authorization: Bearer TOKEN')")
+    if scheme.lower() != "bearer" or not token.strip():
+        raise _unauthorized("malformed Authorization header (expected 'Bearer TOKEN')")
+    cache: TokenCache = request.app.state.auth_cache
+    user = cache.get(token.strip())
+    if user is None:
+        user = await run_in_threadpool(_lookup, db, token.strip())
+        if user is None:
+            raise _unauthorized("invalid or revoked API token")
+        cache.put(token.strip(), user)
+    return user
+
+
+def _lookup(db: Database, token: str) -> Principal | None:
+    with db.read() as s:
+        return authenticate(s, token)
+
+
+def require(role: str) -> Callable[..., Principal]:
+    """A dependency that lets callers with ``role`` (or a higher one) through, else 403."""
+    if role not in ROLES:
+        raise ValueError(role)
+
+    async def check(user: Annotated[Principal, Depends(current_user)]) -> Principal:
+        if not user.may(role):
+            raise HTTPException(403, f"user '{user.name}' has role {user.role}; this needs {role}")
+        return user
+
+    check.__name__ = f"require_{role}"
+    return check
+
+
+User = Annotated[Principal, Depends(current_user)]
+Reviewer = Annotated[Principal, Depends(require("reviewer"))]
+Manager = Annotated[Principal, Depends(require("manager"))]
+Admin = Annotated[Principal, Depends(require("admin"))]
+
+
+def get_project(session: Session, pid: int, *, for_update: bool = False) -> Project:
+    project = session.get(Project, pid, with_for_update=True if for_update else None)
+    if project is None:
+        raise HTTPException(404, f"project {pid} not found")
+    return project
+
+
+def open_project(session: Session, pid: int) -> Project:
+    """The project, locked for this transaction; 423 once it is signed off."""
+    project = get_project(session, pid, for_update=True)
+    if project.status != "open":
+        raise HTTPException(423, f"project {pid} is signed off; it can no longer be changed")
+    return project
+
+
+def library_classes(request: Request, session: Session, models_id: int | None) -> dict:
+    """Class id -> model.json fields of an uploaded library, or of the bundled one."""
+    from ..models import ModelLibraryRow
+
+    if models_id is not None:
+        row = session.get(ModelLibraryRow, models_id)
+        if row is not None:
+            return dict(row.classes)
+    state = request.app.state
+    if getattr(state, "bundled_classes", None) is None:
+        state.bundled_classes = bundled_classes()
+    return state.bundled_classes
+
+
+def bundled_classes() -> dict:
+    """The bundled library's classes; the simulator's catalogue while the library is missing."""
+    from sbsc_core.errors import SbscError
+
+    from ..storage import bundled_library_summary
+
+    try:
+        return bundled_library_summary()
+    except SbscError:
+        from sbsc_core.simulate.catalogue import CATALOGUE
+
+        return {c.class_id: {"name": c.name, "ifc_class": c.ifc_class,
+                             "predefined_type": c.predefined_type, "width_m": c.width_m,
+                             "height_m": c.height_m} for c in CATALOGUE.values()}

@@ -1,0 +1,77 @@
+"""Exports: the accepted objects as IFC4 (via ``sbsc_core.bim.export``), the document as JSON."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+from fastapi import APIRouter, HTTPException
+from fastapi.responses import JSONResponse, Response
+from sqlalchemy import select
+
+from sbsc_core.errors import SbscError
+
+from ..models import Job, ModelLibraryRow, SignOff
+from ..results import project_document
+from .deps import ReadSession, Reviewer, Settings, get_project
+from .projects import signoff_dict
+
+router = APIRouter(prefix="/api", tags=["export"])
+
+
+def _library(settings, s, models_id):  # noqa: ANN001, ANN202
+    """The ModelLibrary the results were computed with (uploaded or bundled)."""
+    from sbsc_core.io.models import load_model_library
+    from sbsc_core.paths import bundled_models_dir
+
+    row = s.get(ModelLibraryRow, models_id) if models_id else None
+    root = settings.data_dir / row.path if row else bundled_models_dir()
+    try:
+        return load_model_library(root)
+    except SbscError:
+        return None  # the export falls back to its own class table
+
+
+@router.get("/projects/{pid}/export.ifc", response_class=Response,
+            responses={200: {"content": {"application/x-step": {}}}})
+def export_ifc_file(pid: int, _: Reviewer, s: ReadSession, settings: Settings) -> Response:
+    """IFC4: the walls, openings and the accepted objects of the project's current results."""
+    p = get_project(s, pid)
+    if p.current_job_id is None:
+        raise HTTPException(409, f"project {pid} has no finished detection job to export")
+    try:
+        from sbsc_core.bim.export import export_ifc
+    except ImportError:
+        raise HTTPException(501, "IFC export is not available in this installation "
+                                 "(sbsc_core.bim.export is missing)") from None
+    doc = project_document(s, p, id_is_ref=True)
+    doc["project_name"] = p.name
+    so = s.scalars(select(SignOff).where(SignOff.project_id == pid)).first()
+    library = _library(settings, s, s.get(Job, p.current_job_id).models_id)
+    try:
+        model = export_ifc(doc, library=library, schema="IFC4", accepted_only=True,
+                           signoff=signoff_dict(so))
+    except SbscError as exc:
+        raise HTTPException(422, str(exc)) from None
+    settings.tmp_dir.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix="export-", suffix=".ifc", dir=settings.tmp_dir)
+    os.close(fd)
+    try:
+        model.write(tmp)
+        with open(tmp, "rb") as fh:
+            data = fh.read()
+    finally:
+        os.unlink(tmp)
+    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in p.name)[:60] or "project"
+    return Response(data, media_type="application/x-step",
+                    headers={"Content-Disposition": f'attachment; filename="{safe}-{pid}.ifc"'})
+
+
+@router.get("/projects/{pid}/export.json")
+def export_json(pid: int, _: Reviewer, s: ReadSession) -> JSONResponse:
+    """The detections document (contract 4, ids as the pipeline wrote them) as a download."""
+    p = get_project(s, pid)
+    doc = project_document(s, p, id_is_ref=True)
+    so = s.scalars(select(SignOff).where(SignOff.project_id == pid)).first()
+    doc["signoff"] = signoff_dict(so)
+    return JSONResponse(doc, headers={"Content-Disposition": f'attachment; filename="detections-{pid}.json"'})

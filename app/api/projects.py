@@ -1,0 +1,114 @@
+"""Health, the caller, users (admin) and projects."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, HTTPException, Request
+from pydantic import BaseModel, Field
+from sqlalchemy import func, select
+
+from ..auth import create_user
+from ..models import Job, ModelLibraryRow, Project, Scan, SignOff, User, iso
+from ..results import job_dict, review_counts
+from .deps import DB, Admin, ReadSession, Reviewer, get_project, library_classes
+
+router = APIRouter(prefix="/api")
+
+
+@router.get("/health", tags=["meta"])
+def health() -> dict:
+    return {"status": "ok"}
+
+
+@router.get("/me", tags=["users"])
+def me(user: Reviewer) -> dict:
+    return {"id": user.id, "name": user.name, "role": user.role}
+
+
+class NewUser(BaseModel):
+    name: str = Field(min_length=1, max_length=100)
+    role: str = Field(pattern="^(reviewer|manager|admin)$")
+
+
+@router.get("/users", tags=["users"])
+def list_users(_: Admin, s: ReadSession) -> list[dict]:
+    return [{"id": u.id, "name": u.name, "role": u.role, "created_at": iso(u.created_at),
+             "disabled": u.disabled} for u in s.scalars(select(User).order_by(User.id))]
+
+
+@router.post("/users", status_code=201, tags=["users"])
+def add_user(body: NewUser, _: Admin, db: DB) -> dict:
+    """Create a user; the answer holds its token, shown this once."""
+    with db.write() as s:
+        try:
+            user, token = create_user(s, body.name, body.role)
+        except ValueError as exc:
+            raise HTTPException(409 if "exists" in str(exc) else 422, str(exc)) from None
+        return {"id": user.id, "name": user.name, "role": user.role, "token": token}
+
+
+class NewProject(BaseModel):
+    name: str = Field(min_length=1, max_length=200)
+
+
+def project_summary(s, p: Project) -> dict:  # noqa: ANN001
+    return {"id": p.id, "name": p.name, "status": p.status, "created_at": iso(p.created_at),
+            "created_by": p.created_by, "current_job": p.current_job_id}
+
+
+@router.get("/projects", tags=["projects"])
+def list_projects(_: Reviewer, s: ReadSession) -> list[dict]:
+    out = []
+    n_scans = dict(s.execute(select(Scan.project_id, func.count(Scan.id)).group_by(Scan.project_id)).all())
+    for p in s.scalars(select(Project).order_by(Project.id.desc())):
+        last = s.scalars(select(Job).where(Job.project_id == p.id).order_by(Job.id.desc()).limit(1)).first()
+        out.append({**project_summary(s, p), "scans": n_scans.get(p.id, 0),
+                    "last_job": job_dict(last) if last else None, "counts": review_counts(s, p)})
+    return out
+
+
+@router.post("/projects", status_code=201, tags=["projects"])
+def create_project(body: NewProject, user: Reviewer, db: DB) -> dict:
+    name = " ".join(body.name.split())
+    if not name:
+        raise HTTPException(422, "name: must not be blank")
+    with db.write() as s:
+        p = Project(name=name, status="open", created_by=user.name)
+        s.add(p)
+        s.flush()
+        return project_summary(s, p)
+
+
+def signoff_dict(so: SignOff | None) -> dict | None:
+    if so is None:
+        return None
+    return {"by": so.user_name, "at": iso(so.at), "comment": so.comment, "counts": so.counts,
+            "job": so.job_id}
+
+
+@router.get("/projects/{pid}", tags=["projects"])
+def get_project_detail(pid: int, _: Reviewer, s: ReadSession) -> dict:
+    """The project with its scans, model library, jobs, review counts and sign-off."""
+    p = get_project(s, pid)
+    scans = [{"id": sc.id, "filename": sc.filename, "points": sc.points, "bytes": sc.size_bytes,
+              "sha256": sc.sha256, "uploaded_by": sc.uploaded_by, "created_at": iso(sc.created_at)}
+             for sc in s.scalars(select(Scan).where(Scan.project_id == pid).order_by(Scan.id))]
+    models = s.get(ModelLibraryRow, p.models_id) if p.models_id else None
+    jobs = [job_dict(j) for j in s.scalars(select(Job).where(Job.project_id == pid).order_by(Job.id.desc()))]
+    so = s.scalars(select(SignOff).where(SignOff.project_id == pid)).first()
+    return {
+        **project_summary(s, p), "scans": scans,
+        "models": None if models is None else {
+            "id": models.id, "filename": models.filename, "sha256": models.sha256,
+            "classes": sorted(models.classes)},
+        "jobs": jobs, "counts": review_counts(s, p), "signoff": signoff_dict(so),
+    }
+
+
+@router.get("/projects/{pid}/classes", tags=["review"])
+def project_classes(pid: int, request: Request, _: Reviewer, s: ReadSession) -> dict:
+    """The classes a detection of this project may be relabelled to (its model library)."""
+    p = get_project(s, pid)
+    models_id = p.models_id
+    if p.current_job_id is not None:
+        models_id = s.get(Job, p.current_job_id).models_id
+    return library_classes(request, s, models_id)

@@ -1,0 +1,143 @@
+"""Uploads: scans (contract 1) and zipped model libraries (contract 2), streamed to disk.
+
+Both endpoints are ``async``: the body is parsed chunk by chunk as it arrives (see
+:func:`app.storage.receive_file`); checking and storing run in the thread pool. A file
+is moved into its place only after it passed the checks, and its row is committed right
+after; if the commit fails the file is removed again.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import shutil
+import uuid
+from pathlib import Path
+
+from fastapi import APIRouter, HTTPException, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse
+
+from ..auth import Principal
+from ..config import AppSettings
+from ..db import Database
+from ..models import ModelLibraryRow, Project, Scan
+from ..storage import (
+    SCAN_SUFFIXES,
+    ZIP_SUFFIXES,
+    ReceivedFile,
+    UploadRefused,
+    check_scan,
+    check_zip,
+    move_into_place,
+    receive_file,
+    unpack_library,
+)
+from .deps import DB, Reviewer, Settings, open_project
+
+router = APIRouter(prefix="/api", tags=["uploads"])
+
+
+def _refusal(exc: UploadRefused) -> JSONResponse:
+    return JSONResponse({"detail": exc.detail}, status_code=exc.status)
+
+
+def _check_open(db: Database, pid: int) -> None:
+    with db.read() as s:
+        p = s.get(Project, pid)
+        if p is None:
+            raise HTTPException(404, f"project {pid} not found")
+        if p.status != "open":
+            raise HTTPException(423, f"project {pid} is signed off; it can no longer be changed")
+
+
+async def _receive(request: Request, settings: AppSettings, max_bytes: int,
+                   suffixes: tuple[str, ...]) -> ReceivedFile:
+    return await receive_file(request, tmp_dir=settings.tmp_dir, max_bytes=max_bytes,
+                              drain_bytes=settings.upload_drain_bytes, suffixes=suffixes)
+
+
+@router.post("/projects/{pid}/scans", status_code=201,
+             openapi_extra={"requestBody": {"content": {"multipart/form-data": {"schema": {
+                 "type": "object", "required": ["file"],
+                 "properties": {"file": {"type": "string", "format": "binary"}}}}}}})
+async def upload_scan(pid: int, request: Request, user: Reviewer, settings: Settings, db: DB):
+    """One scan file (PLY, E57, LAS/LAZ, PCD, XYZ/PTS/TXT) in the multipart field ``file``."""
+    await run_in_threadpool(_check_open, db, pid)
+    try:
+        got = await _receive(request, settings, settings.max_scan_bytes, SCAN_SUFFIXES)
+    except UploadRefused as exc:
+        return _refusal(exc)
+    try:
+        points = await run_in_threadpool(check_scan, got.path, got.filename, settings.scan_check_timeout_s)
+        return await run_in_threadpool(_store_scan, db, settings, pid, got, points, user)
+    except UploadRefused as exc:
+        return _refusal(exc)
+    finally:
+        got.discard()
+
+
+def _store_scan(db: Database, settings: AppSettings, pid: int, got: ReceivedFile, points: int,
+                user: Principal) -> dict:
+    rel = Path("projects", str(pid), "scans", f"{uuid.uuid4().hex[:12]}_{got.filename}")
+    dest = settings.data_dir / rel
+    try:
+        with db.write() as s:
+            open_project(s, pid)
+            scan = Scan(project_id=pid, filename=got.filename, path=rel.as_posix(),
+                        size_bytes=got.size, sha256=got.sha256, points=points, uploaded_by=user.name)
+            s.add(scan)
+            s.flush()
+            move_into_place(got.path, dest)
+            out = {"id": scan.id, "filename": scan.filename, "points": points, "bytes": got.size,
+                   "sha256": got.sha256}
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            dest.unlink()
+        raise
+    return out
+
+
+@router.post("/projects/{pid}/models", status_code=201,
+             openapi_extra={"requestBody": {"content": {"multipart/form-data": {"schema": {
+                 "type": "object", "required": ["file"],
+                 "properties": {"file": {"type": "string", "format": "binary"}}}}}}})
+async def upload_models(pid: int, request: Request, user: Reviewer, settings: Settings, db: DB):
+    """A zipped model library (contract 2) in the multipart field ``file``; used by later jobs."""
+    await run_in_threadpool(_check_open, db, pid)
+    try:
+        got = await _receive(request, settings, settings.max_models_zip_bytes, ZIP_SUFFIXES)
+    except UploadRefused as exc:
+        return _refusal(exc)
+    try:
+        return await run_in_threadpool(_store_models, db, settings, pid, got, user)
+    except UploadRefused as exc:
+        return _refusal(exc)
+    finally:
+        got.discard()
+
+
+def _store_models(db: Database, settings: AppSettings, pid: int, got: ReceivedFile,
+                  user: Principal) -> dict:
+    s_ = settings
+    check_zip(got.path, got.filename, max_entries=s_.zip_max_entries,
+              max_entry_bytes=s_.zip_max_entry_bytes, max_total_bytes=s_.zip_max_total_bytes,
+              max_ratio=s_.zip_max_ratio)
+    rel_dir = Path("projects", str(pid), "models", uuid.uuid4().hex[:12])
+    dest = settings.data_dir / rel_dir
+    root, classes = unpack_library(got.path, got.filename, dest)
+    try:
+        with db.write() as s:
+            project = open_project(s, pid)
+            row = ModelLibraryRow(project_id=pid, filename=got.filename,
+                                  path=root.relative_to(settings.data_dir).as_posix(),
+                                  size_bytes=got.size, sha256=got.sha256, classes=classes,
+                                  uploaded_by=user.name)
+            s.add(row)
+            s.flush()
+            project.models_id = row.id
+            out = {"id": row.id, "filename": row.filename, "bytes": got.size, "sha256": got.sha256,
+                   "classes": sorted(classes)}
+    except BaseException:
+        shutil.rmtree(dest, ignore_errors=True)
+        raise
+    return out

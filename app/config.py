@@ -1,0 +1,90 @@
+"""Settings of the review app, read the pydantic-settings way from ``SBSC_*`` variables.
+
+``SBSC_DATA_DIR`` holds the embedded SQLite database and every large file (scans,
+model libraries, job outputs); ``SBSC_DATABASE_URL`` points at another database
+(e.g. ``postgresql+psycopg://user@host/sbsc``) while files stay under the data dir.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+MiB = 1024 * 1024
+GiB = 1024 * MiB
+
+
+def default_data_dir() -> Path:
+    """``$XDG_DATA_HOME/sbsc`` (``~/.local/share/sbsc``), or ``%APPDATA%\\sbsc`` on Windows."""
+    if os.name == "nt" and os.environ.get("APPDATA"):
+        return Path(os.environ["APPDATA"]) / "sbsc"
+    base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return Path(base) / "sbsc"
+
+
+def default_static_dir() -> Path:
+    """``static/`` beside the ``app`` package in the source tree."""
+    return Path(__file__).resolve().parent.parent / "static"
+
+
+class AppSettings(BaseSettings):
+    """Everything the web app can be told; each field is ``SBSC_<NAME>`` in the environment."""
+
+    model_config = SettingsConfigDict(env_prefix="SBSC_", extra="ignore")
+
+    data_dir: Path = Field(default_factory=default_data_dir)
+    database_url: str | None = None  # default: sqlite file sbsc.db in data_dir
+    static_dir: Path = Field(default_factory=default_static_dir)
+
+    threads: int = 8  # worker threads of the web process for blocking endpoints
+
+    # uploads
+    max_scan_bytes: int = 8 * GiB
+    max_models_zip_bytes: int = 256 * MiB
+    upload_drain_bytes: int = 32 * MiB  # a refused body is read and dropped up to this, then cut
+    scan_check_timeout_s: float = 1800.0
+    zip_max_entries: int = 5000
+    zip_max_entry_bytes: int = 64 * MiB
+    zip_max_total_bytes: int = 1 * GiB
+    zip_max_ratio: float = 200.0  # uncompressed / compressed per entry (zip bombs)
+
+    # jobs
+    job_workers: int = 1
+    job_runner: str = "sbsc_core.pipeline:detect_to_dir"  # "module:function" with its signature
+    job_timeout_s: float = 6 * 3600.0
+    job_poll_s: float = 0.25  # supervisor tick
+    progress_min_interval_s: float = 0.3  # worker writes progress at most this often
+
+    # review
+    thumbnail_px: int = 160
+    thumbnail_context: float = 2.5  # crop side = this x the object's larger side (min below)
+    thumbnail_min_m: float = 0.25
+
+    # 3D review scenes (app.viewer, viser): one server per project on a free port of this host
+    viewer: bool = True
+    viewer_host: str = "127.0.0.1"
+
+    # first run
+    create_admin_on_first_run: bool = True
+
+    @property
+    def db_url(self) -> str:
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'sbsc.db').as_posix()}"
+
+    @property
+    def tmp_dir(self) -> Path:
+        """Partial uploads and job scratch space; emptied at start-up."""
+        return self.data_dir / "tmp"
+
+    @property
+    def projects_dir(self) -> Path:
+        return self.data_dir / "projects"
+
+    def ensure_dirs(self) -> None:
+        for d in (self.data_dir, self.tmp_dir, self.projects_dir):
+            d.mkdir(parents=True, exist_ok=True)

@@ -1,0 +1,349 @@
+"""Detection jobs: queued in the database, run in worker processes, watched by a supervisor.
+
+The ``jobs`` table is the queue. A supervisor thread in the server claims queued jobs
+(``queued`` -> ``running``, stamped with this server's ``owner`` id) while fewer than
+``job_workers`` run, and starts one spawned process per job. The worker runs the
+library's ``detect_to_dir`` (or the runner named by ``SBSC_JOB_RUNNER``), writes its stage
+and progress to the database as it goes and imports the results in one transaction.
+
+Every way a job can end leaves it ``succeeded`` or ``failed`` with a reason:
+
+- the runner raises: ``failed`` with its one-line message;
+- the worker process dies (killed, crashed): the supervisor sees its exit code and fails it;
+- it runs longer than ``job_timeout_s``: killed and failed;
+- the server stops: its workers are stopped and their jobs failed; after a crash of the
+  server, start-up fails every job still ``running`` ("server restarted") while ``queued``
+  jobs simply run; a worker whose server died notices (its parent changes) and exits.
+
+A worker only writes while its job is still ``running`` under its owner, so a job that the
+supervisor has given up can never be overwritten by a late worker.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import multiprocessing as mp
+import os
+import re
+import signal
+import threading
+import time
+import traceback
+import uuid
+from collections.abc import Callable
+from pathlib import Path
+
+from sqlalchemy import select, update
+
+from sbsc_core.errors import InputError, SbscError
+
+from .config import AppSettings
+from .db import Database
+from .models import Job, ModelLibraryRow, Project, Scan, utcnow
+from .results import import_results
+
+log = logging.getLogger("sbsc.jobs")
+
+# Overall progress: the span of 0..1 each stage of the pipeline covers.
+STAGE_SPANS: dict[str, tuple[float, float]] = {
+    "starting": (0.0, 0.02), "reading": (0.02, 0.15), "segmentation": (0.15, 0.25),
+    "walls": (0.25, 0.85), "consensus": (0.85, 0.92), "writing": (0.92, 0.96),
+    "done": (0.96, 0.96), "importing": (0.96, 1.0),
+}
+TERMINAL = ("succeeded", "failed")
+
+
+class JobAbandoned(Exception):
+    """The job is no longer ours to run (failed by the supervisor, or the server restarted)."""
+
+
+def overall_progress(stage: str, fraction: float, previous: float) -> float:
+    span = STAGE_SPANS.get(stage)
+    if span is None:
+        return previous
+    lo, hi = span
+    return max(previous, lo + (hi - lo) * min(1.0, max(0.0, float(fraction))))
+
+
+def job_dir(settings: AppSettings, project_id: int, job_id: int) -> Path:
+    return settings.projects_dir / str(project_id) / "jobs" / str(job_id)
+
+
+def load_runner(spec: str) -> Callable:
+    module, _, name = spec.partition(":")
+    return getattr(importlib.import_module(module), name or "detect_to_dir")
+
+
+def describe_exit(code: int | None) -> str:
+    if code is None:
+        return "worker process did not exit"
+    if code < 0:
+        try:
+            return f"worker process died (killed by signal {signal.Signals(-code).name})"
+        except ValueError:
+            return f"worker process died (signal {-code})"
+    return f"worker process exited with code {code} before finishing"
+
+
+# --------------------------------------------------------------------------- worker side
+
+
+class ProgressWriter:
+    """The ``progress(stage, fraction)`` callback: throttled writes, checks the job is ours."""
+
+    def __init__(self, db: Database, job_id: int, owner: str, min_interval_s: float) -> None:
+        self.db, self.job_id, self.owner, self.min_interval_s = db, job_id, owner, min_interval_s
+        self.stage = ""
+        self.progress = 0.0
+        self.last = 0.0
+
+    def __call__(self, stage: str, fraction: float, *, force: bool = False) -> None:
+        progress = overall_progress(stage, fraction, self.progress)
+        now = time.monotonic()
+        if not force and stage == self.stage and now - self.last < self.min_interval_s:
+            return
+        self.stage, self.progress, self.last = stage, progress, now
+        with self.db.write() as s:
+            n = s.execute(update(Job).where(Job.id == self.job_id, Job.status == "running",
+                                            Job.owner == self.owner)
+                          .values(stage=stage[:100], progress=progress, updated_at=utcnow())).rowcount
+        if n == 0:
+            raise JobAbandoned(f"job {self.job_id} is no longer running here")
+
+
+def _watch_parent(parent_pid: int, interval_s: float = 0.5) -> None:
+    """Exit this worker when the server that started it has gone."""
+    def loop() -> None:
+        while True:
+            time.sleep(interval_s)
+            if os.getppid() != parent_pid:
+                os._exit(70)
+    threading.Thread(target=loop, name="sbsc-parent-watch", daemon=True).start()
+
+
+def run_job(job_id: int, owner: str, settings_data: dict, parent_pid: int) -> None:
+    """Entry point of a worker process."""
+    settings = AppSettings(**settings_data)
+    _watch_parent(parent_pid)
+    db = Database(settings.db_url)
+    try:
+        _run(db, settings, job_id, owner)
+    finally:
+        db.dispose()
+
+
+def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
+    with db.read() as s:
+        job = s.get(Job, job_id)
+        if job is None or job.status != "running" or job.owner != owner:
+            return
+        scans = [settings.data_dir / p for p in s.scalars(
+            select(Scan.path).where(Scan.project_id == job.project_id).order_by(Scan.id))]
+        models_rel = s.scalar(select(ModelLibraryRow.path).where(ModelLibraryRow.id == job.models_id)) \
+            if job.models_id else None
+        expected = dict(job.expected) if job.expected else None
+        out = settings.data_dir / job.out_dir
+    out.parent.mkdir(parents=True, exist_ok=True)
+    progress = ProgressWriter(db, job_id, owner, settings.progress_min_interval_s)
+    with open(out.parent / "job.log", "a", encoding="utf-8") as logf:
+        def say(msg: str) -> None:
+            logf.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {msg}\n")
+            logf.flush()
+
+        try:
+            progress("starting", 1.0, force=True)
+            if not scans:
+                raise InputError("project", "no scan uploaded yet")
+            from sbsc_core.paths import bundled_models_dir
+
+            models = settings.data_dir / models_rel if models_rel else bundled_models_dir()
+            say(f"job {job_id}: {len(scans)} scan(s), models {models}, pid {os.getpid()}")
+            runner = load_runner(settings.job_runner)
+            summary = runner(scans, models, expected=expected, out=out, log=say, progress=progress)
+            say(f"finished: {summary}")
+            progress("importing", 0.0, force=True)
+            _finish_succeeded(db, settings, job_id, owner, out)
+            say("results stored")
+        except JobAbandoned as exc:
+            say(f"stopped: {exc}")
+        except SbscError as exc:
+            say(f"failed: {exc}")
+            _finish_failed(db, job_id, owner, str(exc))
+        except Exception as exc:  # noqa: BLE001 - the job must end failed with a reason
+            say(traceback.format_exc())
+            _finish_failed(db, job_id, owner, f"internal error: {type(exc).__name__}: {exc}")
+
+
+def _finish_succeeded(db: Database, settings: AppSettings, job_id: int, owner: str, out: Path) -> None:
+    """Import the results and mark the job succeeded, all in one transaction."""
+    with db.write() as s:
+        job = s.get(Job, job_id, with_for_update=True)
+        if job is None or job.status != "running" or job.owner != owner:
+            raise JobAbandoned(f"job {job_id} is no longer running here")
+        project = s.get(Project, job.project_id, with_for_update=True)
+        if project.status != "open":
+            job.status, job.error = "failed", "the project was signed off while the job ran"
+            job.finished_at = job.updated_at = utcnow()
+            return
+        import_results(s, job, out, settings.data_dir)
+        job.status, job.stage, job.progress = "succeeded", "done", 1.0
+        job.finished_at = job.updated_at = utcnow()
+        s.flush()
+        project.current_job_id = job.id
+
+
+def _finish_failed(db: Database, job_id: int, owner: str, reason: str) -> None:
+    with db.write() as s:
+        s.execute(update(Job).where(Job.id == job_id, Job.status == "running", Job.owner == owner)
+                  .values(status="failed", error=reason[:2000], finished_at=utcnow(),
+                          updated_at=utcnow()))
+
+
+# --------------------------------------------------------------------------- server side
+
+
+class JobManager:
+    """The supervisor: claims queued jobs, starts and reaps workers, fails lost jobs."""
+
+    def __init__(self, settings: AppSettings, db: Database) -> None:
+        self.settings, self.db = settings, db
+        self.owner = uuid.uuid4().hex
+        self.procs: dict[int, mp.process.BaseProcess] = {}
+        self.started: dict[int, float] = {}
+        self._ctx = mp.get_context("spawn")
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    # lifecycle ---------------------------------------------------------------------
+    def start(self) -> None:
+        self.recover()
+        self._thread = threading.Thread(target=self._loop, name="sbsc-job-supervisor", daemon=True)
+        self._thread.start()
+
+    def recover(self) -> int:
+        """Fail the jobs a previous server left running; queued ones will simply run."""
+        with self.db.write() as s:
+            jobs = s.scalars(select(Job).where(Job.status == "running", Job.owner != self.owner)).all()
+            for job in jobs:
+                job.status = "failed"
+                job.error = f"server restarted while the job was running (stage '{job.stage}')"
+                job.finished_at = job.updated_at = utcnow()
+        if jobs:
+            log.warning("marked %d job(s) left running by a previous server as failed", len(jobs))
+        return len(jobs)
+
+    def wake(self) -> None:
+        self._wake.set()
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+        for jid, proc in list(self.procs.items()):
+            if proc.is_alive():
+                proc.terminate()
+            proc.join(timeout_s)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(timeout_s)
+            self._fail(jid, "server shut down while the job was running (stage '{stage}')")
+        self.procs.clear()
+
+    # loop --------------------------------------------------------------------------
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self.tick()
+            except Exception:  # noqa: BLE001 - keep supervising whatever happened
+                log.exception("job supervisor tick failed")
+            self._wake.wait(self.settings.job_poll_s)
+            self._wake.clear()
+
+    def tick(self) -> None:
+        self._reap()
+        while not self._stop.is_set() and len(self.procs) < max(1, self.settings.job_workers):
+            jid = self._claim_next()
+            if jid is None:
+                break
+            self._spawn(jid)
+
+    def _reap(self) -> None:
+        for jid, proc in list(self.procs.items()):
+            if proc.is_alive():
+                if time.monotonic() - self.started[jid] > self.settings.job_timeout_s:
+                    proc.kill()
+                    proc.join(5)
+                    self._fail(jid, f"timed out after {self.settings.job_timeout_s:.0f} s "
+                                    "(stage '{stage}')")
+                    self._forget(jid)
+                continue
+            proc.join(1)
+            self._fail(jid, describe_exit(proc.exitcode) + " during stage '{stage}'")
+            self._forget(jid)
+
+    def _forget(self, jid: int) -> None:
+        self.procs.pop(jid, None)
+        self.started.pop(jid, None)
+
+    def _claim_next(self) -> int | None:
+        with self.db.write() as s:
+            job = s.scalars(select(Job).where(Job.status == "queued").order_by(Job.id).limit(1)
+                            .with_for_update(skip_locked=True)).first()
+            if job is None:
+                return None
+            job.status, job.stage, job.progress = "running", "starting", 0.0
+            job.owner, job.error = self.owner, None
+            job.started_at = job.updated_at = utcnow()
+            job.out_dir = (job_dir(self.settings, job.project_id, job.id) / "out") \
+                .relative_to(self.settings.data_dir).as_posix()
+            return job.id
+
+    def _spawn(self, jid: int) -> None:
+        data = self.settings.model_dump(mode="json")
+        proc = self._ctx.Process(target=run_job, args=(jid, self.owner, data, os.getpid()),
+                                 name=f"sbsc-job-{jid}")
+        try:
+            proc.start()
+        except OSError as exc:
+            self._fail(jid, f"could not start a worker process ({exc})")
+            return
+        self.procs[jid], self.started[jid] = proc, time.monotonic()
+        with self.db.write() as s:
+            s.execute(update(Job).where(Job.id == jid, Job.owner == self.owner)
+                      .values(worker_pid=proc.pid))
+        log.info("job %d started in process %d", jid, proc.pid)
+
+    def _fail(self, jid: int, reason: str) -> None:
+        """Fail the job if it is still running here; ``{stage}`` in reason is filled in."""
+        with self.db.write() as s:
+            job = s.get(Job, jid, with_for_update=True)
+            if job is None or job.status != "running" or job.owner != self.owner:
+                return
+            job.status, job.error = "failed", reason.replace("{stage}", job.stage)
+            job.finished_at = job.updated_at = utcnow()
+        log.warning("job %d failed: %s", jid, reason)
+
+    def running(self) -> list[int]:
+        return [jid for jid, p in self.procs.items() if p.is_alive()]
+
+
+def parse_expected(value: object) -> dict[str, int] | None:
+    """``{"socket_x1": 20}`` or a whole contract-3 document ``{"schema", "counts"}``."""
+    if value is None:
+        return None
+    if isinstance(value, dict) and "counts" in value:
+        value = value["counts"]
+    if not isinstance(value, dict):
+        raise InputError("expected", "must be an object of class id -> count")
+    out: dict[str, int] = {}
+    for k, v in value.items():
+        if not isinstance(k, str) or not re.fullmatch(r"[a-z0-9_]+", k):
+            raise InputError(f"expected.{k}", "class ids are lower case letters, digits and '_'")
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            raise InputError(f"expected.{k}", f"count must be a whole number >= 0, not {v!r}")
+        out[k] = v
+    return out
+

@@ -1,0 +1,152 @@
+"""A sample project made from a finished ``sbsc detect`` run, so ``sbsc serve`` opens on results.
+
+``ensure_sample_project(scan, detections_dir)`` copies the scan and the output directory
+into the data dir and records them as a project with one succeeded job, without running
+detection again. It is idempotent: a project of that name with results is reused.
+
+    python -m app.sample SCAN DETECTIONS_DIR [--models DIR] [--name NAME]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import shutil
+import sys
+import uuid
+from pathlib import Path
+
+from sqlalchemy import select
+
+from sbsc_core.errors import InputError, SbscError
+
+from .config import AppSettings
+from .db import Database, upgrade
+from .jobs import job_dir
+from .models import Job, ModelLibraryRow, Project, Scan, utcnow
+from .results import import_results
+from .storage import sha256_file
+
+SAMPLE_NAME = "Sample: Scenario I"
+
+
+def _link_or_copy(src: Path, dest: Path) -> None:
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        os.link(src, dest)
+    except OSError:
+        shutil.copy2(src, dest)
+
+
+def find_sample_project(settings: AppSettings, name: str = SAMPLE_NAME) -> int | None:
+    """The id of the project called ``name`` that has results, if any."""
+    db = Database(settings.db_url)
+    try:
+        upgrade(db)
+        with db.read() as s:
+            return s.scalar(select(Project.id).where(Project.name == name,
+                                                     Project.current_job_id.is_not(None))
+                            .order_by(Project.id).limit(1))
+    finally:
+        db.dispose()
+
+
+def ensure_sample_project(scan: Path, detections_dir: Path, *, models: Path | None = None,
+                          name: str = SAMPLE_NAME, settings: AppSettings | None = None,
+                          points: int | None = None) -> int:
+    """Create (once) a project from ``scan`` and a finished output dir; returns its id.
+
+    ``detections_dir`` holds ``detections.json`` and ``orthoimages/`` as written by
+    ``sbsc detect``; ``models`` is the library it was run with (default: the bundled one).
+    ``points`` saves reading the scan to count them.
+    """
+    settings = settings or AppSettings()
+    scan, detections_dir = Path(scan), Path(detections_dir)
+    if not scan.is_file():
+        raise InputError(scan, "no such scan file")
+    if not (detections_dir / "detections.json").is_file():
+        raise InputError(detections_dir, "no detections.json here (run sbsc detect first)")
+    existing = find_sample_project(settings, name)
+    if existing is not None:
+        return existing
+    library_classes = None
+    if models is not None:
+        from sbsc_core.io.models import load_model_library
+
+        from .storage import library_summary
+
+        library_classes = library_summary(load_model_library(models))
+    if points is None:
+        from sbsc_core.io.scans import read_scan
+
+        points = len(read_scan(scan))
+    settings.ensure_dirs()
+    db = Database(settings.db_url)
+    created: list[Path] = []
+    try:
+        with db.write() as s:
+            project = Project(name=name, status="open", created_by="sample")
+            s.add(project)
+            s.flush()
+            pdir = settings.projects_dir / str(project.id)
+            scan_dest = pdir / "scans" / f"{uuid.uuid4().hex[:12]}_{scan.name}"
+            created.append(pdir)
+            _link_or_copy(scan, scan_dest)
+            s.add(Scan(project_id=project.id, filename=scan.name,
+                       path=scan_dest.relative_to(settings.data_dir).as_posix(),
+                       size_bytes=scan.stat().st_size, sha256=sha256_file(scan), points=int(points),
+                       uploaded_by="sample"))
+            models_id = None
+            if models is not None:
+                lib_dest = pdir / "models" / uuid.uuid4().hex[:12]
+                shutil.copytree(models, lib_dest)
+                row = ModelLibraryRow(project_id=project.id, filename=Path(models).name,
+                                      path=lib_dest.relative_to(settings.data_dir).as_posix(),
+                                      size_bytes=0, sha256="", classes=library_classes,
+                                      uploaded_by="sample")
+                s.add(row)
+                s.flush()
+                models_id = project.models_id = row.id
+            now = utcnow()
+            job = Job(project_id=project.id, status="succeeded", stage="imported", progress=1.0,
+                      models_id=models_id, created_by="sample", created_at=now, started_at=now,
+                      finished_at=now, updated_at=now)
+            s.add(job)
+            s.flush()
+            out = job_dir(settings, project.id, job.id) / "out"
+            shutil.copytree(detections_dir, out)
+            job.out_dir = out.relative_to(settings.data_dir).as_posix()
+            import_results(s, job, out, settings.data_dir)
+            s.flush()
+            project.current_job_id = job.id
+            pid = project.id
+    except BaseException:
+        for p in created:
+            shutil.rmtree(p, ignore_errors=True)
+        raise
+    finally:
+        db.dispose()
+    return pid
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m app.sample", description=__doc__.splitlines()[0])
+    ap.add_argument("scan")
+    ap.add_argument("detections_dir")
+    ap.add_argument("--models")
+    ap.add_argument("--name", default=SAMPLE_NAME)
+    args = ap.parse_args(argv)
+    try:
+        pid = ensure_sample_project(Path(args.scan), Path(args.detections_dir),
+                                    models=Path(args.models) if args.models else None, name=args.name)
+    except SbscError as exc:
+        print(f"sbsc: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"sample project {pid}: {args.name}")
+    return 0
+
+
+if __name__ == "__main__":
+    with contextlib.suppress(KeyboardInterrupt):
+        sys.exit(main())

@@ -1,0 +1,33 @@
+"""``sbsc user add NAME --role ROLE``: create a user in the app's database, print its token once."""
+
+from __future__ import annotations
+
+from sbsc_core.errors import InputError
+
+from .auth import create_user
+from .config import AppSettings
+from .db import Database, upgrade
+
+
+def add_user(settings: AppSettings, name: str, role: str) -> str:
+    """Create the user; returns the clear token. Raises InputError (bad name, role, duplicate)."""
+    settings.ensure_dirs()
+    db = Database(settings.db_url)
+    try:
+        upgrade(db)
+        with db.write() as s:
+            try:
+                _, token = create_user(s, name, role)
+            except ValueError as exc:
+                raise InputError("sbsc user add", str(exc)) from None
+    finally:
+        db.dispose()
+    return token
+
+
+def add_user_cli(name: str, role: str) -> str:
+    """The text ``sbsc user add`` prints: who was created and the token, shown this once."""
+    settings = AppSettings()
+    token = add_user(settings, name, role)
+    return (f"created user '{name.strip()}' with role {role} in {settings.db_url}\n"
+            f"API token (shown only now; keep it secret):\n{token}")

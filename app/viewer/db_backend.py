@@ -1,0 +1,166 @@
+"""The :class:`~app.viewer.backend.ReviewBackend` on the review service's database.
+
+Reads go straight to the service's tables (``app.models``) and documents
+(``app.results.project_document``), so the scene shows exactly what
+``GET /api/projects/{pid}/detections`` answers. Decisions go through the service's own
+``PATCH /api/detections/{did}`` handler (``app.api.review.review_detection``), called as
+a function: one code path for the version check, the 423 after sign-off, the relabel
+rules and the append-only audit row, whichever side the decision comes from.
+
+The change feed is the audit trail: every decision is a ``review_decisions`` row with an
+increasing id, so "what changed since cursor" is one indexed query; a new current job
+(results replaced) asks the scene to rebuild.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+from fastapi import HTTPException
+from fastapi.responses import JSONResponse
+from sqlalchemy import func, select
+
+from sbsc_core.paths import bundled_models_dir
+
+from ..auth import Principal, authenticate
+from ..config import AppSettings
+from ..db import Database
+from ..models import DetectionRow, Job, ModelLibraryRow, Project, ReviewDecision, Scan, SignOff
+from ..results import detection_dict, project_document
+from .backend import (
+    Changes,
+    Forbidden,
+    Locked,
+    NotFound,
+    NotReady,
+    ProjectData,
+    ProjectId,
+    Reviewer,
+    ReviewError,
+    StaleVersion,
+)
+
+# Decisions are re-read this far behind the cursor: on PostgreSQL ids are handed out before
+# commit, so a smaller id can become visible after a larger one. Re-reading is harmless
+# (the scene ignores a detection whose version it already shows).
+CURSOR_OVERLAP = 20
+
+_ERRORS: dict[int, type[ReviewError]] = {403: Forbidden, 404: NotFound, 409: StaleVersion,
+                                         423: Locked}
+
+
+class DbReviewBackend:
+    """The review service's database as the 3D scene sees it. Thread-safe (a session per call)."""
+
+    def __init__(self, db: Database, settings: AppSettings) -> None:
+        self.db = db
+        self.settings = settings
+        # what the PATCH handler reads from ``request.app.state`` (the bundled classes cache)
+        self._request = SimpleNamespace(app=SimpleNamespace(state=SimpleNamespace(bundled_classes=None)))
+
+    def _signoff(self, s: Any, pid: int) -> dict | None:
+        from ..api.projects import signoff_dict
+
+        return signoff_dict(s.scalars(select(SignOff).where(SignOff.project_id == pid)).first())
+
+    def project_data(self, pid: ProjectId) -> ProjectData:
+        from ..api.deps import bundled_classes
+
+        data_dir = self.settings.data_dir
+        with self.db.read() as s:
+            p = s.get(Project, int(pid))
+            if p is None:
+                raise NotFound(f"project {pid} not found")
+            if p.current_job_id is None:
+                raise NotReady(f"project {pid} has no detection results yet")
+            doc = project_document(s, p)
+            job = s.get(Job, p.current_job_id)
+            out = data_dir / job.out_dir if job is not None and job.out_dir else None
+            scans = [data_dir / path for path in s.scalars(
+                select(Scan.path).where(Scan.project_id == p.id).order_by(Scan.id))]
+            lib = s.get(ModelLibraryRow, job.models_id) if job is not None and job.models_id else None
+            classes = dict(lib.classes) if lib is not None else bundled_classes()
+            models_dir = data_dir / lib.path if lib is not None else bundled_models_dir()
+            locked = p.status != "open"
+            signoff = self._signoff(s, p.id) if locked else None
+            name = p.name
+        rois = None
+        if out is not None and (out / "rois.json").is_file():
+            try:
+                rois = json.loads((out / "rois.json").read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                rois = None  # the scene simply shows no RoIs
+        ortho = out / "orthoimages" if out is not None else None
+        return ProjectData(
+            pid=pid, name=name, detections=doc, rois=rois,
+            ortho_dir=ortho if ortho is not None and ortho.is_dir() else None, scans=scans,
+            cache_dir=self.settings.projects_dir / str(int(pid)) / "viewer",
+            models_dir=Path(models_dir), classes=sorted(classes), locked=locked, signoff=signoff,
+            revision=doc.get("job"))
+
+    def changes_since(self, pid: ProjectId, cursor: Any) -> Changes:
+        with self.db.read() as s:
+            p = s.get(Project, int(pid))
+            if p is None:
+                raise NotFound(f"project {pid} not found")
+            last = s.scalar(select(func.max(ReviewDecision.id))
+                            .where(ReviewDecision.project_id == p.id)) or 0
+            locked = p.status != "open"
+            signoff = self._signoff(s, p.id) if locked else None
+            now = (int(last), p.current_job_id)
+            if cursor is None:
+                return Changes(now, [], locked, signoff)
+            seen, job = cursor
+            if job != p.current_job_id:
+                return Changes(now, [], locked, signoff, reload=True)
+            dets: list[dict] = []
+            if last > seen - CURSOR_OVERLAP and last > 0:
+                ids = select(ReviewDecision.detection_id).where(
+                    ReviewDecision.project_id == p.id,
+                    ReviewDecision.id > seen - CURSOR_OVERLAP)
+                rows = s.scalars(select(DetectionRow).where(DetectionRow.id.in_(ids),
+                                                            DetectionRow.job_id == job)
+                                 .order_by(DetectionRow.id))
+                dets = [detection_dict(r) for r in rows]
+            return Changes(now, dets, locked, signoff)
+
+    def resolve_token(self, token: str) -> Reviewer | None:
+        token = (token or "").strip()
+        if not token:
+            return None
+        with self.db.read() as s:
+            principal = authenticate(s, token)
+        if principal is None:
+            return None
+        return Reviewer(name=principal.name, role=principal.role, ref=principal)
+
+    def decide(self, pid: ProjectId, detection_id: str, status: str, new_class: str | None,
+               version: int, user: Reviewer) -> dict:
+        from ..api.review import Change, review_detection
+
+        if not user.may_decide or not isinstance(user.ref, Principal):
+            raise Forbidden(f"{user.name}: role '{user.role}' may not review")
+        try:
+            did = int(detection_id)
+        except ValueError:
+            raise NotFound(f"detection {detection_id} not found") from None
+        with self.db.read() as s:
+            owner = s.scalar(select(DetectionRow.project_id).where(DetectionRow.id == did))
+        if owner != int(pid):
+            raise NotFound(f"detection {detection_id} is not in project {pid}")
+        change = {"version": int(version), "status": status}
+        if new_class is not None:
+            change["class"] = new_class
+        try:
+            result = review_detection(did, Change.model_validate(change), self._request, user.ref,
+                                      self.db)
+        except HTTPException as exc:
+            raise _ERRORS.get(exc.status_code, ReviewError)(str(exc.detail)) from None
+        if isinstance(result, JSONResponse):  # 409 with the current state
+            body = json.loads(result.body)
+            raise _ERRORS.get(result.status_code, ReviewError)(body.get("detail", ""),
+                                                               body.get("current"))
+        return result

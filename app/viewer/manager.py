@@ -1,0 +1,121 @@
+"""One viser server per project, started when first asked for, each on its own free port.
+
+A viser server shows one scene to every browser that connects, so projects get separate
+servers: a tab on project 7 never sees, nor disturbs, a tab on project 8. The scene is built
+in a background thread, so asking for a project's address answers at once; the browser
+shows "Loading the scene…" until the scan and the walls are there.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import dataclass, field
+
+import viser
+
+from .backend import ProjectId, ReviewBackend
+from .scene import ProjectScene, SceneSettings
+
+log = logging.getLogger(__name__)
+WILDCARD_HOSTS = ("", "0.0.0.0", "::", "[::]")
+
+
+@dataclass
+class _Viewer:
+    server: viser.ViserServer
+    scene: ProjectScene
+    thread: threading.Thread
+    port: int = 0
+    error: list[BaseException] = field(default_factory=list)
+
+
+class ViewerManager:
+    """Starts, finds and stops the per-project 3D review scenes.
+
+    ``host`` is the address the viser servers listen on (the app's host setting);
+    ``public_host`` the host name put in the addresses handed to browsers (default: ``host``,
+    or the host the browser used to reach the REST API when ``host`` is a wildcard).
+    """
+
+    def __init__(self, backend: ReviewBackend, host: str = "127.0.0.1",
+                 public_host: str | None = None, settings: SceneSettings | None = None,
+                 verbose: bool = False) -> None:
+        self.backend = backend
+        self.host = host
+        self.public_host = public_host
+        self.settings = settings or SceneSettings()
+        self.verbose = verbose
+        self._viewers: dict[ProjectId, _Viewer] = {}
+        self._lock = threading.Lock()
+
+    def viewer(self, pid: ProjectId) -> _Viewer:
+        """The project's running viewer, started (and its scene build begun) if needed.
+
+        Raises the backend's ``NotFound`` for an unknown project, before starting anything.
+        """
+        with self._lock:
+            v = self._viewers.get(pid)
+            if v is not None and v.error and not v.thread.is_alive():
+                self._viewers.pop(pid)  # the last build failed: try again
+                v.scene.close()
+                v.server.stop()
+                v = None
+            if v is not None:
+                return v
+            # NotFound / NotReady before anything is started
+            cursor = self.backend.changes_since(pid, None).cursor
+            data = self.backend.project_data(pid)
+            server = viser.ViserServer(host=self.host, port=0, label=f"sbsc · project {pid}",
+                                       verbose=self.verbose)
+            scene = ProjectScene(server, self.backend, pid, self.settings)
+            v = _Viewer(server, scene, threading.Thread(), port=server.get_port())
+
+            def build() -> None:
+                try:
+                    scene.build(data, cursor)
+                except BaseException as exc:  # kept for wait_ready(); shown in the scene
+                    v.error.append(exc)
+
+            v.thread = threading.Thread(target=build, name=f"viewer-build-{pid}", daemon=True)
+            self._viewers[pid] = v
+            v.thread.start()
+            return v
+
+    def scene_for(self, pid: ProjectId) -> ProjectScene:
+        return self.viewer(pid).scene
+
+    def wait_ready(self, pid: ProjectId, timeout: float | None = None) -> ProjectScene:
+        """The project's scene once built; re-raises a build error."""
+        v = self.viewer(pid)
+        if not v.scene.ready.wait(timeout):
+            raise TimeoutError(f"project {pid}: scene not ready after {timeout} s")
+        if v.error:
+            raise v.error[0]
+        return v.scene
+
+    def url_for(self, pid: ProjectId, request_host: str | None = None) -> str:
+        """The address of the project's scene, as a browser can open it."""
+        v = self.viewer(pid)
+        host = self.public_host or self.host
+        if host in WILDCARD_HOSTS:
+            host = request_host or "localhost"
+        if ":" in host and not host.startswith("["):
+            host = f"[{host}]"  # IPv6 literal
+        return f"http://{host}:{v.port}/"
+
+    def running(self) -> list[ProjectId]:
+        with self._lock:
+            return list(self._viewers)
+
+    def stop(self, pid: ProjectId) -> None:
+        with self._lock:
+            v = self._viewers.pop(pid, None)
+        if v is not None:
+            v.thread.join(timeout=30.0)  # let a build in progress finish before the server goes
+            v.scene.close()
+            v.server.stop()
+
+    def stop_all(self) -> None:
+        for pid in self.running():
+            self.stop(pid)

@@ -1,0 +1,858 @@
+"""The 3D review scene of one project, built into a ``viser.ViserServer`` from plain data.
+
+What the reviewer sees (paper, section 5 and figures 18, 19 and 21):
+
+``/scan``, ``/ceiling``
+    the floor's scan at a browser level of detail (``app.viewer.lod``), recentred on
+    :attr:`ProjectScene.centre`, in tiles of ``tile_m`` so float16 coordinates stay precise;
+    the ceiling points (above the walls' tops) are a layer of their own, off at first.
+``/walls/<W>/outline``, ``/walls/<W>/label``, ``/openings/<W>``
+    each wall segment outlined and named; doors and windows outlined.
+``/images/colour/<W>``, ``/images/depth/<W>``
+    the wall's colour and depth orthoimage as a textured plane on the wall (colour, depth
+    or off); depth planes are sent only when first asked for.
+``/rois/depth/<W>`` (cyan), ``/rois/colour/<W>`` (magenta)
+    the regions of interest of the depth and colour recognizers (figure 21 a).
+``/spots/<D>``, ``/spot_labels/<D>``
+    every recognized object as a spot at its ``position`` (the paper's red spots), coloured
+    by review state, labelled with class and alpha; clicking one selects it.
+
+Every browser tab gets its own review panel (:class:`ReviewSession`): sign in with an API
+token, the selected object's values and crops, Accept / Reject / Relabel, Previous / Next
+pending; the camera flies to the selection. Decisions go through the :class:`ReviewBackend`;
+a background thread polls its change feed so that a decision made on the REST API shows in
+every tab within ``poll_s``. After sign-off the scene is read-only and says so.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import viser
+import viser.transforms as vtf
+
+from sbsc_core.types import WallFrame
+
+from .backend import (
+    Changes,
+    Locked,
+    ProjectData,
+    ProjectId,
+    ReviewBackend,
+    Reviewer,
+    ReviewError,
+    StaleVersion,
+)
+from .images import WallImages, read_rgb, texture, thumbnail
+from .lod import ScanLod, scan_lod
+
+log = logging.getLogger(__name__)
+
+STATUS_RGB: dict[str, tuple[int, int, int]] = {
+    "pending": (230, 30, 30),  # the paper's red spots
+    "accepted": (40, 190, 70),
+    "rejected": (120, 120, 120),
+}
+DEPTH_ROI_RGB = (0, 255, 255)  # cyan, figure 21 a
+COLOUR_ROI_RGB = (255, 0, 255)  # magenta, figure 21 a
+WALL_RGB = (255, 210, 0)
+OPENING_RGB = (255, 130, 0)
+SELECTION_RGB = (255, 240, 0)
+IMAGE_MODES: tuple[str, ...] = ("colour", "depth", "off")
+SCAN_LEVELS: tuple[str, ...] = ("overview", "full", "off")
+
+
+@dataclass
+class SceneSettings:
+    """Every size, colour-free threshold and timing of the scene."""
+
+    max_points: int = 2_000_000  # scan points of the whole floor at the full level
+    overview_points: int = 400_000  # ... at the overview level, the one shown first
+    tile_m: float = 8.0  # side of a scan tile (float16 precision ~ tile_m / 2048)
+    point_size_min_m: float = 0.012
+    point_size_voxels: float = 1.3  # point side in voxels (gaps close at about 1.3)
+    ceiling_margin_m: float = 0.08  # points this close below the walls' top count as ceiling
+    texture_pixel_m: float = 0.01  # orthoimage textures: pixels at least this big
+    texture_max_px: int = 2048  # ... and at most this many on a side
+    jpeg_quality: int = 85
+    image_offset_m: float = 0.004  # textured planes stand this far into the room
+    depth_roi_offset_m: float = 0.008
+    colour_roi_offset_m: float = 0.012
+    roi_thickness_px: float = 3.0
+    wall_thickness_px: float = 2.5
+    spot_radius_m: float = 0.05
+    label_lift_m: float = 0.06
+    poll_s: float = 0.25  # change feed polling period
+    scan_delay_s: float = 1.5  # a new tab gets the scan this long after the rest of the scene
+    scan_detail: str = "overview"  # what a new tab shows first: overview, full or off
+    fly_s: float = 0.6  # camera flight to a selected object
+    fly_steps: int = 24
+    view_distance_m: float = 1.6  # camera distance from a selected object
+    crop_context: float = 2.5  # crop side = this x the object's larger side ...
+    crop_min_m: float = 0.25  # ... and at least this
+    crop_px: int = 160
+
+
+def rect_segments(frame: WallFrame, u0: float, u1: float, v0: float, v1: float,
+                  d: float = 0.0) -> np.ndarray:
+    """The four sides of a (u, v) rectangle on a wall as (4, 2, 3) world segments."""
+    c = frame.to_world(np.array([u0, u1, u1, u0]), np.array([v0, v0, v1, v1]), d)
+    return np.stack([c, np.roll(c, -1, axis=0)], axis=1)
+
+
+def plane_wxyz(frame: WallFrame) -> np.ndarray:
+    """Orientation of a viser image on a wall: image x along u, image rows downwards.
+
+    viser draws an image in its node's x-y plane with the top row towards -y (the OpenCV
+    camera convention), so the node's axes are (axis_u, -axis_v, -normal).
+    """
+    rot = np.stack([frame.axis_u, -frame.axis_v, -frame.normal], axis=1)
+    return vtf.SO3.from_matrix(rot).wxyz
+
+
+@dataclass
+class ScanTile:
+    """Scan points of one ``tile_m`` square: float16 offsets from ``position``."""
+
+    points: np.ndarray  # (n, 3) float16
+    colors: np.ndarray  # (n, 3) uint8
+    position: np.ndarray  # (3,) float64, scene coordinates
+    point_size: float
+
+
+def make_tiles(p: np.ndarray, c: np.ndarray, size: float, tile_m: float) -> list[ScanTile]:
+    """Split points into square tiles in plan, each centred on its bounding box."""
+    if len(p) == 0:
+        return []
+    lo = p[:, :2].min(axis=0)
+    key = np.floor((p[:, :2] - lo) / tile_m).astype(np.int64)
+    tile_id = key[:, 0] * 1_000_003 + key[:, 1]
+    order = np.argsort(tile_id, kind="stable")
+    bounds = np.flatnonzero(np.diff(tile_id[order])) + 1
+    tiles = []
+    for idx in np.split(order, bounds):
+        tp = p[idx].astype(np.float64)
+        mid = (tp.min(axis=0) + tp.max(axis=0)) / 2.0
+        tiles.append(ScanTile((tp - mid).astype(np.float16), c[idx], mid, size))
+    return tiles
+
+
+def _fmt(x: Any, nd: int = 2) -> str:
+    return "–" if x is None else f"{float(x):.{nd}f}"
+
+
+def spot_label(det: dict) -> str:
+    return f"{det['class']} α {_fmt(det.get('alpha'))}"
+
+
+class ProjectScene:
+    """The scene of one project in one viser server (the server shows nothing else)."""
+
+    def __init__(self, server: viser.ViserServer, backend: ReviewBackend, pid: ProjectId,
+                 settings: SceneSettings | None = None) -> None:
+        self.server = server
+        self.backend = backend
+        self.pid = pid
+        self.s = settings or SceneSettings()
+        self.data: ProjectData | None = None
+        self.centre = np.zeros(3)
+        self.lod: ScanLod | None = None
+        self.frames: dict[str, WallFrame] = {}
+        self.detections: dict[str, dict] = {}
+        self.order: list[str] = []  # detection ids in review order
+        self.locked = False
+        self.signoff: dict | None = None
+        self.images: WallImages | None = None
+        self.groups: dict[str, Any] = {}  # layer name -> frame handle
+        self.spots: dict[str, Any] = {}
+        self.spot_labels: dict[str, Any] = {}
+        self.nodes: dict[str, Any] = {}  # every other node by name
+        self.sessions: dict[int, ReviewSession] = {}
+        self.ready = threading.Event()
+        self.error: str | None = None
+        self.revision: Any = None
+        self.scan_tiles: dict[str, list[ScanTile]] = {}  # layer -> tiles, sent per tab
+        self._cursor: Any = None
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self._poller: threading.Thread | None = None
+        self._build_gui()
+        server.on_client_connect(self._on_connect)
+        server.on_client_disconnect(self._on_disconnect)
+
+    # ------------------------------------------------------------------ shared GUI
+    def _build_gui(self) -> None:
+        gui = self.server.gui
+        gui.configure_theme(control_width="large", show_share_button=False, show_logo=False)
+        self._status = gui.add_markdown("Loading the scene…", order=0)
+        self._layers = gui.add_folder("Layers", order=30)
+        with self._layers:
+            self.ui_walls = gui.add_checkbox("Walls (outlines, names)", True)
+            self.ui_openings = gui.add_checkbox("Openings", True)
+            self.ui_images = gui.add_dropdown("Wall images", IMAGE_MODES, initial_value="colour")
+            self.ui_depth_rois = gui.add_checkbox("Depth RoIs (cyan)", True)
+            self.ui_colour_rois = gui.add_checkbox("Colour RoIs (magenta)", True)
+            self.ui_spots = gui.add_checkbox("Objects (spots)", True)
+            self.ui_labels = gui.add_checkbox("Object labels", True)
+        for box, layers in ((self.ui_walls, ("walls",)), (self.ui_openings, ("openings",)),
+                            (self.ui_depth_rois, ("rois_depth",)),
+                            (self.ui_colour_rois, ("rois_colour",)),
+                            (self.ui_spots, ("spots",)), (self.ui_labels, ("spot_labels",))):
+            box.on_update(lambda ev, layers=layers: self._set_layers(layers, ev.target.value))
+        self.ui_images.on_update(lambda ev: self.set_image_mode(ev.target.value))
+
+    def _set_layers(self, layers: Iterable[str], visible: bool) -> None:
+        with self._lock:
+            for name in layers:
+                if name in self.groups:
+                    self.groups[name].visible = bool(visible)
+
+    def _layer_visible(self, name: str) -> bool:
+        box = {"walls": self.ui_walls,
+               "openings": self.ui_openings, "rois_depth": self.ui_depth_rois,
+               "rois_colour": self.ui_colour_rois, "spots": self.ui_spots,
+               "spot_labels": self.ui_labels}.get(name)
+        if box is not None:
+            return bool(box.value)
+        if name.startswith("images_"):
+            return self.ui_images.value == name.removeprefix("images_")
+        return True
+
+    def status_text(self) -> str:
+        if self.error:
+            return f"**{self.error}**"
+        counts = {k: 0 for k in STATUS_RGB}
+        for d in self.detections.values():
+            counts[d["review"]["status"]] = counts.get(d["review"]["status"], 0) + 1
+        name = self.data.name if self.data else str(self.pid)
+        lines = [f"### {name}",
+                 f"{len(self.detections)} objects on {len(self.frames)} walls: "
+                 f"**{counts['pending']} pending**, {counts['accepted']} accepted, "
+                 f"{counts['rejected']} rejected."]
+        if self.lod is not None:
+            ov = len(self.lod.overview) if self.lod.overview is not None else len(self.lod)
+            lines.append(f"Scan: {self.lod.source_points:,} points, shown as {ov:,} (overview) "
+                         f"or {len(self.lod):,} (full).")
+        if self.locked:
+            so = self.signoff or {}
+            lines.append(f"🔒 **Signed off** by {so.get('by', '?')} on {so.get('at', '?')}: "
+                         "this scene is **read-only**.")
+        return "\n\n".join(lines)
+
+    def _refresh_status(self) -> None:
+        self._status.content = self.status_text()
+
+    # ------------------------------------------------------------------ building
+    def build(self, data: ProjectData | None = None, cursor: Any = None) -> None:
+        """Build every layer, then start following the change feed.
+
+        ``data`` and ``cursor`` are read from the backend unless given (the cursor must be
+        taken before the data, so that no change falls between them).
+        """
+        try:
+            if data is None:
+                cursor = self.backend.changes_since(self.pid, None).cursor
+                data = self.backend.project_data(self.pid)
+            lod = None
+            if data.scans:
+                lod = self._scan_lod(data)
+            with self._lock:
+                self._build_from(data, lod)
+                self._cursor = cursor
+        except Exception as exc:  # shown in the browser rather than lost in a thread
+            log.exception("viewer: building the scene of project %s failed", self.pid)
+            self.error = f"Cannot build the scene: {exc}"
+            self._status.content = self.status_text()
+            raise
+        finally:
+            self.ready.set()
+        self.start_sync()
+
+    def _scan_lod(self, data: ProjectData) -> ScanLod:
+        return scan_lod(data.scans, self.s.max_points, data.cache_dir, self.s.overview_points)
+
+    def _build_from(self, data: ProjectData, lod: ScanLod | None) -> None:
+        scene = self.server.scene
+        for g in list(self.groups.values()):
+            g.remove()
+        self.groups.clear()
+        self.spots.clear()
+        self.spot_labels.clear()
+        self.nodes.clear()
+        self.data, self.lod, self.revision = data, lod, data.revision
+        self.locked, self.signoff = bool(data.locked), data.signoff
+        doc = data.detections
+        self.frames = {w["id"]: WallFrame.from_dict(w) for w in doc.get("walls", [])}
+        dets = doc.get("detections", [])
+        self.detections = {d["id"]: d for d in dets}
+        self.order = sorted(self.detections)
+        self.images = WallImages(data.ortho_dir, float(doc.get("pixel_m") or
+                                                      (data.rois or {}).get("pixel_m") or 0.005))
+        self.centre = lod.centre.copy() if lod is not None else self._walls_centre()
+
+        for name in ("walls", "openings", "images_colour", "images_depth",
+                     "rois_depth", "rois_colour", "spots", "spot_labels"):
+            self.groups[name] = scene.add_frame(f"/{name}", show_axes=False,
+                                                visible=self._layer_visible(name))
+        self.scan_tiles = self._scan_layers(lod) if lod is not None else {}
+        for wid, frame in self.frames.items():
+            self._add_wall(wid, frame)
+        for o in doc.get("openings", []):
+            self._add_opening(o)
+        rois = (data.rois or {}).get("walls", {})
+        for wid, r in rois.items():
+            self._add_rois(wid, r)
+        if self.ui_images.value != "off":
+            self._add_images(self.ui_images.value)
+        for d in dets:
+            self._add_spot(d)
+        self._set_initial_camera()
+        # A status element created last: a browser that shows it has every node before it.
+        self._status.remove()
+        self._status = self.server.gui.add_markdown(self.status_text(), order=0)
+        for session in self.sessions.values():
+            session.reset()
+
+    def _walls_centre(self) -> np.ndarray:
+        if not self.frames:
+            return np.zeros(3)
+        pts = np.concatenate([f.to_world(np.array([0.0, f.width_m]), np.array([0.0, f.height_m]))
+                              for f in self.frames.values()])
+        return np.round((pts.min(axis=0) + pts.max(axis=0)) / 2.0, 3)
+
+    def local(self, world: Any) -> np.ndarray:
+        """World coordinates to scene coordinates (recentred)."""
+        return np.asarray(world, dtype=np.float64) - self.centre
+
+    def _scan_layers(self, lod: ScanLod) -> dict[str, list[ScanTile]]:
+        """The scan's layers (body / ceiling at the overview and the full level), in tiles."""
+        top = None
+        if self.frames:
+            top = float(np.median([f.origin[2] + f.height_m - self.centre[2]
+                                   for f in self.frames.values()])) - self.s.ceiling_margin_m
+        ov = lod.overview or lod
+        full_size = max(lod.voxel_m * self.s.point_size_voxels, self.s.point_size_min_m)
+        ov_size = max(ov.voxel_m * self.s.point_size_voxels, full_size)
+        layers = {}
+        for level, lv, size in (("full", lod, full_size), ("overview", ov, ov_size)):
+            ceiling = lv.xyz[:, 2] > top if top is not None else np.zeros(len(lv.xyz), bool)
+            for part, mask in (("scan", ~ceiling), ("ceiling", ceiling)):
+                layers[f"{part}_{level}"] = make_tiles(lv.xyz[mask], lv.rgb[mask], size,
+                                                       self.s.tile_m)
+        return layers
+
+    def _add_wall(self, wid: str, f: WallFrame) -> None:
+        scene = self.server.scene
+        seg = rect_segments(f, 0.0, f.width_m, 0.0, f.height_m) - self.centre
+        self.nodes[f"walls/{wid}/outline"] = scene.add_line_segments(
+            f"/walls/{wid}/outline", seg, WALL_RGB, thickness=self.s.wall_thickness_px,
+            thickness_units="screen")
+        top = f.to_world(f.width_m / 2.0, f.height_m, 0.05) - self.centre
+        self.nodes[f"walls/{wid}/label"] = scene.add_label(
+            f"/walls/{wid}/label", f"{wid}  {f.width_m:.2f} m", position=top,
+            anchor="bottom-center", font_screen_scale=1.1)
+
+    def _add_opening(self, o: dict) -> None:
+        f = self.frames.get(o.get("wall"))
+        if f is None:
+            return
+        name = f"openings/{o['wall']}"
+        seg = rect_segments(f, o["u_min"], o["u_max"], o["v_min"], o["v_max"],
+                            self.s.image_offset_m * 2) - self.centre
+        old = self.nodes.get(name)
+        if old is not None:  # several openings on one wall: one node with all of them
+            seg = np.concatenate([old.points.astype(np.float64), seg])
+        self.nodes[name] = self.server.scene.add_line_segments(
+            f"/{name}", seg, OPENING_RGB, thickness=self.s.wall_thickness_px,
+            thickness_units="screen")
+
+    def _add_rois(self, wid: str, rois: dict) -> None:
+        f = self.frames.get(wid)
+        if f is None:
+            return
+        for kind, rgb, d in (("depth", DEPTH_ROI_RGB, self.s.depth_roi_offset_m),
+                             ("colour", COLOUR_ROI_RGB, self.s.colour_roi_offset_m)):
+            boxes = rois.get(kind) or []
+            if not boxes:
+                continue
+            seg = np.concatenate([rect_segments(f, b["u_min"], b["u_max"], b["v_min"], b["v_max"], d)
+                                  for b in boxes]) - self.centre
+            self.nodes[f"rois_{kind}/{wid}"] = self.server.scene.add_line_segments(
+                f"/rois_{kind}/{wid}", seg, rgb, thickness=self.s.roi_thickness_px,
+                thickness_units="screen")
+
+    def _add_images(self, kind: str) -> None:
+        """Textured planes of one kind on every wall (once; later calls only show them)."""
+        assert self.images is not None
+        for wid, f in self.frames.items():
+            name = f"images_{kind}/{wid}"
+            if name in self.nodes:
+                continue
+            img = self.images.image(wid, kind)
+            if img is None:
+                continue
+            tex = texture(img, self.images.pixel_m, self.s.texture_pixel_m, self.s.texture_max_px)
+            # the image covers its pixels: cols * px by rows * px from the wall's top-left
+            w_m, h_m = img.shape[1] * self.images.pixel_m, img.shape[0] * self.images.pixel_m
+            centre = f.to_world(w_m / 2.0, f.height_m - h_m / 2.0, self.s.image_offset_m)
+            self.nodes[name] = self.server.scene.add_image(
+                f"/{name}", tex, render_width=w_m, render_height=h_m, format="jpeg",
+                jpeg_quality=self.s.jpeg_quality, cast_shadow=False, receive_shadow=False,
+                wxyz=plane_wxyz(f), position=centre - self.centre)
+
+    def set_image_mode(self, mode: str) -> None:
+        """Show the colour or depth orthoimages on the walls, or none."""
+        if mode not in IMAGE_MODES:
+            raise ValueError(f"image mode: {mode!r} is not one of {IMAGE_MODES}")
+        with self._lock:
+            if self.ui_images.value != mode:
+                self.ui_images.value = mode
+            if mode != "off" and self.data is not None:
+                self._add_images(mode)
+            for kind in ("colour", "depth"):
+                if f"images_{kind}" in self.groups:
+                    self.groups[f"images_{kind}"].visible = mode == kind
+
+    def _add_spot(self, d: dict) -> None:
+        did = d["id"]
+        pos = self.local(d["position"])
+        spot = self.server.scene.add_icosphere(
+            f"/spots/{did}", radius=self.s.spot_radius_m,
+            color=STATUS_RGB.get(d["review"]["status"], STATUS_RGB["pending"]),
+            subdivisions=2, cast_shadow=False, receive_shadow=False, position=pos)
+        spot.on_click(lambda ev, did=did: self._on_spot_click(ev, did))
+        self.spots[did] = spot
+        f = self.frames.get(d.get("wall"))
+        lift = np.array([0.0, 0.0, self.s.label_lift_m])
+        if f is not None:
+            lift = lift + f.normal * self.s.spot_radius_m
+        self.spot_labels[did] = self.server.scene.add_label(
+            f"/spot_labels/{did}", spot_label(d), position=pos + lift, anchor="bottom-center",
+            font_screen_scale=0.8, depth_test=False)
+
+    def _set_initial_camera(self) -> None:
+        """Look down on the whole floor from the south, slightly tilted."""
+        lo, hi = np.array([-5.0, -5.0, 0.0]), np.array([5.0, 5.0, 3.0])
+        if self.frames:
+            pts = np.concatenate([rect_segments(f, 0, f.width_m, 0, f.height_m).reshape(-1, 3)
+                                  for f in self.frames.values()]) - self.centre
+            lo, hi = pts.min(axis=0), pts.max(axis=0)
+        ext = float(max(hi[0] - lo[0], hi[1] - lo[1], 1.0))
+        mid = (lo + hi) / 2.0
+        # aim right of the middle: the review panel covers the right of the page
+        target = np.array([mid[0] + 0.15 * ext, mid[1], lo[2]])
+        cam = self.server.initial_camera
+        cam.look_at = tuple(target)
+        cam.position = tuple(target + np.array([0.0, -0.35 * ext, 0.8 * ext]))
+        cam.up = (0.0, 0.0, 1.0)
+
+    # ------------------------------------------------------------------ review state
+    def detection(self, did: str) -> dict | None:
+        with self._lock:
+            return self.detections.get(did)
+
+    def apply_detection(self, det: dict) -> None:
+        """Show a detection's new review state (or class) everywhere; idempotent."""
+        with self._lock:
+            did = det.get("id")
+            old = self.detections.get(did)
+            if old is None:
+                return
+            if (old["review"] == det["review"] and old.get("class") == det.get("class")):
+                return
+            if old["review"].get("version", 0) > det["review"].get("version", 0):
+                return  # an older answer arriving late
+            self.detections[did] = det
+            spot = self.spots.get(did)
+            if spot is not None:
+                spot.color = STATUS_RGB.get(det["review"]["status"], STATUS_RGB["pending"])
+            label = self.spot_labels.get(did)
+            if label is not None:
+                label.text = spot_label(det)
+            self._refresh_status()
+            sessions = list(self.sessions.values())
+        for session in sessions:
+            if session.selected == did:
+                session.show()
+
+    def apply_lock(self, locked: bool, signoff: dict | None) -> None:
+        with self._lock:
+            if locked == self.locked and signoff == self.signoff:
+                return
+            self.locked, self.signoff = locked, signoff
+            self._refresh_status()
+            sessions = list(self.sessions.values())
+        for session in sessions:
+            session.show()
+
+    def apply_changes(self, ch: Changes) -> None:
+        if ch.reload:
+            self.rebuild()
+            return
+        for d in ch.detections:
+            self.apply_detection(d)
+        self.apply_lock(ch.locked, ch.signoff)
+        self._cursor = ch.cursor
+
+    def rebuild(self) -> None:
+        cursor = self.backend.changes_since(self.pid, None).cursor
+        data = self.backend.project_data(self.pid)
+        lod = self._scan_lod(data) if data.scans else None
+        with self._lock:
+            self._build_from(data, lod)
+            self._cursor = cursor
+
+    def poll_once(self) -> None:
+        """Apply what changed in the backend since the last poll."""
+        self.apply_changes(self.backend.changes_since(self.pid, self._cursor))
+
+    def start_sync(self) -> None:
+        if self._poller is not None or self.s.poll_s <= 0:
+            return
+        self._poller = threading.Thread(target=self._poll_loop, name=f"viewer-sync-{self.pid}",
+                                        daemon=True)
+        self._poller.start()
+
+    def _poll_loop(self) -> None:
+        while not self._stop.wait(self.s.poll_s):
+            try:
+                self.poll_once()
+            except Exception:  # keep polling: the backend may come back
+                log.exception("viewer: change feed of project %s", self.pid)
+                self._stop.wait(2.0)
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._poller is not None:
+            self._poller.join(timeout=2.0)
+
+    def pending_after(self, did: str | None, step: int) -> str | None:
+        """The next (step=+1) or previous (step=-1) pending detection after ``did``, cyclically."""
+        with self._lock:
+            ids = self.order
+            if not ids:
+                return None
+            start = ids.index(did) if did in self.detections else (-1 if step > 0 else 0)
+            for k in range(1, len(ids) + 1):
+                cand = ids[(start + step * k) % len(ids)]
+                if cand != did and self.detections[cand]["review"]["status"] == "pending":
+                    return cand
+            return None
+
+    # ------------------------------------------------------------------ clients
+    def _on_connect(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            if client.client_id not in self.sessions:
+                self.sessions[client.client_id] = ReviewSession(self, client)
+
+    def _on_disconnect(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            self.sessions.pop(client.client_id, None)
+
+    def _on_spot_click(self, event: Any, did: str) -> None:
+        session = self.sessions.get(event.client_id)
+        if session is None and event.client is not None:
+            self._on_connect(event.client)
+            session = self.sessions.get(event.client_id)
+        if session is not None:
+            session.select(did)
+
+
+class ReviewSession:
+    """The review panel of one browser tab: its reviewer, its selection, its camera."""
+
+    def __init__(self, scene: ProjectScene, client: viser.ClientHandle) -> None:
+        self.scene = scene
+        self.client = client
+        self.user: Reviewer | None = None
+        self.selected: str | None = None
+        self._highlight: Any = None
+        self._scan_lock = threading.RLock()
+        self.scan_groups: dict[str, Any] = {}  # layer -> this tab's frame holding its tiles
+        self.scan_nodes: dict[str, list[Any]] = {}  # layer -> this tab's point cloud tiles
+        self._model_cache: dict[str, np.ndarray | None] = {}
+        gui = client.gui
+        blank = np.zeros((scene.s.crop_px, scene.s.crop_px, 3), np.uint8)
+        self.f_user = gui.add_folder("Reviewer", order=10)
+        with self.f_user:
+            self.ui_token = gui.add_text("API token", "", hint="paste your API token to review")
+            self.ui_sign_in = gui.add_button("Sign in")
+            self.ui_who = gui.add_markdown("Not signed in: you can look, not decide.")
+        self.f_sel = gui.add_folder("Selected object", order=20)
+        with self.f_sel:
+            self.ui_info = gui.add_markdown("Click a spot to select an object.")
+            self.ui_colour = gui.add_image(blank, label="colour", format="jpeg", visible=False)
+            self.ui_depth = gui.add_image(blank, label="depth", format="jpeg", visible=False)
+            self.ui_model = gui.add_image(blank, label="model", format="png", visible=False)
+            self.ui_accept = gui.add_button("Accept", color="green", disabled=True)
+            self.ui_reject = gui.add_button("Reject", color="red", disabled=True)
+            classes = self._classes() or ["-"]
+            self.ui_class = gui.add_dropdown("Class", classes, initial_value=classes[0],
+                                             disabled=True)
+            self.ui_relabel = gui.add_button("Relabel (accept as class)", disabled=True)
+            self.ui_auto = gui.add_checkbox("Go to next pending after a decision", True)
+            self.ui_prev = gui.add_button("◀ Previous pending")
+            self.ui_next = gui.add_button("Next pending ▶")
+        self.f_scan = gui.add_folder("Scan (this tab)", order=25)
+        with self.f_scan:
+            self.ui_scan = gui.add_dropdown(
+                "Scan detail", SCAN_LEVELS, initial_value=scene.s.scan_detail,
+                hint="overview: light for any computer; full: every point sent "
+                     "(up to max_points), for a good graphics card; off: none")
+            self.ui_ceiling = gui.add_checkbox("Ceiling", False)
+        self.ui_scan.on_update(lambda ev: self.update_scan())
+        self.ui_ceiling.on_update(lambda ev: self.update_scan())
+        self.ui_sign_in.on_click(lambda ev: self.sign_in(self.ui_token.value))
+        self.ui_accept.on_click(lambda ev: self.decide("accepted"))
+        self.ui_reject.on_click(lambda ev: self.decide("rejected"))
+        self.ui_relabel.on_click(lambda ev: self.decide("accepted", self.ui_class.value))
+        self.ui_prev.on_click(lambda ev: self.step(-1))
+        self.ui_next.on_click(lambda ev: self.step(+1))
+        self.show()
+        self.stream_scan_later()
+
+    def _classes(self) -> list[str]:
+        data = self.scene.data
+        if data is None:
+            return []
+        have = {d["class"] for d in self.scene.detections.values()}
+        return sorted(set(data.classes) | have)
+
+    def notify(self, title: str, body: str, colour: str | None = None) -> None:
+        try:
+            self.client.add_notification(title, body, auto_close_seconds=4.0, color=colour)
+        except Exception:  # a tab that just closed
+            log.debug("viewer: notification to a closed client dropped")
+
+    def reset(self) -> None:
+        """After a rebuild: forget the selection, refresh the class list, send the new scan."""
+        self.selected = None
+        if self._highlight is not None:
+            self._highlight.remove()
+            self._highlight = None
+        classes = self._classes()
+        if classes:
+            self.ui_class.options = classes
+        with self._scan_lock:
+            for g in self.scan_groups.values():
+                g.remove()
+            self.scan_groups.clear()
+            self.scan_nodes.clear()
+        self.show()
+        self.stream_scan_later()
+
+    # -- the scan, per tab ----------------------------------------------------------------
+    def stream_scan_later(self) -> None:
+        """Send the scan after the rest of the scene, so the tab shows walls and spots first.
+
+        The scan is by far the heaviest layer to send and to draw; a tab gets it
+        ``scan_delay_s`` after connecting, tile by tile, at the detail it asks for.
+        """
+        def run() -> None:
+            time.sleep(self.scene.s.scan_delay_s)
+            if self.scene.ready.wait(600):
+                self.update_scan()
+
+        threading.Thread(target=run, name=f"viewer-scan-{self.client.client_id}",
+                         daemon=True).start()
+
+    def wanted_scan_layers(self) -> set[str]:
+        level = self.ui_scan.value
+        if level not in ("overview", "full"):
+            return set()
+        return {f"scan_{level}"} | ({f"ceiling_{level}"} if self.ui_ceiling.value else set())
+
+    def update_scan(self) -> None:
+        """Show the scan layers this tab asks for, sending each one the first time."""
+        tiles = self.scene.scan_tiles
+        with self._scan_lock:
+            if self.scene.sessions.get(self.client.client_id) is not self:
+                return  # the tab has gone
+            want = self.wanted_scan_layers()
+            for name in want - set(self.scan_nodes):
+                if name not in tiles:
+                    continue
+                group = self.client.scene.add_frame(f"/{name}", show_axes=False)
+                self.scan_groups[name] = group
+                self.scan_nodes[name] = [
+                    self.client.scene.add_point_cloud(
+                        f"/{name}/t{i}", points=t.points, colors=t.colors,
+                        point_size=t.point_size, point_shape="square", precision="float16",
+                        point_shading="flat", position=t.position)
+                    for i, t in enumerate(tiles[name])]
+            for name, group in self.scan_groups.items():
+                group.visible = name in want
+
+    def scan_points_sent(self) -> int:
+        with self._scan_lock:
+            return sum(len(n.points) for nodes in self.scan_nodes.values() for n in nodes)
+
+    # -- identity -----------------------------------------------------------------------
+    def sign_in(self, token: str) -> Reviewer | None:
+        token = (token or "").strip()
+        user = self.scene.backend.resolve_token(token) if token else None
+        self.user = user
+        if user is None:
+            self.ui_who.content = "**Unknown token.** Not signed in: you can look, not decide."
+        else:
+            self.ui_token.value = ""  # do not leave the token on screen
+            self.ui_who.content = f"Signed in as **{user.name}** ({user.role})."
+        self.show()
+        return user
+
+    # -- selection ----------------------------------------------------------------------
+    def select(self, did: str, fly: bool = True) -> None:
+        det = self.scene.detection(did)
+        if det is None:
+            return
+        self.selected = did
+        pos = self.scene.local(det["position"])
+        if self._highlight is None:
+            self._highlight = self.client.scene.add_icosphere(
+                "/selection", radius=self.scene.s.spot_radius_m * 1.9, color=SELECTION_RGB,
+                wireframe=True, subdivisions=1, cast_shadow=False, receive_shadow=False,
+                position=pos)
+        else:
+            self._highlight.position = pos
+        if det.get("class") in (self.ui_class.options or ()):
+            self.ui_class.value = det["class"]
+        self.show()
+        if fly:
+            self.fly_to(det)
+
+    def step(self, direction: int) -> str | None:
+        did = self.scene.pending_after(self.selected, direction)
+        if did is None:
+            self.notify("Nothing pending", "Every object has been reviewed.")
+            return None
+        self.select(did)
+        return did
+
+    def fly_to(self, det: dict) -> None:
+        """Move this tab's camera in front of the object, looking at it."""
+        target = self.scene.local(det["position"])
+        f = self.scene.frames.get(det.get("wall"))
+        normal = f.normal if f is not None else np.array([0.0, -1.0, 0.0])
+        dist = self.scene.s.view_distance_m
+        eye = target + normal * dist + np.array([0.0, 0.0, 0.25 * dist])
+        cam = self.client.camera
+        try:
+            p0, l0 = np.array(cam.position), np.array(cam.look_at)
+        except AssertionError:  # no camera state from this tab yet
+            p0, l0 = eye, target
+        n = max(1, self.scene.s.fly_steps)
+        for i in range(1, n + 1):
+            t = i / n
+            t = t * t * (3 - 2 * t)  # smoothstep
+            with self.client.atomic():
+                cam.position = p0 + (eye - p0) * t
+                cam.look_at = l0 + (target - l0) * t
+            if i < n:
+                time.sleep(self.scene.s.fly_s / n)
+
+    # -- decisions ----------------------------------------------------------------------
+    def decide(self, status: str, new_class: str | None = None) -> dict | None:
+        """Record a decision on the selected object as the signed-in reviewer."""
+        did, user = self.selected, self.user
+        if did is None:
+            self.notify("No object selected", "Click a spot first.")
+            return None
+        if user is None:
+            self.notify("Not signed in", "Enter your API token to review.", "red")
+            return None
+        det = self.scene.detection(did)
+        if det is None:
+            return None
+        if new_class is not None and new_class == det.get("class"):
+            new_class = None
+        try:
+            updated = self.scene.backend.decide(self.scene.pid, did, status, new_class,
+                                                int(det["review"]["version"]), user)
+        except StaleVersion as exc:
+            if exc.current:
+                self.scene.apply_detection(exc.current)
+            self.notify("Changed meanwhile", f"{did} was changed by someone else; "
+                        "look again, then decide.", "yellow")
+            return None
+        except Locked:
+            self.scene.poll_once()
+            self.notify("Signed off", "The project is signed off: read-only.", "red")
+            return None
+        except ReviewError as exc:
+            self.notify("Not recorded", str(exc), "red")
+            return None
+        self.scene.apply_detection(updated)
+        self.notify(f"{did} {updated['review']['status']}",
+                    f"{updated['class']} by {updated['review'].get('by')}", "green")
+        if self.ui_auto.value:
+            nxt = self.scene.pending_after(did, +1)
+            if nxt is not None:
+                self.select(nxt)
+        return updated
+
+    # -- panel ----------------------------------------------------------------------------
+    def show(self) -> None:
+        """Bring the panel in line with the selection, the reviewer and the lock."""
+        sc = self.scene
+        det = sc.detection(self.selected) if self.selected else None
+        can = det is not None and self.user is not None and self.user.may_decide and not sc.locked
+        for b in (self.ui_accept, self.ui_reject, self.ui_relabel, self.ui_class):
+            b.disabled = not can
+        if sc.locked:
+            self.ui_who.content = "🔒 Signed off: this scene is **read-only**." + (
+                f" (signed in as {self.user.name})" if self.user else "")
+        if det is None:
+            self.ui_info.content = "Click a spot to select an object." if not sc.locked else \
+                "🔒 Signed off: read-only. Click a spot to see an object."
+            for img in (self.ui_colour, self.ui_depth, self.ui_model):
+                img.visible = False
+            return
+        self.ui_info.content = self.info_text(det)
+        for kind, ui in (("colour", self.ui_colour), ("depth", self.ui_depth)):
+            crop = self._crop(det, kind)
+            ui.visible = crop is not None
+            if crop is not None:
+                ui.image = crop
+        model = self._model_image(det["class"])
+        self.ui_model.visible = model is not None
+        if model is not None:
+            self.ui_model.image = model
+            self.ui_model.label = f"model: {det['class']}"
+
+    def info_text(self, det: dict) -> str:
+        r = det["review"]
+        who = f" by {r['by']} at {r['at']}" if r.get("by") else ""
+        lines = [f"**{det.get('ref') or det['id']} · {det['class']}** on wall {det.get('wall')}",
+                 f"u {_fmt(det.get('u'), 3)} m, v {_fmt(det.get('v'), 3)} m, "
+                 f"{_fmt(det.get('width_m'), 3)} × {_fmt(det.get('height_m'), 3)} m",
+                 f"α {_fmt(det.get('alpha'))} · ρ_D {_fmt(det.get('rho_depth'))} · "
+                 f"ρ_C {_fmt(det.get('rho_colour'))} · found in {det.get('source')}",
+                 f"Review: **{r['status']}**{who} (version {r.get('version')})"]
+        if self.scene.locked:
+            lines.append("🔒 Signed off: read-only.")
+        return "\n\n".join(lines)
+
+    def _crop(self, det: dict, kind: str) -> np.ndarray | None:
+        sc = self.scene
+        f = sc.frames.get(det.get("wall"))
+        if f is None or sc.images is None:
+            return None
+        s = sc.s
+        return sc.images.crop(det["wall"], kind, f.height_m, float(det["u"]), float(det["v"]),
+                              float(det.get("width_m") or 0.05), float(det.get("height_m") or 0.05),
+                              s.crop_context, s.crop_min_m, s.crop_px)
+
+    def _model_image(self, cls: str) -> np.ndarray | None:
+        data = self.scene.data
+        if data is None or data.models_dir is None:
+            return None
+        if cls not in self._model_cache:
+            img = read_rgb(data.models_dir / cls / "colour.png")
+            self._model_cache[cls] = None if img is None else thumbnail(img, self.scene.s.crop_px)
+        return self._model_cache[cls]
