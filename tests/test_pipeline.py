@@ -115,3 +115,21 @@ def test_empty_or_malformed_library_is_refused(one_room: Path, tmp_path: Path, c
     exp.write_text(json.dumps({"schema": "sbsc.expected/1", "counts": {"toaster": 2}}))
     _refused(capsys, [scan, "--models", str(bundled_models_dir()), "--expected", str(exp)],
              tmp_path / "o3", "toaster")
+
+
+def test_compare_finds_every_deliberate_design_difference(one_room: Path, detected: Path) -> None:
+    from sbsc_core.bim.compare import compare_to_dir
+
+    out = one_room.parent / "compare"
+    compare_to_dir(one_room / "as_designed.ifc", detected / "detections.json", out)
+    items = json.loads((out / "comparison.json").read_text())["items"]
+    truth = json.loads((one_room / "ground_truth.json").read_text())
+    diffs = truth["design_differences"]
+    assert {d["kind"] for d in diffs} == {"moved", "removed", "added"}
+    status_of_kind = {"moved": "displaced", "removed": "unexpected", "added": "missing"}
+    findings = [i for i in items if i["status"] != "found"]
+    for d in diffs:
+        assert any(i["status"] == status_of_kind[d["kind"]] and i["class"] == d["class"] for i in findings), d
+    table = evaluate(read_detections(detected / "detections.json"), read_truth(one_room / "ground_truth.json"))
+    # no false difference among correctly recognized objects: extra findings only from FN/FP
+    assert len(findings) - len(diffs) <= table.total.fn + table.total.fp

@@ -154,8 +154,8 @@ def test_simulate_scene_writes_the_contracts_deterministically(tmp_path: Path, m
 
     assert digest(tmp_path / "a" / "scan.ply") == digest(tmp_path / "b" / "scan.ply")
     assert digest(tmp_path / "a" / "scan.ply") != digest(tmp_path / "c" / "scan.ply")
-    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["expected.json", "ground_truth.json",
-                                                                  "models", "scan.ply"]
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == [
+        "as_designed.ifc", "expected.json", "ground_truth.json", "models", "scan.ply"]
     head = (tmp_path / "a" / "scan.ply").read_bytes()[:400].decode("ascii", "replace")
     assert "property float x" in head and "property uchar red" in head
     assert f"element vertex {a.points}\n" in head

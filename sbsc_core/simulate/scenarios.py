@@ -63,12 +63,14 @@ def simulate_scenario(scenario: str, out: Path, seed: int = 0, angular_step_deg:
 
 
 def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_step_deg: float | None = None,
-                   log: Log | None = None, object_builder: ObjectBuilder | None = None
-                   ) -> SimulationSummary:
+                   log: Log | None = None, object_builder: ObjectBuilder | None = None,
+                   design: bool = True) -> SimulationSummary:
     """Build the described floor, scan it and write contracts 1, 2, 3 and 5 into ``out``.
 
     ``out`` receives ``scan.ply`` (float32 xyz, uchar colour), ``ground_truth.json``,
-    ``expected.json`` and ``models/``. Everything is written into a temporary directory
+    ``expected.json``, ``models/`` and, with ``design``, ``as_designed.ifc``: the as-designed
+    model with a few objects deliberately moved, removed or added, listed in the ground truth
+    under ``design_differences`` (for measuring ``sbsc compare``). Everything is written into a temporary directory
     and moved in at the end, so a failure leaves ``out`` as it was. Deterministic for a seed.
     """
     t0 = time.perf_counter()
@@ -91,7 +93,14 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
         write_ply(tmp / "scan.ply", scan.xyz, scan.rgb)
         n_points, n_rays = len(scan), scan.rays
         del scan
-        write_json_atomic(tmp / "ground_truth.json", building.truth_document())
+        truth = building.truth_document()
+        if design:
+            from ..bim.design import write_as_designed_ifc
+
+            res = write_as_designed_ifc(truth, tmp / "as_designed.ifc", seed=seed)
+            truth["as_designed"] = res["as_designed"]
+            truth["design_differences"] = res["design_differences"]
+        write_json_atomic(tmp / "ground_truth.json", truth)
         expected = building.expected_document()
         write_json_atomic(tmp / "expected.json", expected)
         from .library import write_model_library
