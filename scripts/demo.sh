@@ -26,7 +26,8 @@ fi
 "$sbsc" evaluate --detections "$run/detect/detections.json" \
   --truth "$run/scan/ground_truth.json" --json "$run/evaluation.json"
 if [ "$serve" = 1 ]; then
-  .venv/bin/python -m app.sample --name "Sample: Scenario ${scenario}" \
-    --scan "$run/scan/scan.ply" --detections "$run/detect"
+  .venv/bin/python -m app.sample "$run/scan/scan.ply" "$run/detect" \
+    --models "$run/scan/models" --name "Sample: Scenario ${scenario}"
+  echo "demo: the review app opens on the sample project; stop it with Ctrl-C"
   exec "$sbsc" serve --open
 fi
