@@ -224,7 +224,7 @@ def test_click_accept_records_decision_and_syncs(setup):
         wait_for(lambda: scene.locked, 1.0, "lock")
         assert "read-only" in scene.status_text()
         wait_for(lambda: session.ui_accept.disabled and session.ui_reject.disabled)
-        assert "read-only" in session.ui_who.content
+        wait_for(lambda: "read-only" in session.ui_who.content, 1.0, "read-only notice")
         before = backend.project_data(1).detections
         tab.press(session.ui_accept)
         time.sleep(0.3)
