@@ -17,9 +17,14 @@ result; ``detect_to_dir`` reads the inputs, runs ``detect`` and writes the outpu
 
 from __future__ import annotations
 
+import itertools
 import json
+import multiprocessing
+import os
 import time
-from collections.abc import Callable, Sequence
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,8 +32,8 @@ import cv2
 import numpy as np
 
 from .colour_prep import prepare_colour
-from .colour_recognition import colour_rois, learn_prototypes, match_colour
-from .consensus import consensus, suppress_conflicts
+from .colour_recognition import ColourPrototypes, colour_rois, learn_prototypes, match_colour
+from .consensus import consensus_all
 from .depth_recognition import depth_rois, match_depth
 from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
@@ -39,7 +44,7 @@ from .orthoimage import build_orthoimage
 from .placement import place_hits
 from .segmentation import segment_floor_ceiling_walls
 from .settings import DetectionSettings, load_settings
-from .templates import make_templates
+from .templates import ModelTemplate, make_templates
 from .types import (
     Box,
     Candidate,
@@ -48,6 +53,7 @@ from .types import (
     Orthoimage,
     PointCloud,
     Segmentation,
+    Wall,
     WallArea,
 )
 from .wall_area import find_wall_area
@@ -84,6 +90,75 @@ def _noop_progress(stage: str, fraction: float) -> None:
     return None
 
 
+WALL_STAGES = ("orthoimage", "colour_prep", "wall_area", "depth", "colour")
+
+
+def process_wall(cloud: PointCloud, wall: Wall, templates: dict[str, ModelTemplate],
+                 prototypes: ColourPrototypes, s: DetectionSettings) -> tuple[WallResult, dict[str, float]]:
+    """Sections 3.2-4.3 on one wall: orthoimage, colour preparation, wall area and openings,
+    RoIs and candidates in depth and in colour. Returns the result and seconds per stage."""
+    t_stage: dict[str, float] = {}
+    t = time.perf_counter()
+    ortho = build_orthoimage(cloud, wall, s.orthoimage)
+    t_stage["orthoimage"] = time.perf_counter() - t
+    t = time.perf_counter()
+    ortho = prepare_colour(ortho, s.colour_prep)
+    t_stage["colour_prep"] = time.perf_counter() - t
+    t = time.perf_counter()
+    area = find_wall_area(ortho, s.wall_area)
+    t_stage["wall_area"] = time.perf_counter() - t
+    t = time.perf_counter()
+    d_rois = depth_rois(ortho, area, s.depth)
+    d_cands = match_depth(ortho, area, d_rois, templates, s.depth)
+    t_stage["depth"] = time.perf_counter() - t
+    t = time.perf_counter()
+    c_rois = colour_rois(ortho, area, s.colour)
+    c_cands = match_colour(ortho, area, c_rois, prototypes, s.colour)
+    t_stage["colour"] = time.perf_counter() - t
+    return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
+
+
+def _wall_cloud(cloud: PointCloud, wall: Wall) -> tuple[PointCloud, Wall]:
+    """The points of one wall as a cloud of their own (what a worker process receives)."""
+    sub = PointCloud(cloud.xyz[wall.point_index], cloud.rgb[wall.point_index], cloud.origin, cloud.sources)
+    return sub, Wall(wall.id, wall.frame, np.arange(len(wall.point_index), dtype=np.int64))
+
+
+def _process_wall_job(sub: PointCloud, wall: Wall, templates: dict[str, ModelTemplate],
+                      prototypes: ColourPrototypes, s: DetectionSettings
+                      ) -> tuple[str, WallResult, dict[str, float]]:
+    res, t_stage = process_wall(sub, wall, templates, prototypes, s)
+    return wall.id, res, t_stage
+
+
+def _walls_results(cloud: PointCloud, seg: Segmentation, templates: dict[str, ModelTemplate],
+                   prototypes: ColourPrototypes, s: DetectionSettings
+                   ) -> Iterator[tuple[str, WallResult, dict[str, float]]]:
+    """Process every wall, in ``s.workers`` processes when there are several walls.
+
+    Each worker receives only its wall's points; at most two walls per worker are in flight,
+    so the scan is never copied whole. Results come back in the order of ``seg.walls``.
+    """
+    workers = s.workers or min(2, os.cpu_count() or 1)
+    if workers <= 1 or len(seg.walls) <= 1:
+        for wall in seg.walls:
+            res, t_stage = process_wall(cloud, wall, templates, prototypes, s)
+            yield wall.id, res, t_stage
+        return
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        pending: deque = deque()
+        todo = iter(seg.walls)
+        for wall in itertools.islice(todo, 2 * workers):
+            pending.append(pool.submit(_process_wall_job, *_wall_cloud(cloud, wall), templates, prototypes, s))
+        while pending:
+            yield pending.popleft().result()
+            nxt = next(todo, None)
+            if nxt is not None:
+                pending.append(pool.submit(_process_wall_job, *_wall_cloud(cloud, nxt), templates,
+                                           prototypes, s))
+
+
 def detect(
     cloud: PointCloud,
     library: ModelLibrary,
@@ -116,41 +191,25 @@ def detect(
     templates = make_templates(library, s.orthoimage.pixel_m, classes)
     prototypes = learn_prototypes(templates, s.colour)
     timings["templates"] = time.perf_counter() - t
+    t = time.perf_counter()
 
     walls: dict[str, WallResult] = {}
-    stage_t = {k: 0.0 for k in ("orthoimage", "colour_prep", "wall_area", "depth", "colour")}
-    for i, wall in enumerate(seg.walls):
-        progress("walls", i / max(1, len(seg.walls)))
-        t = time.perf_counter()
-        ortho = build_orthoimage(cloud, wall, s.orthoimage)
-        stage_t["orthoimage"] += time.perf_counter() - t
-        t = time.perf_counter()
-        ortho = prepare_colour(ortho, s.colour_prep)
-        stage_t["colour_prep"] += time.perf_counter() - t
-        t = time.perf_counter()
-        area = find_wall_area(ortho, s.wall_area)
-        stage_t["wall_area"] += time.perf_counter() - t
-        t = time.perf_counter()
-        d_rois = depth_rois(ortho, area, s.depth)
-        d_cands = match_depth(ortho, area, d_rois, templates, s.depth)
-        stage_t["depth"] += time.perf_counter() - t
-        t = time.perf_counter()
-        c_rois = colour_rois(ortho, area, s.colour)
-        c_cands = match_colour(ortho, area, c_rois, prototypes, s.colour)
-        stage_t["colour"] += time.perf_counter() - t
-        walls[wall.id] = WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands)
+    stage_t = dict.fromkeys(WALL_STAGES, 0.0)
+    for i, (wid, res, t_wall) in enumerate(_walls_results(cloud, seg, templates, prototypes, s)):
+        progress("walls", (i + 1) / max(1, len(seg.walls)))
+        walls[wid] = res
+        for k, v in t_wall.items():
+            stage_t[k] += v
     timings.update(stage_t)
+    timings["walls_elapsed"] = time.perf_counter() - t
 
     progress("consensus", 0.0)
     t = time.perf_counter()
-    hits = {}
-    for cls in classes:
-        d = [c for w in walls.values() for c in w.depth_candidates if c.class_id == cls]
-        c = [c for w in walls.values() for c in w.colour_candidates if c.class_id == cls]
-        hits[cls] = consensus(d, c, None if expected is None else expected.get(cls, 0), s.consensus)
-    hits = suppress_conflicts(hits, s.consensus)
+    depth_c = [c for w in walls.values() for c in w.depth_candidates]
+    colour_c = [c for w in walls.values() for c in w.colour_candidates]
+    hits = consensus_all(depth_c, colour_c, expected, s.consensus, classes)
     orthos = {k: w.ortho for k, w in walls.items()}
-    detections = place_hits([h for cls in classes for h in hits[cls]], orthos, templates)
+    detections = place_hits([h for cls in classes for h in hits.get(cls, [])], orthos, templates)
     timings["consensus"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     progress("consensus", 1.0)

@@ -138,6 +138,7 @@ class DepthRecognitionSettings:
     isolation_width_px: int = 3  # ... and are this wide
     isolation_relief_fraction: float = 0.5  # relief above this x the model's (median) counts
     isolation_max_occupancy: float = 0.5  # a side strip with more relief: part of something larger
+    min_relief_iou: float = 0.5  # where model and scene stand out must overlap this much (IoU)
     nms_overlap: float = 0.3  # same-class matches overlapping more than this are one match
     refit_plane: bool = True  # remove a residual plane fitted to the visible wall
     gap_fill_sigma_px: float = 1.0  # sampling gaps are filled by a normalised Gaussian of this size
@@ -166,10 +167,11 @@ class ColourRecognitionSettings:
     cluster_merge_ab: float = 4.0  # ... and a / b classes closer than this (Lab units)
     segment_cap: int = 10  # v5 (number of s2 segments in s1) normalised by this count
     ab_scale: float = 100.0  # Lab a / b units mapped to 1 in the normalised descriptors
-    size_tolerance: float = 0.5  # relative difference allowed between RoI and model sizes
-    nearest_only: bool = True  # a RoI is a candidate of its nearest prototype only
+    size_tolerance: float = 0.3  # relative difference allowed between RoI and model sizes
+    nearest_only: bool = False  # True: a RoI is a candidate of its nearest prototype only
     depth_check_gain: float = 0.3  # a class with relief needs this much of it in the scan (0: off)
     depth_check_min_relief_m: float = 0.008  # ... checked only for models with this much relief
+    depth_check_coverage: float = 0.5  # ... whose footprint must have depth data in this share
     train_blurs_px: tuple[float, ...] = (0.5, 1.0)  # blurs of the library views when learning
     train_noise_samples: int = 2  # noisy copies per view and blur (noise measured on the wall)
     train_threshold_factors: tuple[float, ...] = (0.8, 1.0, 1.25)  # foreground-threshold jitter
@@ -189,6 +191,7 @@ class ConsensusSettings:
     min_alpha: float = 0.0  # cells at or below this are never selected
     suppress_overlap: float = 0.5  # cross-class suppression: max overlap of two accepted objects
     prefer_depth: bool = True  # at equal alpha: both > depth only > colour only, then goodness
+    alpha_tolerance: float = 0.05  # alphas this close count as equal (the tie-break decides)
 
 
 @dataclass
@@ -200,6 +203,7 @@ class DetectionSettings:
     depth: DepthRecognitionSettings = field(default_factory=DepthRecognitionSettings)
     colour: ColourRecognitionSettings = field(default_factory=ColourRecognitionSettings)
     consensus: ConsensusSettings = field(default_factory=ConsensusSettings)
+    workers: int = 0  # processes for the per-wall stages; 0 = up to 2, by the CPU count
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
