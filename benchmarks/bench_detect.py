@@ -33,7 +33,7 @@ class TreeRssSampler(threading.Thread):
     def __init__(self) -> None:
         super().__init__(daemon=True)
         self.peak = 0
-        self._stop = threading.Event()
+        self._halt = threading.Event()
 
     @staticmethod
     def _rss(pid: int) -> int:
@@ -56,12 +56,12 @@ class TreeRssSampler(threading.Thread):
         return out
 
     def run(self) -> None:
-        while not self._stop.wait(0.1):
+        while not self._halt.wait(0.1):
             total = self._rss(os.getpid()) + sum(self._rss(p) for p in self._children())
             self.peak = max(self.peak, total)
 
     def stop(self) -> int:
-        self._stop.set()
+        self._halt.set()
         self.join()
         return self.peak
 
