@@ -44,6 +44,7 @@ class AppSettings(BaseSettings):
     # uploads
     max_scan_bytes: int = 8 * GiB
     max_models_zip_bytes: int = 256 * MiB
+    max_design_bytes: int = 512 * MiB  # as-designed IFC files
     upload_drain_bytes: int = 32 * MiB  # a refused body is read and dropped up to this, then cut
     scan_check_timeout_s: float = 1800.0
     zip_max_entries: int = 5000

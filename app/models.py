@@ -113,6 +113,23 @@ class ModelLibraryRow(Base):
     created_at: Mapped[datetime] = mapped_column(Stamp, default=utcnow)
 
 
+class DesignRow(Base):
+    """An as-designed IFC file of a project; the newest row is the one compared with."""
+
+    __tablename__ = "designs"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    project_id: Mapped[int] = mapped_column(ForeignKey("projects.id"), index=True)
+    filename: Mapped[str] = mapped_column(String(255))
+    path: Mapped[str] = mapped_column(String(500))  # relative to the data dir
+    size_bytes: Mapped[int] = mapped_column(BigInteger)
+    sha256: Mapped[str] = mapped_column(String(64))
+    objects: Mapped[int] = mapped_column(Integer)  # designed objects mapped to library classes
+    expected_counts: Mapped[dict[str, Any]] = mapped_column(JSON)  # class id -> count
+    uploaded_by: Mapped[str | None] = mapped_column(String(100))
+    created_at: Mapped[datetime] = mapped_column(Stamp, default=utcnow)
+
+
 class Job(Base):
     __tablename__ = "jobs"
 

@@ -100,9 +100,9 @@ def create_app(settings: AppSettings | None = None, *, start_jobs: bool = True) 
     async def _on_sbsc_error(_: Request, exc: SbscError) -> JSONResponse:
         return JSONResponse({"detail": str(exc)}, status_code=422)
 
-    from .api import export, jobs, projects, review, uploads
+    from .api import design, export, jobs, projects, review, uploads
 
-    for module in (projects, uploads, jobs, review, export):
+    for module in (projects, uploads, jobs, review, export, design):
         app.include_router(module.router)
 
     if settings.viewer:

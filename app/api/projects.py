@@ -7,7 +7,7 @@ from pydantic import BaseModel, Field
 from sqlalchemy import func, select
 
 from ..auth import create_user
-from ..models import Job, ModelLibraryRow, Project, Scan, SignOff, User, iso
+from ..models import DesignRow, Job, ModelLibraryRow, Project, Scan, SignOff, User, iso
 from ..results import job_dict, review_counts
 from .deps import DB, Admin, ReadSession, Reviewer, get_project, library_classes
 
@@ -87,7 +87,7 @@ def signoff_dict(so: SignOff | None) -> dict | None:
 
 @router.get("/projects/{pid}", tags=["projects"])
 def get_project_detail(pid: int, _: Reviewer, s: ReadSession) -> dict:
-    """The project with its scans, model library, jobs, review counts and sign-off."""
+    """The project with its scans, model library, jobs, review counts, sign-off and design."""
     p = get_project(s, pid)
     scans = [{"id": sc.id, "filename": sc.filename, "points": sc.points, "bytes": sc.size_bytes,
               "sha256": sc.sha256, "uploaded_by": sc.uploaded_by, "created_at": iso(sc.created_at)}
@@ -95,12 +95,18 @@ def get_project_detail(pid: int, _: Reviewer, s: ReadSession) -> dict:
     models = s.get(ModelLibraryRow, p.models_id) if p.models_id else None
     jobs = [job_dict(j) for j in s.scalars(select(Job).where(Job.project_id == pid).order_by(Job.id.desc()))]
     so = s.scalars(select(SignOff).where(SignOff.project_id == pid)).first()
+    design = s.scalars(select(DesignRow).where(DesignRow.project_id == pid)
+                       .order_by(DesignRow.id.desc()).limit(1)).first()
     return {
         **project_summary(s, p), "scans": scans,
         "models": None if models is None else {
             "id": models.id, "filename": models.filename, "sha256": models.sha256,
             "classes": sorted(models.classes)},
         "jobs": jobs, "counts": review_counts(s, p), "signoff": signoff_dict(so),
+        "design": None if design is None else {
+            "filename": design.filename, "objects": design.objects,
+            "expected_counts": design.expected_counts, "sha256": design.sha256,
+            "uploaded_by": design.uploaded_by, "created_at": iso(design.created_at)},
     }
 
 
