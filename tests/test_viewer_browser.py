@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import tempfile
 import time
 from pathlib import Path
 
@@ -20,7 +21,11 @@ CHROMIUM = os.environ.get("SBSC_CHROMIUM", "/usr/bin/chromium")
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
         "--disable-component-update", "--disable-sync", "--no-first-run",
         "--use-gl=swiftshader", "--enable-unsafe-swiftshader"]
-DOCS = Path(__file__).resolve().parent.parent / "docs" / "images"
+# Screenshots go to docs/images only when asked (SBSC_SAVE_SCREENSHOTS=1), so a test run
+# never changes the work tree; otherwise to a temporary folder.
+DOCS = (Path(__file__).resolve().parent.parent / "docs" / "images"
+        if os.environ.get("SBSC_SAVE_SCREENSHOTS") == "1"
+        else Path(tempfile.gettempdir()) / "sbsc-screenshots")
 VIEW = {"width": 1400, "height": 850}
 CANVAS_RIGHT = 990  # the review panel covers the right of the page
 
