@@ -11,8 +11,9 @@
    (bounding rectangles), clustered when they overlap or touch.
 2. **Patterns.** Each RoI's 15 global descriptors (``colour_descriptors``) are compared
    with the prototype of each expected class by a minimum-distance classifier on the
-   normalised descriptors; a RoI is a candidate of the nearest class when its distance
-   rho_C is at most mu_C = 0.2.
+   normalised descriptors; a RoI joins the list {C} of every class whose distance rho_C
+   is at most mu_C = 0.2 (as in the paper; ``nearest_only`` keeps the nearest class
+   only). The consensus decides between classes that share a place.
 
 Prototypes are learnt from the library's front views. The paper learns them once; here
 they are also re-learnt for each wall colour (``ColourPrototypes.for_wall``): every view
@@ -27,6 +28,8 @@ The scale is known (the orthoimage and the library share ``pixel_m``), so a RoI 
 compared with classes whose visible extent has a similar size (``size_tolerance``,
 either orientation), and the footprint is placed by colour cross-correlation of the
 composited view around the RoI (``refine_position``) rather than at the RoI centroid.
+Finally the colour may not contradict the geometry: a class whose model stands out of
+the wall is refused where the scan shows a flat wall or no data (``depth_agrees``).
 """
 
 from __future__ import annotations
@@ -286,13 +289,18 @@ def learn_prototypes(templates: dict[str, ModelTemplate], settings: ColourRecogn
 
 
 def size_mismatch(roi: Box, size_px: tuple[float, float], rotations: bool) -> float:
-    """Largest relative difference of the RoI's sides from the prototype's (either orientation)."""
+    """How much the RoI's sides differ from the prototype's: the larger ratio of the two
+    sides, minus 1 (0.3 = one side 30 % longer or shorter), in the better orientation."""
     h, w = max(size_px[0], 1.0), max(size_px[1], 1.0)
-    straight = max(abs(roi.height - h) / h, abs(roi.width - w) / w)
+    rh, rw = max(roi.height, 1), max(roi.width, 1)
+
+    def ratio(a: float, b: float) -> float:
+        return max(a / b, b / a) - 1.0
+
+    straight = max(ratio(rh, h), ratio(rw, w))
     if not rotations:
         return straight
-    turned = max(abs(roi.height - w) / w, abs(roi.width - h) / h)
-    return min(straight, turned)
+    return min(straight, max(ratio(rh, w), ratio(rw, h)))
 
 
 def rotate_offset(offset: tuple[float, float], deg: int) -> tuple[float, float]:
@@ -340,9 +348,11 @@ def depth_agrees(depth: np.ndarray, t: ModelTemplate, box: Box, rotation_deg: in
                  settings: ColourRecognitionSettings) -> bool:
     """False when a class that stands out of the wall is placed where the scan shows a flat wall.
 
-    Only for models with at least ``depth_check_min_relief_m`` of relief and footprints with
-    depth data in at least half of their pixels: the least-squares amplitude of the scene's
-    relief against the model's there must reach ``depth_check_gain`` (0 disables the check).
+    Only for models with at least ``depth_check_min_relief_m`` of relief: the footprint must
+    have depth data in ``depth_check_coverage`` of its pixels (a protruding object is always
+    scanned where its colour was; a footprint over a hole or an opening is not an object)
+    and the least-squares amplitude of the scene's relief against the model's there must
+    reach ``depth_check_gain`` (0 disables the check).
     """
     if settings.depth_check_gain <= 0 or t.depth is None or t.relief_m() < settings.depth_check_min_relief_m:
         return True
@@ -351,8 +361,8 @@ def depth_agrees(depth: np.ndarray, t: ModelTemplate, box: Box, rotation_deg: in
         return True
     patch = crop_padded(depth, box.r0, box.r1, box.c0, box.c1)
     ok = np.isfinite(patch)
-    if ok.mean() < 0.5:
-        return True
+    if ok.mean() < settings.depth_check_coverage:
+        return False  # a protruding object would have been scanned: this is mostly a hole
     m = model[ok] - model[ok].mean()
     den = float((m * m).sum())
     if den <= 0:

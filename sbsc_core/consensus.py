@@ -16,7 +16,9 @@ its row and column are removed, except for an exclusive cell (case III), where o
 cell is set to 0 so the "none" row / column stays available to the other candidates (the
 selected candidate's own row or column is removed as well, so one candidate is never
 counted twice); this stops when Psi is null or the expected number of instances is
-reached. Ties are broken by the recognizers' goodness (below).
+reached. Cells within ``alpha_tolerance`` of the best count as tied (equation 15 moves
+by a few hundredths for a one-pixel shift); ties are broken by the kind of evidence and
+the recognizers' goodness (below).
 
 The position of an instance is equation 16, c = (rho_D c_D + w_C c_C) / (rho_D + w_C).
 rho_C is a distance (lower is better), so its weight is w_C = 1 - rho_C (in [0.8, 1] for
@@ -30,6 +32,12 @@ instances (of any classes) whose footprints overlap by more than ``suppress_over
 the kind of evidence (with ``prefer_depth``: found in both, then depth only, then colour
 only: at equal alpha the geometry, which is metric and shape-specific, contradicts a
 colour-only class whose depth model did not match there) and then by goodness.
+
+``consensus_all`` runs the selection of every class at once with that rule built in: the
+best cell of any class is taken next and accepted only if its place is free, so an
+instance that loses its place to another class does not use up its class's expected
+count (the two-step ``consensus`` + ``suppress_conflicts`` can). It is the recommended
+entry point for a whole floor.
 """
 
 from __future__ import annotations
@@ -163,7 +171,8 @@ class _Selection:
         best = self.psi.max() if self.psi.size else 0.0
         if not best > self.settings.min_alpha:
             return None
-        ties = np.argwhere(self.psi >= best - 1e-12)
+        ties = np.argwhere((self.psi >= best - max(self.settings.alpha_tolerance, 1e-12))
+                           & (self.psi > self.settings.min_alpha))
         i, j = max((tuple(int(v) for v in x) for x in ties), key=lambda ij: (self.rank[ij], -ij[0], -ij[1]))
         return float(best), float(self.rank[i, j]), i, j
 
@@ -226,7 +235,8 @@ def consensus_all(depth: list[Candidate], colour: list[Candidate], expected: dic
         cells = [(c, n) for c, n in cells if c is not None]
         if not cells:
             break
-        (alpha, rank, i, j), n = max(cells, key=lambda x: (x[0][0], x[0][1], x[1]))
+        top = max(c[0][0] for c in cells) - max(settings.alpha_tolerance, 1e-12)
+        (alpha, rank, i, j), n = max((c for c in cells if c[0][0] >= top), key=lambda x: (x[0][1], x[0][0], x[1]))
         hit = sels[n].hit(i, j)
         if _conflicts(hit, kept, settings):
             sels[n].drop(i, j)
@@ -249,20 +259,29 @@ def suppress_conflicts(hits_by_class: dict[str, list[ConsensusHit]],
                        settings: ConsensusSettings) -> dict[str, list[ConsensusHit]]:
     """One place holds one object: of overlapping hits (any classes, same wall) keep the best.
 
-    Hits are ranked by alpha, then (``prefer_depth``) both > depth > colour, then goodness; a
-    hit is dropped when its footprint overlaps an already kept one by more than
-    ``suppress_overlap`` of the smaller footprint.
+    Hits are taken in order of alpha; among those within ``alpha_tolerance`` of the best,
+    (``prefer_depth``) both > depth > colour, then goodness decides. A hit is dropped when
+    its footprint overlaps an already kept one by more than ``suppress_overlap`` of the
+    smaller footprint.
     """
-    order = sorted(
-        ((cls, h) for cls, hs in hits_by_class.items() for h in hs),
-        key=lambda ch: (-ch[1].alpha, -(_SOURCE_PRIORITY.get(ch[1].source, 0) if settings.prefer_depth else 0),
-                        -ch[1].goodness, ch[0], ch[1].wall_id, ch[1].centre),
-    )
+    left = sorted(((cls, h) for cls, hs in hits_by_class.items() for h in hs),
+                  key=lambda ch: (ch[0], ch[1].wall_id, ch[1].centre))
     kept: list[ConsensusHit] = []
     out: dict[str, list[ConsensusHit]] = {cls: [] for cls in hits_by_class}
-    for cls, h in order:
-        if _conflicts(h, kept, settings):
-            continue
-        kept.append(h)
-        out[cls].append(h)
+    tol = max(settings.alpha_tolerance, 1e-12)
+    while left:
+        top = max(h.alpha for _, h in left) - tol
+        k = max((k for k, (_, h) in enumerate(left) if h.alpha >= top),
+                key=lambda k: (_hit_rank(left[k][1], settings), left[k][1].alpha, -k))
+        cls, h = left.pop(k)
+        if not _conflicts(h, kept, settings):
+            kept.append(h)
+            out[cls].append(h)
     return out
+
+
+def _hit_rank(h: ConsensusHit, settings: ConsensusSettings) -> float:
+    """The tie-break of hits with (nearly) equal alpha, as :func:`_cell_rank` for cells."""
+    prio = _SOURCE_PRIORITY.get(h.source, 0) if settings.prefer_depth else 0
+    n = (h.rho_depth is not None) + (h.rho_colour is not None)
+    return 10.0 * prio + h.goodness * n

@@ -37,6 +37,7 @@ from collections.abc import Callable
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from .settings import DepthRecognitionSettings
 from .templates import ModelTemplate
@@ -69,10 +70,13 @@ def fill_gaps(values: np.ndarray, ok: np.ndarray, sigma_px: float, min_weight: f
 
 
 def depth_image(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSettings) -> np.ndarray:
-    """The depth image J_D: metres out of the wall plane; openings and larger holes at 0.
+    """The depth image J_D: metres out of the wall plane, openings at 0.
 
     Sampling gaps of a sparse scan are filled from their neighbours (``gap_fill_sigma_px``)
-    so that they neither break an object's relief nor create false discontinuities.
+    and each larger hole (an occlusion shadow beside an object, an unseen recess in it)
+    takes the lowest relief found around it, so holes neither break an object's relief
+    nor create false discontinuities (the paper's Figure 16 problem). A residual plane
+    fitted to the visible wall is removed and a median filter takes out speckle.
     """
     d = np.asarray(ortho.depth, np.float32)
     ok = np.isfinite(d)
@@ -83,12 +87,35 @@ def depth_image(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSet
     d, ok = fill_gaps(np.where(ok, d, 0.0), ok, settings.gap_fill_sigma_px, settings.gap_fill_min_weight)
     ok &= ~opening
     out = np.where(ok, d, 0.0).astype(np.float32)
-    if settings.median_px in (3, 5):  # speckle (outliers, isolated no-data pixels) off
-        out = cv2.medianBlur(out, settings.median_px)
     if settings.refit_plane:
         plane = _residual_plane(out, ok & area.visible if area.visible.shape == d.shape else ok)
         if plane is not None:
             out = np.where(ok, out - plane, 0.0).astype(np.float32)
+    out = fill_holes_low(out, ok, ~ok & ~opening)
+    if settings.median_px in (3, 5):  # speckle (outliers, isolated no-data pixels) off
+        out = cv2.medianBlur(out, settings.median_px)
+    return np.where(opening, 0.0, out).astype(np.float32)
+
+
+def fill_holes_low(values: np.ndarray, ok: np.ndarray, holes: np.ndarray) -> np.ndarray:
+    """Fill each 8-connected hole with the lowest (lightly smoothed) value on its 1-pixel rim.
+
+    A shadow cast on the wall beside a protruding object is bounded by wall and object: its
+    rim minimum is the wall. A hole inside an object's face is bounded by that face. Holes
+    with no known rim stay 0.
+    """
+    if not holes.any():
+        return values
+    lab, n = ndimage.label(holes, structure=np.ones((3, 3), bool))
+    rim = ndimage.grey_dilation(lab, size=(3, 3)) * (ok & ~holes)
+    sm = cv2.GaussianBlur(np.where(ok, values, 0).astype(np.float32), (0, 0), 1.0)
+    w = cv2.GaussianBlur(ok.astype(np.float32), (0, 0), 1.0)
+    sm = np.where(w > 1e-3, sm / np.maximum(w, 1e-3), 0.0)
+    on = rim > 0
+    low = np.asarray(ndimage.minimum(sm[on], labels=rim[on], index=np.arange(1, n + 1)), np.float64)
+    low = np.nan_to_num(low, nan=0.0)
+    out = values.copy()
+    out[holes] = low[lab[holes] - 1]
     return out
 
 
@@ -384,13 +411,13 @@ def _window_energy(region: np.ndarray, ph: int, pw: int) -> np.ndarray:
     if x.ndim == 2:
         x = x[..., None]
     n = ph * pw
-    total = np.zeros((x.shape[0] - ph + 1, x.shape[1] - pw + 1))
+    oh, ow = x.shape[0] - ph + 1, x.shape[1] - pw + 1
+    total = np.zeros((oh, ow))
     for ch in range(x.shape[2]):
-        s1 = cv2.integral(np.ascontiguousarray(x[..., ch]))
-        s2 = cv2.integral(np.ascontiguousarray(x[..., ch] ** 2))
-        a = s1[ph:, pw:] - s1[:-ph, pw:] - s1[ph:, :-pw] + s1[:-ph, :-pw]
-        b = s2[ph:, pw:] - s2[:-ph, pw:] - s2[ph:, :-pw] + s2[:-ph, :-pw]
-        total += b - a * a / n
+        c = np.ascontiguousarray(x[..., ch])
+        s1 = cv2.boxFilter(c, -1, (pw, ph), anchor=(0, 0), normalize=False, borderType=cv2.BORDER_CONSTANT)
+        s2 = cv2.sqrBoxFilter(c, -1, (pw, ph), anchor=(0, 0), normalize=False, borderType=cv2.BORDER_CONSTANT)
+        total += s2[:oh, :ow] - s1[:oh, :ow] ** 2 / n
     return total
 
 
@@ -411,6 +438,24 @@ def isolation(jd: np.ndarray, box: Box, threshold_m: float, gap_px: int, width_p
         if strip.size:
             out = max(out, float(np.mean(np.abs(strip) > threshold_m)))
     return out
+
+
+def relief_overlap(jd: np.ndarray, model: np.ndarray, box: Box, pad_px: int, threshold_m: float,
+                   gain: float) -> float:
+    """Intersection over union of where the model and the scene stand out by ``threshold_m``.
+
+    ``model`` is the padded (and smoothed) depth model over ``box`` grown by ``pad_px``; the
+    scene's threshold is scaled by the match's ``gain``. The correlation alone tolerates a
+    footprint of the wrong size (a 12 cm plate on an 8 cm socket); this does not.
+    """
+    patch = crop_padded(jd, box.r0 - pad_px, box.r1 + pad_px, box.c0 - pad_px, box.c1 + pad_px)
+    if patch.shape != model.shape:
+        return 0.0
+    sign = 1.0 if float(np.sum(model)) >= 0 else -1.0
+    m = sign * model > threshold_m
+    s = sign * patch > threshold_m * max(gain, 1e-6)
+    union = int(np.count_nonzero(m | s))
+    return float(np.count_nonzero(m & s)) / union if union else 0.0
 
 
 def match_depth(
@@ -442,16 +487,23 @@ def match_depth(
             h, w = rot.shape
             min_energy = (h + 2 * settings.template_pad_px) * (w + 2 * settings.template_pad_px) * flat_m ** 2
             relief = float(np.median(np.abs(rot[np.abs(rot) > 0.1 * np.abs(rot).max()])))
+            smooth_model = padded_template(rot, settings.template_pad_px, settings.match_sigma_px)
 
-            def isolated(r: float, c: float, gain: float, h: int = h, w: int = w, relief: float = relief) -> bool:
+            def plausible(r: float, c: float, gain: float, h: int = h, w: int = w, relief: float = relief,
+                          model: np.ndarray = smooth_model) -> bool:
+                box = box_at((r, c), h, w)
                 thr = max(settings.isolation_relief_fraction * relief * gain, noise_relief)
-                return isolation(jm, box_at((r, c), h, w), thr, settings.isolation_gap_px,
-                                 settings.isolation_width_px) <= settings.isolation_max_occupancy
+                if isolation(jm, box, thr, settings.isolation_gap_px,
+                             settings.isolation_width_px) > settings.isolation_max_occupancy:
+                    return False
+                return relief_overlap(jm, model, box, settings.template_pad_px,
+                                      settings.isolation_relief_fraction * relief,
+                                      gain) >= settings.min_relief_iou
 
             peaks = match_template_in_rois(jm, rot, rois, settings.mu_d, settings.template_pad_px,
                                            settings.search_margin_px, settings.max_peaks_per_roi,
                                            settings.match_sigma_px, settings.gain_range, min_energy,
-                                           isolated)
+                                           plausible)
             for score, r, c, roi, _gain in peaks:
                 box = box_at((r, c), h, w)
                 found.append(Candidate(cid, ortho.wall_id, "depth", box, (r, c), score, roi, deg))

@@ -131,3 +131,20 @@ def test_cluster_boxes_merges_overlapping_and_touching() -> None:
     assert Box(0, 0, 20, 15) in out  # (0..15) grown by 2 touches (16..20)
     assert Box(30, 30, 40, 40) in out and len(out) == 3
     assert len(cluster_boxes(boxes, gap_px=0)) == 4
+
+
+def test_holes_take_the_lowest_relief_around_them() -> None:
+    from sbsc_core.depth_recognition import depth_image
+
+    templates = make_templates(synthetic_library(), PIXEL_M)
+    ortho, area = make_wall(seed=10, holes=0)
+    paste(ortho, area, templates["panel"], (120.0, 200.0), seed=1)
+    ortho.depth[125:135, 195:205] = np.nan  # unseen patch inside the panel's face (50 mm)
+    ortho.depth[100:140, 221:231] = np.nan  # shadow on the wall beside the panel
+    jd = depth_image(ortho, area, DepthRecognitionSettings())
+    assert np.all(np.abs(jd[127:133, 197:203] - 0.05) < 0.006)  # filled like the face
+    assert np.all(np.abs(jd[102:138, 224:231]) < 0.004)  # filled like the wall
+    s = DepthRecognitionSettings()
+    rois = depth_rois(ortho, area, s)
+    panels = [x for x in match_depth(ortho, area, rois, templates, s) if x.class_id == "panel"]
+    assert len(panels) == 1 and np.hypot(panels[0].centre[0] - 120, panels[0].centre[1] - 200) < 1
