@@ -138,9 +138,14 @@ def colour_noise(rgb: np.ndarray, where: np.ndarray) -> np.ndarray:
     return (1.4826 * mad * np.sqrt(9.0 / 8.0)).astype(float)
 
 
-def colour_rois(ortho: Orthoimage, area: WallArea, settings: ColourRecognitionSettings) -> list[Box]:
-    """RoIs of J_BW: bounding rectangles of compact foreground regions, clustered (section 4.3)."""
-    return _rois(colour_image(ortho, area, settings).foreground, settings)
+def colour_rois(ortho: Orthoimage, area: WallArea, settings: ColourRecognitionSettings,
+                image: ColourImage | None = None) -> list[Box]:
+    """RoIs of J_BW: bounding rectangles of compact foreground regions, clustered (section 4.3).
+
+    ``image`` is ``colour_image(ortho, area, settings)`` when the caller already has it.
+    """
+    img = image if image is not None else colour_image(ortho, area, settings)
+    return _rois(img.foreground, settings)
 
 
 def _rois(fg: np.ndarray, settings: ColourRecognitionSettings) -> list[Box]:
@@ -385,14 +390,16 @@ def match_colour(
     rois: list[Box],
     prototypes: ColourPrototypes,
     settings: ColourRecognitionSettings,
+    image: ColourImage | None = None,
 ) -> list[Candidate]:
     """Candidates {C}: RoIs whose pattern lies within mu_C of a class prototype.
 
     ``score`` is rho_C (lower is better); ``box`` is the class footprint placed on the RoI.
+    ``image`` is ``colour_image(ortho, area, settings)`` when the caller already has it.
     """
     if not rois or not prototypes.templates:
         return []
-    img = colour_image(ortho, area, settings)
+    img = image if image is not None else colour_image(ortho, area, settings)
     protos = prototypes.for_wall(img.wall_rgb, img.threshold, img.noise_rgb)
     if not protos:
         return []

@@ -32,7 +32,13 @@ import cv2
 import numpy as np
 
 from .colour_prep import prepare_colour
-from .colour_recognition import ColourPrototypes, colour_rois, learn_prototypes, match_colour
+from .colour_recognition import (
+    ColourPrototypes,
+    colour_image,
+    colour_rois,
+    learn_prototypes,
+    match_colour,
+)
 from .consensus import consensus_all
 from .depth_recognition import depth_rois, match_depth
 from .errors import InputError, SbscError
@@ -112,8 +118,9 @@ def process_wall(cloud: PointCloud, wall: Wall, templates: dict[str, ModelTempla
     d_cands = match_depth(ortho, area, d_rois, templates, s.depth)
     t_stage["depth"] = time.perf_counter() - t
     t = time.perf_counter()
-    c_rois = colour_rois(ortho, area, s.colour)
-    c_cands = match_colour(ortho, area, c_rois, prototypes, s.colour)
+    c_img = colour_image(ortho, area, s.colour)  # J_C and J_BW, computed once per wall
+    c_rois = colour_rois(ortho, area, s.colour, c_img)
+    c_cands = match_colour(ortho, area, c_rois, prototypes, s.colour, c_img)
     t_stage["colour"] = time.perf_counter() - t
     return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
 
