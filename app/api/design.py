@@ -17,7 +17,6 @@ import uuid
 from pathlib import Path
 
 from fastapi import APIRouter, HTTPException, Request
-from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import HTMLResponse, JSONResponse, Response
 from sqlalchemy import select
 from sqlalchemy.orm import Session
@@ -32,7 +31,7 @@ from ..results import project_document
 from ..storage import ReceivedFile, UploadRefused, move_into_place
 from .deps import DB, ReadSession, Reviewer, Settings, get_project, open_project
 from .export import _library
-from .uploads import _check_open, _receive, _refusal
+from .uploads import MULTIPART_FILE, handle_upload
 
 router = APIRouter(prefix="/api", tags=["design"])
 
@@ -56,23 +55,11 @@ def _read_design(settings: AppSettings, s: Session, p: Project, path: Path, file
         raise UploadRefused(422, f"{filename}: {exc.reason}".splitlines()[0]) from None
 
 
-@router.post("/projects/{pid}/design", status_code=201,
-             openapi_extra={"requestBody": {"content": {"multipart/form-data": {"schema": {
-                 "type": "object", "required": ["file"],
-                 "properties": {"file": {"type": "string", "format": "binary"}}}}}}})
+@router.post("/projects/{pid}/design", status_code=201, openapi_extra=MULTIPART_FILE)
 async def upload_design(pid: int, request: Request, user: Reviewer, settings: Settings, db: DB):
     """An as-designed IFC file (IFC2X3, IFC4, IFC4X3) in the multipart field ``file``."""
-    await run_in_threadpool(_check_open, db, pid)
-    try:
-        got = await _receive(request, settings, settings.max_design_bytes, IFC_SUFFIXES)
-    except UploadRefused as exc:
-        return _refusal(exc)
-    try:
-        return await run_in_threadpool(_store_design, db, settings, pid, got, user)
-    except UploadRefused as exc:
-        return _refusal(exc)
-    finally:
-        got.discard()
+    return await handle_upload(request, settings, db, pid, settings.max_design_bytes, IFC_SUFFIXES,
+                               lambda got: _store_design(db, settings, pid, got, user))
 
 
 def _store_design(db: Database, settings: AppSettings, pid: int, got: ReceivedFile,

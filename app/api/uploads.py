@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import shutil
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 
 from fastapi import APIRouter, HTTPException, Request
@@ -55,25 +56,39 @@ async def _receive(request: Request, settings: AppSettings, max_bytes: int,
     return await receive_file(request, tmp_dir=settings.tmp_dir, max_bytes=max_bytes,
                               drain_bytes=settings.upload_drain_bytes, suffixes=suffixes)
 
+MULTIPART_FILE = {"requestBody": {"content": {"multipart/form-data": {"schema": {
+    "type": "object", "required": ["file"],
+    "properties": {"file": {"type": "string", "format": "binary"}}}}}}}
 
-@router.post("/projects/{pid}/scans", status_code=201,
-             openapi_extra={"requestBody": {"content": {"multipart/form-data": {"schema": {
-                 "type": "object", "required": ["file"],
-                 "properties": {"file": {"type": "string", "format": "binary"}}}}}}})
-async def upload_scan(pid: int, request: Request, user: Reviewer, settings: Settings, db: DB):
-    """One scan file (PLY, E57, LAS/LAZ, PCD, XYZ/PTS/TXT) in the multipart field ``file``."""
+
+async def handle_upload(request: Request, settings: AppSettings, db: Database, pid: int,
+                        max_bytes: int, suffixes: tuple[str, ...],
+                        store: Callable[[ReceivedFile], dict]) -> dict | JSONResponse:
+    """The shape every upload shares: the project must be open (423), the body is streamed to
+    a temporary file (4xx refusals), ``store`` checks and stores it in a worker thread, and the
+    temporary file is always removed."""
     await run_in_threadpool(_check_open, db, pid)
     try:
-        got = await _receive(request, settings, settings.max_scan_bytes, SCAN_SUFFIXES)
+        got = await _receive(request, settings, max_bytes, suffixes)
     except UploadRefused as exc:
         return _refusal(exc)
     try:
-        points = await run_in_threadpool(check_scan, got.path, got.filename, settings.scan_check_timeout_s)
-        return await run_in_threadpool(_store_scan, db, settings, pid, got, points, user)
+        return await run_in_threadpool(store, got)
     except UploadRefused as exc:
         return _refusal(exc)
     finally:
         got.discard()
+
+
+@router.post("/projects/{pid}/scans", status_code=201, openapi_extra=MULTIPART_FILE)
+async def upload_scan(pid: int, request: Request, user: Reviewer, settings: Settings, db: DB):
+    """One scan file (PLY, E57, LAS/LAZ, PCD, XYZ/PTS/TXT) in the multipart field ``file``."""
+
+    def store(got: ReceivedFile) -> dict:
+        points = check_scan(got.path, got.filename, settings.scan_check_timeout_s)
+        return _store_scan(db, settings, pid, got, points, user)
+
+    return await handle_upload(request, settings, db, pid, settings.max_scan_bytes, SCAN_SUFFIXES, store)
 
 
 def _store_scan(db: Database, settings: AppSettings, pid: int, got: ReceivedFile, points: int,
@@ -97,23 +112,11 @@ def _store_scan(db: Database, settings: AppSettings, pid: int, got: ReceivedFile
     return out
 
 
-@router.post("/projects/{pid}/models", status_code=201,
-             openapi_extra={"requestBody": {"content": {"multipart/form-data": {"schema": {
-                 "type": "object", "required": ["file"],
-                 "properties": {"file": {"type": "string", "format": "binary"}}}}}}})
+@router.post("/projects/{pid}/models", status_code=201, openapi_extra=MULTIPART_FILE)
 async def upload_models(pid: int, request: Request, user: Reviewer, settings: Settings, db: DB):
     """A zipped model library (contract 2) in the multipart field ``file``; used by later jobs."""
-    await run_in_threadpool(_check_open, db, pid)
-    try:
-        got = await _receive(request, settings, settings.max_models_zip_bytes, ZIP_SUFFIXES)
-    except UploadRefused as exc:
-        return _refusal(exc)
-    try:
-        return await run_in_threadpool(_store_models, db, settings, pid, got, user)
-    except UploadRefused as exc:
-        return _refusal(exc)
-    finally:
-        got.discard()
+    return await handle_upload(request, settings, db, pid, settings.max_models_zip_bytes, ZIP_SUFFIXES,
+                               lambda got: _store_models(db, settings, pid, got, user))
 
 
 def _store_models(db: Database, settings: AppSettings, pid: int, got: ReceivedFile,
