@@ -233,13 +233,14 @@ def fire_alarm_sign(width_m: float = 0.21, height_m: float = 0.21,
     p.line(m([[0.40, 0.30], [0.88, 0.30], [0.88, 0.78], [0.40, 0.78]]), w, 0.05 * s, closed=True)
     p.circle(m([[0.64, 0.54]])[0], 0.09 * s, w)
     p.circle(m([[0.64, 0.54]])[0], 0.05 * s, SAFETY_RED)
-    # hand from the lower right: a rounded fist with the index finger on the button
-    a = np.radians(np.linspace(0, 360, 24, endpoint=False))
-    fist = np.column_stack([0.86 + 0.12 * np.cos(a), 0.90 + 0.10 * np.sin(a)])
-    p.poly(m(fist), w)
-    p.line(m([[0.80, 0.84], [0.665, 0.585]]), w, 0.075 * s)  # index finger
-    p.line(m([[0.78, 0.92], [0.70, 0.86]]), w, 0.06 * s)  # thumb
-    p.line(m([[0.80, 0.95], [0.95, 0.86]]), SAFETY_RED, 0.012 * s)  # knuckle crease
+    # hand: palm from the lower right, index finger pointing at the button
+    palm = np.array([[0.74, 0.78], [0.97, 0.72], [0.99, 0.98], [0.78, 0.99], [0.70, 0.90]])
+    p.poly(m(palm), w)
+    p.line(m([[0.79, 0.84], [0.67, 0.60]]), w, 0.075 * s)  # index finger
+    p.line(m([[0.67, 0.60], [0.655, 0.57]]), w, 0.06 * s)
+    for k, (a, bb) in enumerate((((0.83, 0.86), (0.77, 0.77)), ((0.86, 0.90), (0.81, 0.80)))):
+        p.line(m([a, bb]), SAFETY_RED, 0.012 * s)  # finger gaps
+        del k
     # flames top-left, sound arcs above the box
     _flames(p, 0.05 * s, 0.36 * s, 0.32 * s, w)
     for r in (0.10, 0.17):
@@ -282,7 +283,7 @@ def exit_light_front(width_m: float = 0.36, height_m: float = 0.14,
     d0 = gx0 + 0.08 * gh
     p.rect(d0, gy0 + 0.08 * gh, d0 + 0.62 * gh, gy1 - 0.08 * gh, white)
     p.rect(d0 + 0.10 * gh, gy0 + 0.18 * gh, d0 + 0.52 * gh, gy1 - 0.08 * gh, SAFETY_GREEN)
-    running_man(p, d0 + 0.52 * gh, gy0 + 0.10 * gh, 0.82 * gh, white, facing_left=True)
+    running_man(p, d0 + 0.35 * gh, gy0 + 0.10 * gh, 0.82 * gh, white, facing_left=True)
     # arrow to the left
     ax0, ax1, ay = gx1 - 1.25 * gh, gx1 - 0.15 * gh, (gy0 + gy1) / 2
     p.poly(np.array([[ax0, ay], [ax0 + 0.40 * gh, ay - 0.38 * gh], [ax0 + 0.40 * gh, ay - 0.14 * gh],
@@ -314,8 +315,8 @@ def extinguisher_label(width_m: float, height_m: float, px_per_m: float = PX_PER
         p.line(np.array([[x + 0.075 * w, y + 0.07 * w], [x + 0.06 * w, y + 0.13 * w]]),
                (60, 60, 60), 0.02 * w)
     y += 0.19 * w
-    p.text_lines(0.08 * w, y, 0.92 * w, max(1, int((0.95 * h - y) / (0.03 * h))), 0.03 * h,
-                 0.009 * h, (110, 108, 100), seed=3)
+    p.text_lines(0.08 * w, y, 0.92 * w, max(1, int((0.95 * h - y) / (0.035 * h))), 0.035 * h,
+                 0.016 * h, (70, 70, 70), seed=3)
     return p.img
 
 
@@ -380,8 +381,8 @@ def electrical_panel_front(width_m: float, height_m: float, px_per_m: float = PX
                      [0.0, -0.05], [0.06, -0.30]]) * ts * 0.9 + [tc, ty + 0.55 * ts]
     p.poly(bolt, BLACK)
     # lock on the right edge, maker plate at the bottom
-    p.round_rect(0.925 * w, 0.40 * h, 0.975 * w, 0.56 * h, 0.006, (150, 152, 150))
-    p.circle((0.95 * w, 0.48 * h), 0.006, (50, 50, 50))
+    p.round_rect(0.90 * w, 0.40 * h, 0.96 * w, 0.56 * h, 0.006, (150, 152, 150))
+    p.circle((0.93 * w, 0.48 * h), 0.006, (50, 50, 50))
     p.rect(0.40 * w, 0.90 * h, 0.60 * w, 0.92 * h, (170, 172, 170))
     return p.img
 
