@@ -19,6 +19,7 @@ import shutil
 import tempfile
 import uuid
 import zipfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path, PurePath
 
@@ -329,6 +330,23 @@ def bundled_library_summary() -> dict:
 def move_into_place(src: Path, dest: Path) -> None:
     dest.parent.mkdir(parents=True, exist_ok=True)
     os.replace(src, dest)
+
+
+def project_file(pid: int, kind: str, filename: str) -> Path:
+    """Relative path (under the data dir) for a new stored file of project ``pid``."""
+    return Path("projects", str(pid), kind, f"{uuid.uuid4().hex[:12]}_{filename}")
+
+
+@contextlib.contextmanager
+def removed_on_failure(dest: Path) -> Iterator[Path]:
+    """Yield ``dest``; if the block fails (e.g. the row's commit after the file was moved into
+    place), the file is removed again, so no stored file is left without its row."""
+    try:
+        yield dest
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            dest.unlink()
+        raise
 
 
 def clean_tmp(tmp_dir: Path) -> int:

@@ -13,7 +13,6 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
-import uuid
 from pathlib import Path
 
 from fastapi import APIRouter, HTTPException, Request
@@ -28,7 +27,7 @@ from ..config import AppSettings
 from ..db import Database
 from ..models import DesignRow, Job, Project
 from ..results import project_document
-from ..storage import ReceivedFile, UploadRefused, move_into_place
+from ..storage import ReceivedFile, UploadRefused, move_into_place, project_file, removed_on_failure
 from .deps import DB, ReadSession, Reviewer, Settings, get_project, open_project
 from .export import _library
 from .uploads import MULTIPART_FILE, handle_upload
@@ -67,20 +66,14 @@ def _store_design(db: Database, settings: AppSettings, pid: int, got: ReceivedFi
     with db.read() as s:
         design = _read_design(settings, s, get_project(s, pid), got.path, got.filename)
     counts = design.expected_counts()
-    rel = Path("projects", str(pid), "design", f"{uuid.uuid4().hex[:12]}_{got.filename}")
-    dest = settings.data_dir / rel
-    try:
-        with db.write() as s:
-            open_project(s, pid)
-            s.add(DesignRow(project_id=pid, filename=got.filename, path=rel.as_posix(),
-                            size_bytes=got.size, sha256=got.sha256, objects=len(design.objects),
-                            expected_counts=counts, uploaded_by=user.name))
-            s.flush()
-            move_into_place(got.path, dest)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            dest.unlink()
-        raise
+    rel = project_file(pid, "design", got.filename)
+    with removed_on_failure(settings.data_dir / rel) as dest, db.write() as s:
+        open_project(s, pid)
+        s.add(DesignRow(project_id=pid, filename=got.filename, path=rel.as_posix(),
+                        size_bytes=got.size, sha256=got.sha256, objects=len(design.objects),
+                        expected_counts=counts, uploaded_by=user.name))
+        s.flush()
+        move_into_place(got.path, dest)
     return {"filename": got.filename, "objects": len(design.objects), "expected_counts": counts,
             "bytes": got.size, "sha256": got.sha256}
 

@@ -8,7 +8,6 @@ after; if the commit fails the file is removed again.
 
 from __future__ import annotations
 
-import contextlib
 import shutil
 import uuid
 from collections.abc import Callable
@@ -30,7 +29,9 @@ from ..storage import (
     check_scan,
     check_zip,
     move_into_place,
+    project_file,
     receive_file,
+    removed_on_failure,
     unpack_library,
 )
 from .deps import DB, Reviewer, Settings, open_project
@@ -93,23 +94,16 @@ async def upload_scan(pid: int, request: Request, user: Reviewer, settings: Sett
 
 def _store_scan(db: Database, settings: AppSettings, pid: int, got: ReceivedFile, points: int,
                 user: Principal) -> dict:
-    rel = Path("projects", str(pid), "scans", f"{uuid.uuid4().hex[:12]}_{got.filename}")
-    dest = settings.data_dir / rel
-    try:
-        with db.write() as s:
-            open_project(s, pid)
-            scan = Scan(project_id=pid, filename=got.filename, path=rel.as_posix(),
-                        size_bytes=got.size, sha256=got.sha256, points=points, uploaded_by=user.name)
-            s.add(scan)
-            s.flush()
-            move_into_place(got.path, dest)
-            out = {"id": scan.id, "filename": scan.filename, "points": points, "bytes": got.size,
-                   "sha256": got.sha256}
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            dest.unlink()
-        raise
-    return out
+    rel = project_file(pid, "scans", got.filename)
+    with removed_on_failure(settings.data_dir / rel) as dest, db.write() as s:
+        open_project(s, pid)
+        scan = Scan(project_id=pid, filename=got.filename, path=rel.as_posix(),
+                    size_bytes=got.size, sha256=got.sha256, points=points, uploaded_by=user.name)
+        s.add(scan)
+        s.flush()
+        move_into_place(got.path, dest)
+        return {"id": scan.id, "filename": scan.filename, "points": points, "bytes": got.size,
+                "sha256": got.sha256}
 
 
 @router.post("/projects/{pid}/models", status_code=201, openapi_extra=MULTIPART_FILE)
