@@ -16,10 +16,13 @@ from .errors import SbscError
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
+    from .simulate.designs import design_builder
     from .simulate.scenarios import simulate_scenario
 
+    builder = design_builder(args.designs)
+    library = design_builder(args.library_designs) if args.library_designs else builder
     simulate_scenario(args.scenario, Path(args.out), seed=args.seed, angular_step_deg=args.step,
-                      log=_log(args))
+                      log=_log(args), object_builder=builder, library_builder=library)
     return 0
 
 
@@ -91,6 +94,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True)
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--step", type=float, default=None, help="scanner angular step in degrees")
+    s.add_argument("--designs", choices=["standard", "alt"], default="standard",
+                   help="design set the objects are built with (default: standard)")
+    s.add_argument("--library-designs", choices=["standard", "alt"], default=None,
+                   help="design set of the model library (default: the same as --designs)")
     s.set_defaults(func=_cmd_simulate)
 
     d = sub.add_parser("detect", help="recognize objects on the walls of a scan")

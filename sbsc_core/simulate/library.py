@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from ..io.atomic import atomic_output_dir
+from .building import ObjectBuilder
 from .catalogue import CATALOGUE, CLASS_ORDER
 from .objects import build_object
 from .raycast import MeshRaycaster
@@ -32,10 +33,15 @@ class RenderedModel:
 
 def render_model(class_id: str, pixel_m: float = 0.002, seed: int = 0, n_views: int = 3,
                  supersample: int = 3, range_noise_m: float = 0.0008,
-                 colour_noise: float = 3.0) -> RenderedModel:
-    """Scan one object of ``class_id`` straight on; see the module docstring."""
+                 colour_noise: float = 3.0, object_builder: ObjectBuilder | None = None
+                 ) -> RenderedModel:
+    """Scan one object of ``class_id`` straight on; see the module docstring.
+
+    ``object_builder`` is the design set the object is built with (default: the standard
+    :func:`~sbsc_core.simulate.objects.build_object`; see :mod:`designs`).
+    """
     spec = CATALOGUE[class_id]
-    mesh = build_object(class_id)
+    mesh = (object_builder or build_object)(class_id)
     caster = MeshRaycaster(mesh)
     w_px = max(1, round(spec.width_m / pixel_m))
     h_px = max(1, round(spec.height_m / pixel_m))
@@ -82,12 +88,18 @@ def model_json(class_id: str) -> dict:
 
 
 def write_model_library(out_dir: Path, classes: Sequence[str] = CLASS_ORDER, seed: int = 0,
-                        pixel_m: float = 0.002, n_views: int = 3) -> Path:
-    """Write a contract-2 library of ``classes`` into ``out_dir`` atomically; return it."""
+                        pixel_m: float = 0.002, n_views: int = 3,
+                        object_builder: ObjectBuilder | None = None) -> Path:
+    """Write a contract-2 library of ``classes`` into ``out_dir`` atomically; return it.
+
+    The models are scans of the design set ``object_builder`` (default: the standard one);
+    a simulated scene's library is rendered with the scene's builder unless told otherwise.
+    """
     out_dir = Path(out_dir)
     with atomic_output_dir(out_dir) as tmp:
         for cls in classes:
-            model = render_model(cls, pixel_m=pixel_m, seed=seed, n_views=n_views)
+            model = render_model(cls, pixel_m=pixel_m, seed=seed, n_views=n_views,
+                                 object_builder=object_builder)
             d = tmp / cls
             d.mkdir()
             (d / "model.json").write_text(json.dumps(model_json(cls), indent=2) + "\n")

@@ -52,19 +52,20 @@ class SimulationSummary:
 
 
 def simulate_scenario(scenario: str, out: Path, seed: int = 0, angular_step_deg: float | None = None,
-                      log: Log | None = None, object_builder: ObjectBuilder | None = None
-                      ) -> SimulationSummary:
+                      log: Log | None = None, object_builder: ObjectBuilder | None = None,
+                      library_builder: ObjectBuilder | None = None) -> SimulationSummary:
     """Scan the shipped Scenario ``"I"`` or ``"II"`` into ``out`` (see :func:`simulate_scene`)."""
     if scenario not in ("I", "II"):
         raise InputError("--scenario", f"unknown scenario {scenario!r} (I or II)")
     path = sample_projects_dir() / f"scenario_{scenario}.yaml"
     return simulate_scene(path, out, seed=seed, angular_step_deg=angular_step_deg, log=log,
-                          object_builder=object_builder)
+                          object_builder=object_builder, library_builder=library_builder)
 
 
 def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_step_deg: float | None = None,
                    log: Log | None = None, object_builder: ObjectBuilder | None = None,
-                   design: bool = True) -> SimulationSummary:
+                   design: bool = True, library_builder: ObjectBuilder | None = None
+                   ) -> SimulationSummary:
     """Build the described floor, scan it and write contracts 1, 2, 3 and 5 into ``out``.
 
     ``out`` receives ``scan.ply`` (float32 xyz, uchar colour), ``ground_truth.json``,
@@ -72,6 +73,11 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
     model with a few objects deliberately moved, removed or added, listed in the ground truth
     under ``design_differences`` (for measuring ``sbsc compare``). Everything is written into a temporary directory
     and moved in at the end, so a failure leaves ``out`` as it was. Deterministic for a seed.
+
+    ``object_builder`` is the design set the objects are built with (default: the standard
+    designs; see :mod:`designs`). The model library in ``models/`` is rendered with the same
+    designs unless ``library_builder`` names another set (a cross-design test: scene in one
+    set, models in another).
     """
     t0 = time.perf_counter()
     say = log or (lambda msg: None)
@@ -105,7 +111,11 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
         write_json_atomic(tmp / "expected.json", expected)
         from .library import write_model_library
 
-        write_model_library(tmp / "models", seed=seed)
+        lib_builder = library_builder or object_builder
+        if lib_builder is None:
+            write_model_library(tmp / "models", seed=seed)
+        else:
+            write_model_library(tmp / "models", seed=seed, object_builder=lib_builder)
     seconds = time.perf_counter() - t0
     say(f"done in {seconds:.1f} s")
     return SimulationSummary(Path(out), scene.name, n_points, n_rays, len(building.stations),

@@ -1,0 +1,32 @@
+"""Design sets of the simulator: which product designs the thirteen classes are built with.
+
+``standard`` is :func:`objects.build_object` (the designs the method was developed on),
+``alt`` is :func:`objects_alt.build_object_alt` (another manufacturer's products with the
+same catalogue footprints), for measuring recognition on designs it was not tuned on.
+A builder maps a class id to its :class:`~sbsc_core.simulate.mesh.ColouredMesh` in the
+object-local frame; :func:`~sbsc_core.simulate.building.build_building` and
+:func:`~sbsc_core.simulate.library.write_model_library` both take one.
+"""
+
+from __future__ import annotations
+
+from ..errors import InputError
+from .building import ObjectBuilder
+from .objects import build_object
+from .objects_alt import build_object_alt
+
+DESIGN_SETS: dict[str, ObjectBuilder] = {
+    "standard": build_object,
+    "alt": build_object_alt,
+}
+DEFAULT_DESIGNS = "standard"
+
+
+def design_builder(name: str | None) -> ObjectBuilder:
+    """The object builder of design set ``name`` (``None`` = the standard set)."""
+    if name is None:
+        name = DEFAULT_DESIGNS
+    try:
+        return DESIGN_SETS[name]
+    except KeyError:
+        raise InputError("--designs", f"unknown design set {name!r} ({', '.join(DESIGN_SETS)})") from None
