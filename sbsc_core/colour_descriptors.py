@@ -32,6 +32,8 @@ rho_C compared with mu_C = 0.2.
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 from scipy import ndimage
@@ -73,19 +75,26 @@ def kmeans_1d(values: np.ndarray, k: int = 3, merge_tol: float = 0.0, bins: int 
     lo, hi = float(x.min()), float(x.max())
     if hi - lo <= max(merge_tol, 1e-9):
         return np.array([x.mean()]), np.zeros(x.size, int)
-    hist, edges = np.histogram(x, bins=bins, range=(lo, hi))
-    mids = 0.5 * (edges[:-1] + edges[1:])
+    hist, mids = _histogram(x, lo, hi, bins)
     cdf = np.cumsum(hist) / hist.sum()
     centres = np.interp((np.arange(k) + 0.5) / k, cdf, mids)
+    # Lloyd on the histogram: a class takes the bins whose centres lie between the midpoints
+    # to its neighbours' centres, so its weight and weighted sum are differences of
+    # cumulative sums (plain floats: k is tiny and this loop runs thousands of times a wall)
+    cum_w = np.concatenate(([0.0], np.cumsum(hist))).tolist()
+    cum_s = np.concatenate(([0.0], np.cumsum(hist * mids))).tolist()
+    width, tol = (hi - lo) / bins, 1e-9 * (hi - lo)
+    c = centres.tolist()
     for _ in range(iterations):
-        lab = _nearest(mids, centres)
-        w = np.bincount(lab, weights=hist, minlength=k)
-        sums = np.bincount(lab, weights=hist * mids, minlength=k)
-        new = np.sort(np.where(w > 0, sums / np.maximum(w, 1e-12), centres))
-        done = float(np.abs(new - centres).max()) <= 1e-9 * (hi - lo)
-        centres = new
+        cut = [0] + [min(bins, max(0, math.floor((0.5 * (p + q) - lo) / width - 0.5) + 1))
+                     for p, q in zip(c, c[1:], strict=False)] + [bins]
+        new = sorted((cum_s[j] - cum_s[i]) / (cum_w[j] - cum_w[i]) if cum_w[j] > cum_w[i] else old
+                     for i, j, old in zip(cut, cut[1:], c, strict=False))
+        done = max(abs(p - q) for p, q in zip(new, c, strict=True)) <= tol
+        c = new
         if done:
             break
+    centres = np.asarray(c)
     w = np.bincount(_nearest(mids, centres), weights=hist, minlength=k)
     centres = centres[w > 0]
     if merge_tol > 0 and centres.size > 1:
@@ -102,6 +111,15 @@ def kmeans_1d(values: np.ndarray, k: int = 3, merge_tol: float = 0.0, bins: int 
     sums = np.bincount(labels, weights=x, minlength=centres.size)
     centres = np.where(counts > 0, sums / np.maximum(counts, 1), centres)
     return centres, labels
+
+
+def _histogram(x: np.ndarray, lo: float, hi: float, bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """(counts, bin centres) of ``bins`` equal bins over [lo, hi] (the last bin closed)."""
+    idx = ((x - lo) * (bins / (hi - lo))).astype(np.int64)
+    np.clip(idx, 0, bins - 1, out=idx)
+    hist = np.bincount(idx, minlength=bins).astype(np.float64)
+    mids = lo + (np.arange(bins) + 0.5) * ((hi - lo) / bins)
+    return hist, mids
 
 
 def hull_regions(mask: np.ndarray) -> np.ndarray:

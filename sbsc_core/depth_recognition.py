@@ -225,10 +225,23 @@ def cluster_boxes(boxes: list[Box], gap_px: int = 0, min_overlap: float = 0.0) -
     return sorted(work, key=lambda b: (b.r0, b.c0, b.r1, b.c1))
 
 
-def depth_rois(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSettings) -> list[Box]:
-    """RoIs of J_D: closed regions of depth discontinuities, clustered (section 4.2)."""
+def depth_rois(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSettings,
+               templates: dict[str, ModelTemplate] | None = None) -> list[Box]:
+    """RoIs of J_D: closed regions of depth discontinuities, clustered (section 4.2).
+
+    Relief within ``border_margin_m`` of the image's sides (where the wall meets the floor,
+    the ceiling and the next walls) is no object. With the ``templates`` searched, a
+    region longer than ``max_roi_factor`` times the largest model and thinner than half the
+    smallest is dropped too (a pipe, a cable, a step in the plaster): such regions would
+    otherwise merge the objects near them into one wall-sized RoI.
+    """
     jd = depth_image(ortho, area, settings)
-    return _rois_from_jd(jd, _plain_wall(ortho, area, jd, settings), settings)
+    limits = None
+    if templates:
+        sides = [(t.height_px, t.width_px) for t in templates.values()]
+        limits = (settings.max_roi_factor * max(max(s) for s in sides), 0.5 * min(min(s) for s in sides))
+    margin = int(round(settings.border_margin_m / ortho.pixel_m))
+    return _rois_from_jd(jd, _plain_wall(ortho, area, jd, settings), settings, margin, limits)
 
 
 def _plain_wall(ortho: Orthoimage, area: WallArea, jd: np.ndarray, settings: DepthRecognitionSettings
@@ -240,13 +253,21 @@ def _plain_wall(ortho: Orthoimage, area: WallArea, jd: np.ndarray, settings: Dep
     return wall
 
 
-def _rois_from_jd(jd: np.ndarray, wall: np.ndarray, settings: DepthRecognitionSettings) -> list[Box]:
+def _rois_from_jd(jd: np.ndarray, wall: np.ndarray, settings: DepthRecognitionSettings, margin_px: int = 0,
+                  limits: tuple[float, float] | None = None) -> list[Box]:
     relief_m, grad_m = relief_thresholds(jd, wall, settings)
     edges = relief_edges(jd, settings, grad_m)
     relief = np.abs(_smooth(jd, settings.canny_sigma_px)) >= relief_m
     relief = cv2.morphologyEx(relief.astype(np.uint8), cv2.MORPH_OPEN, np.ones((2, 2), np.uint8)) > 0
     closed = cv2.morphologyEx((edges | relief).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    if margin_px > 0:
+        inner = np.zeros_like(closed)
+        inner[margin_px:-margin_px, margin_px:-margin_px] = 1
+        closed &= inner
     boxes = boxes_from_mask(closed > 0, settings.roi_min_px)
+    if limits is not None:
+        longest, thinnest = limits
+        boxes = [b for b in boxes if max(b.height, b.width) <= longest or min(b.height, b.width) >= thinnest]
     return cluster_boxes(boxes, settings.roi_merge_gap_px, settings.roi_merge_overlap)
 
 

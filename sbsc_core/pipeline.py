@@ -114,7 +114,7 @@ def process_wall(cloud: PointCloud, wall: Wall, templates: dict[str, ModelTempla
     area = find_wall_area(ortho, s.wall_area)
     t_stage["wall_area"] = time.perf_counter() - t
     t = time.perf_counter()
-    d_rois = depth_rois(ortho, area, s.depth)
+    d_rois = depth_rois(ortho, area, s.depth, templates)
     d_cands = match_depth(ortho, area, d_rois, templates, s.depth)
     t_stage["depth"] = time.perf_counter() - t
     t = time.perf_counter()

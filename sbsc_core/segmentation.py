@@ -24,6 +24,8 @@ plus one radix sort of 16-bit bucket numbers.
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +38,8 @@ __all__ = ["segment_floor_ceiling_walls", "find_floor_ceiling", "fit_line_2d"]
 
 _DENSE_VOXELS = 1 << 24  # voxel grids up to this size are grouped with bincount, larger ones by sorting
 _CHUNK = 1 << 22  # points handled at once where temporaries would otherwise grow with the wall
+_ASSIGN_THREADS = 2  # threads assigning points to walls
+_THREAD_MIN_POINTS = 1 << 22  # clouds smaller than this are assigned in one thread
 
 
 @dataclass
@@ -502,7 +506,25 @@ def _bucket(a: np.ndarray, lo: float, cell: float, n: int) -> np.ndarray:
 
 def _assign_points(xyz: np.ndarray, segs: list[_Segment], z_lo: float, z_hi: float,
                    s: SegmentationSettings) -> list[np.ndarray]:
-    """Indices of the points of each wall: in its slab and nearer to its plane than to any other's."""
+    """Indices of the points of each wall: in its slab and nearer to its plane than to any other's.
+
+    Every point is decided on its own, so a large cloud is cut into consecutive parts that
+    threads assign side by side (numpy releases the GIL); each wall's indices stay sorted.
+    """
+    n = len(xyz)
+    parts = min(_ASSIGN_THREADS, os.cpu_count() or 1) if n >= _THREAD_MIN_POINTS else 1
+    if parts <= 1:
+        return _assign_part(xyz, segs, z_lo, z_hi, s)
+    cuts = [n * k // parts for k in range(parts + 1)]
+    with ThreadPoolExecutor(max_workers=parts) as pool:
+        done = list(pool.map(lambda k: _assign_part(xyz[cuts[k]:cuts[k + 1]], segs, z_lo, z_hi, s),
+                             range(parts)))
+    return [np.concatenate([idx[w] + cuts[k] for k, idx in enumerate(done)]) for w in range(len(segs))]
+
+
+def _assign_part(xyz: np.ndarray, segs: list[_Segment], z_lo: float, z_hi: float,
+                 s: SegmentationSettings) -> list[np.ndarray]:
+    """:func:`_assign_points` on one part of the cloud (indices relative to the part)."""
     band = _band_index(xyz[:, 2], z_lo, z_hi)
     if len(band) == 0:
         return [np.zeros(0, np.int64) for _ in segs]

@@ -126,6 +126,8 @@ class DepthRecognitionSettings:
     roi_min_px: int = 6  # RoIs whose longer side is shorter than this are noise
     roi_merge_overlap: float = 0.0  # RoIs overlapping by more than this are clustered
     roi_merge_gap_px: int = 2  # ... and so are RoIs closer than this
+    border_margin_m: float = 0.03  # relief this close to the wall's ends, floor or ceiling is no object
+    max_roi_factor: float = 1.6  # thin relief longer than this x the largest model is no object
     search_margin_px: int = 6  # a match's centre may lie this far outside its RoI
     template_pad_px: int = 4  # wall-plane border added around each depth model
     match_sigma_px: float = 1.0  # J_D and the models are both smoothed by this before correlating

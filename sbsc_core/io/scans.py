@@ -13,6 +13,7 @@ import itertools
 import os
 import re
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,7 @@ from ..types import PointCloud
 SCAN_EXTENSIONS: tuple[str, ...] = (".ply", ".e57", ".las", ".laz", ".pcd", ".xyz", ".pts", ".txt")
 CHUNK_POINTS = 1 << 21  # points converted per step (bounds the float64 working set)
 _ORIGIN_SAMPLE = 100_000  # points of the first chunk whose mean sets the origin
+_READ_THREADS = 4  # at most this many threads convert chunks of a binary PLY
 
 
 # --------------------------------------------------------------------------- collector
@@ -51,32 +53,41 @@ class _Collector:
             self._xyz = np.empty((capacity, 3), np.float32)
             self._rgb = np.empty((capacity, 3), rgb_dtype)
 
+    def set_origin(self, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> None:
+        """Fix the origin, unless given, as the rounded mean of the first points of these columns."""
+        if self.origin is None:
+            k = min(len(x), _ORIGIN_SAMPLE)
+            with np.errstate(all="ignore"):
+                mean = np.array([np.nanmean(np.asarray(c[:k], np.float64)) for c in (x, y, z)])
+            self.origin = np.where(np.isfinite(mean), np.round(mean), 0.0) + 0.0
+
     def add(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, rgb: np.ndarray) -> None:
         """Append points given as three coordinate columns (any float type) and (n, 3) colours."""
         n = len(x)
         if n == 0:
             return
-        if self.origin is None:
-            k = min(n, _ORIGIN_SAMPLE)
-            with np.errstate(all="ignore"):
-                mean = np.array([np.nanmean(np.asarray(c[:k], np.float64)) for c in (x, y, z)])
-            self.origin = np.where(np.isfinite(mean), np.round(mean), 0.0) + 0.0
+        self.set_origin(x, y, z)
         if self._xyz is not None:
             if self.count + n > len(self._xyz):
                 raise InputError(self.path, "holds more points than its header says")
-            out = self._xyz[self.count:self.count + n]
-            self._rgb[self.count:self.count + n] = rgb
+            bad = self.put(self.count, x, y, z, rgb)
         else:
             out = np.empty((n, 3), np.float32)
             self._chunks.append((out, np.asarray(rgb, self.rgb_dtype)))
-        with np.errstate(all="ignore"):
-            for j, col in enumerate((x, y, z)):
-                np.subtract(col, self.origin[j], out=out[:, j], casting="unsafe")
-        finite = np.isfinite(out).all(axis=1)
-        if not finite.all():
-            bad = self.count + int(np.argmin(finite))
-            raise InputError(self.path, f"non-finite coordinates (point {bad})")
+            bad = _recentre(out, (x, y, z), self.origin)
+        if bad is not None:
+            raise InputError(self.path, f"non-finite coordinates (point {self.count + bad})")
         self.count += n
+
+    def put(self, start: int, x: np.ndarray, y: np.ndarray, z: np.ndarray, rgb: np.ndarray) -> int | None:
+        """Write points at ``start`` of the preallocated arrays (the origin must be set).
+
+        Chunks that do not overlap may be put from several threads at once; ``count`` is
+        then set by the caller. Returns the chunk's first non-finite point, or None.
+        """
+        n = len(x)
+        self._rgb[start:start + n] = rgb
+        return _recentre(self._xyz[start:start + n], (x, y, z), self.origin)
 
     def finish(self) -> PointCloud:
         if self.count == 0:
@@ -96,6 +107,15 @@ class _Collector:
             rgb = colours_16_to_8(rgb)
         return PointCloud(xyz=xyz, rgb=np.ascontiguousarray(rgb, np.uint8),
                           origin=self.origin.copy(), sources=(str(self.path),))
+
+
+def _recentre(out: np.ndarray, columns: tuple[np.ndarray, ...], origin: np.ndarray) -> int | None:
+    """``out[:, j] = columns[j] - origin[j]`` in float32; the first non-finite row or None."""
+    with np.errstate(all="ignore"):
+        for j, col in enumerate(columns):
+            np.subtract(col, origin[j], out=out[:, j], casting="unsafe")
+    finite = np.isfinite(out).all(axis=1)
+    return None if finite.all() else int(np.argmin(finite))
 
 
 def colours_16_to_8(rgb: np.ndarray) -> np.ndarray:
@@ -287,14 +307,22 @@ def _read_ply_binary(path, fmt, elements, vi, header_len, xyz_names, rgb_names, 
     if size < need:
         raise InputError(path, f"truncated: {vertex.count} vertices need {need} bytes, file has {size}")
     data = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=(vertex.count,))
-    try:
-        for s in range(0, vertex.count, CHUNK_POINTS):
-            chunk = data[s:s + CHUNK_POINTS]
-            rgb = np.stack([chunk[c] for c in rgb_names], axis=1)
-            col.add(chunk[xyz_names[0]], chunk[xyz_names[1]], chunk[xyz_names[2]],
-                    _ply_rgb(path, rgb, rgb_kind))
-    finally:
-        del data
+
+    def convert(start: int) -> int | None:
+        chunk = data[start:start + CHUNK_POINTS]
+        rgb = np.stack([chunk[c] for c in rgb_names], axis=1)
+        bad = col.put(start, chunk[xyz_names[0]], chunk[xyz_names[1]], chunk[xyz_names[2]],
+                      _ply_rgb(path, rgb, rgb_kind))
+        return None if bad is None else start + bad
+
+    first = data[:CHUNK_POINTS]
+    col.set_origin(first[xyz_names[0]], first[xyz_names[1]], first[xyz_names[2]])
+    # numpy releases the GIL on these conversions: chunks go through a few threads at once
+    with ThreadPoolExecutor(max_workers=min(_READ_THREADS, os.cpu_count() or 1)) as pool:
+        bad = [b for b in pool.map(convert, range(0, vertex.count, CHUNK_POINTS)) if b is not None]
+    if bad:
+        raise InputError(path, f"non-finite coordinates (point {min(bad)})")
+    col.count = vertex.count
 
 
 def _read_ply_ascii(path, elements, vi, header_len, xyz_names, rgb_names, rgb_kind, col) -> None:
