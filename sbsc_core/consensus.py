@@ -113,8 +113,16 @@ def coherence_matrix(depth: list[Candidate], colour: list[Candidate],
     return psi
 
 
-def weighted_centre(d: Candidate | None, c: Candidate | None) -> tuple[float, float]:
-    """Equation 16: (w_D c_D + w_C c_C) / (w_D + w_C); the plain mean if both weights are 0."""
+def weighted_centre(d: Candidate | None, c: Candidate | None,
+                    max_disagreement_px: float | None = None) -> tuple[float, float]:
+    """Equation 16: (w_D c_D + w_C c_C) / (w_D + w_C); the plain mean if both weights are 0.
+
+    When the two centres lie more than ``max_disagreement_px`` apart (along rows or
+    columns) they do not measure the same point: the colour match was placed on a print
+    that differs from the model's (another product's label, only the visible part of a
+    sign), while the depth match is metric. The depth centre alone is then the position;
+    averaging would put the object between the two, off both.
+    """
     pts = [x for x in (d, c) if x is not None]
     if not pts:
         raise ValueError("no candidate")
@@ -123,6 +131,8 @@ def weighted_centre(d: Candidate | None, c: Candidate | None) -> tuple[float, fl
     w = _weights(d, c)
     cd = np.asarray(d.centre, float) if d is not None else np.zeros(2)
     cc = np.asarray(c.centre, float) if c is not None else np.zeros(2)
+    if max_disagreement_px is not None and float(np.abs(cd - cc).max()) > max_disagreement_px:
+        return float(cd[0]), float(cd[1])
     if w.sum() <= 0:
         m = np.mean([np.asarray(x.centre, float) for x in pts], axis=0)
         return float(m[0]), float(m[1])
@@ -130,11 +140,12 @@ def weighted_centre(d: Candidate | None, c: Candidate | None) -> tuple[float, fl
     return float(m[0]), float(m[1])
 
 
-def make_hit(d: Candidate | None, c: Candidate | None, alpha: float) -> ConsensusHit:
+def make_hit(d: Candidate | None, c: Candidate | None, alpha: float,
+             settings: ConsensusSettings | None = None) -> ConsensusHit:
     """A ConsensusHit from a selected cell of Psi."""
     ref = d if d is not None else c
     assert ref is not None
-    centre = weighted_centre(d, c)
+    centre = weighted_centre(d, c, (settings or ConsensusSettings()).max_disagreement_px)
     source = "both" if d is not None and c is not None else ("depth" if d is not None else "colour")
     return ConsensusHit(
         class_id=ref.class_id, wall_id=ref.wall_id, centre=centre, alpha=float(alpha),
@@ -179,7 +190,7 @@ class _Selection:
     def hit(self, i: int, j: int) -> ConsensusHit:
         d = self.depth[i] if i < len(self.depth) else None
         c = self.colour[j] if j < len(self.colour) else None
-        return make_hit(d, c, self.psi[i, j])
+        return make_hit(d, c, self.psi[i, j], self.settings)
 
     def take(self, i: int, j: int) -> None:
         """Remove the selected cell's row and column (an exclusive cell: only its candidate)."""

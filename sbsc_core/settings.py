@@ -117,9 +117,9 @@ class DepthRecognitionSettings:
     """Recognition with geometry (paper, section 4.2)."""
 
     mu_d: float = 0.75  # cross-correlation threshold
-    min_relief_m: float = 0.004  # depth step treated as an edge / relief region
+    min_relief_m: float = 0.0025  # relief region: stands out by this (a flush socket, a 3 mm sign)
     canny_sigma_px: float = 1.0  # Gaussian smoothing of J_D before Canny
-    canny_high_fraction: float = 0.3  # Canny high threshold = this x min_relief_m per pixel
+    canny_high_fraction: float = 0.48  # Canny high threshold = this x min_relief_m per pixel (1.2 mm/px)
     canny_low_ratio: float = 0.5  # Canny low threshold = this x the high one
     noise_k: float = 4.0  # thresholds are at least this many robust sigmas of the wall's depth noise
     noise_window_m: float = 0.01  # pixels this close to the plane are plain wall for the noise estimate
@@ -194,6 +194,7 @@ class ConsensusSettings:
     suppress_overlap: float = 0.5  # cross-class suppression: max overlap of two accepted objects
     prefer_depth: bool = True  # at equal alpha: both > depth only > colour only, then goodness
     alpha_tolerance: float = 0.05  # alphas this close count as equal (the tie-break decides)
+    max_disagreement_px: float = 3.0  # equation 16 for centres this close, else depth's (.inf: always)
 
 
 @dataclass

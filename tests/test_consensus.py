@@ -93,8 +93,18 @@ def test_equation_16_weights() -> None:
     assert weighted_centre(d, c) == pytest.approx((10 + 2 / 3, 10 + 4 / 3))
     assert weighted_centre(d, None) == (10.0, 10.0)  # exclusive: the candidate's own centre
     assert weighted_centre(None, c) == (12.0, 14.0)
-    hit = consensus([d], [c], None, S)[0]
+    hit = consensus([d], [c], None, ConsensusSettings(max_disagreement_px=float("inf")))[0]
     assert hit.centre == pytest.approx(weighted_centre(d, c)) and hit.source == "both"
+
+
+def test_equation_16_only_for_centres_that_agree() -> None:
+    """A colour match placed 4 px off the depth match measures another point: depth's centre."""
+    d = cand("depth", (10.0, 10.0), 0.9)
+    c = cand("colour", (12.0, 14.0), 0.1)
+    assert weighted_centre(d, c, 3.0) == (10.0, 10.0)
+    assert weighted_centre(d, c, 4.0) == pytest.approx((11.0, 12.0))  # within 4 px: equation 16
+    hit = consensus([d], [c], None, ConsensusSettings(max_disagreement_px=3.0))[0]
+    assert hit.centre == (10.0, 10.0) and hit.source == "both"
 
 
 def _hit(cls: str, centre, alpha: float, rho_d=None, rho_c=None, size=(16, 16), wall="W01") -> ConsensusHit:
