@@ -138,25 +138,52 @@ def _process_wall_job(sub: PointCloud, wall: Wall, templates: dict[str, ModelTem
     return wall.id, res, t_stage
 
 
+def _worker_count(settings: DetectionSettings) -> int:
+    return settings.workers or min(2, os.cpu_count() or 1)
+
+
+def _ready() -> bool:
+    """A no-op run in each new worker: it is spawned and has imported the method."""
+    return True
+
+
+def wall_pool(settings: DetectionSettings, n_walls: int | None = None) -> ProcessPoolExecutor | None:
+    """The worker processes for the per-wall stages (None when they run in this process).
+
+    The workers are started at once (spawned, each importing the library, about a second),
+    so a caller that creates the pool before reading the scan has them ready when the walls
+    are. The caller shuts the pool down.
+    """
+    workers = _worker_count(settings)
+    if workers <= 1 or (n_walls is not None and n_walls <= 1):
+        return None
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+    for _ in range(workers):
+        pool.submit(_ready)
+    return pool
+
+
 def _walls_results(cloud: PointCloud, seg: Segmentation, templates: dict[str, ModelTemplate],
-                   prototypes: ColourPrototypes, s: DetectionSettings
-                   ) -> Iterator[tuple[str, WallResult, dict[str, float]]]:
-    """Process every wall, in ``s.workers`` processes when there are several walls.
+                   prototypes: ColourPrototypes, s: DetectionSettings,
+                   pool: ProcessPoolExecutor | None = None) -> Iterator[tuple[str, WallResult, dict[str, float]]]:
+    """Process every wall, in worker processes (``pool``, or one of ``s.workers`` made here)
+    when there are several walls.
 
     Each worker receives only its wall's points; at most two walls per worker are in flight,
     so the scan is never copied whole. Results come back in the order of ``seg.walls``.
     """
-    workers = s.workers or min(2, os.cpu_count() or 1)
-    if workers <= 1 or len(seg.walls) <= 1:
+    own = pool is None and len(seg.walls) > 1
+    if own:
+        pool = wall_pool(s, len(seg.walls))
+    if pool is None or len(seg.walls) <= 1:
         for wall in seg.walls:
             res, t_stage = process_wall(cloud, wall, templates, prototypes, s)
             yield wall.id, res, t_stage
         return
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    try:
         pending: deque = deque()
         todo = iter(seg.walls)
-        for wall in itertools.islice(todo, 2 * workers):
+        for wall in itertools.islice(todo, 2 * _worker_count(s)):
             pending.append(pool.submit(_process_wall_job, *_wall_cloud(cloud, wall), templates, prototypes, s))
         while pending:
             yield pending.popleft().result()
@@ -164,6 +191,9 @@ def _walls_results(cloud: PointCloud, seg: Segmentation, templates: dict[str, Mo
             if nxt is not None:
                 pending.append(pool.submit(_process_wall_job, *_wall_cloud(cloud, nxt), templates,
                                            prototypes, s))
+    finally:
+        if own:
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def detect(
@@ -172,11 +202,13 @@ def detect(
     expected: dict[str, int] | None = None,
     settings: DetectionSettings | None = None,
     progress: Progress | None = None,
+    pool: ProcessPoolExecutor | None = None,
 ) -> DetectionResult:
     """Run sections 3 and 4 of the paper on a registered coloured cloud of one floor.
 
     ``expected`` maps class ids to instance counts (contract 3); classes not named are not
     searched. Without it every class of the library is searched with no count limit.
+    ``pool`` (see :func:`wall_pool`) runs the per-wall stages; by default one is made.
     """
     s = settings or DetectionSettings()
     progress = progress or _noop_progress
@@ -202,7 +234,7 @@ def detect(
 
     walls: dict[str, WallResult] = {}
     stage_t = dict.fromkeys(WALL_STAGES, 0.0)
-    for i, (wid, res, t_wall) in enumerate(_walls_results(cloud, seg, templates, prototypes, s)):
+    for i, (wid, res, t_wall) in enumerate(_walls_results(cloud, seg, templates, prototypes, s, pool)):
         progress("walls", (i + 1) / max(1, len(seg.walls)))
         walls[wid] = res
         for k, v in t_wall.items():
@@ -241,11 +273,16 @@ def detect_to_dir(
     progress("reading", 0.0)
     library = load_model_library(Path(models))
     counts = read_expected(expected) if isinstance(expected, (str, Path)) else expected
-    t = time.perf_counter()
-    cloud = read_scans([Path(p) for p in scans])
-    read_s = time.perf_counter() - t
-    log(f"read {len(cloud):,} points from {len(scans)} file(s) in {read_s:.1f} s")
-    result = detect(cloud, library, counts, s, progress)
+    pool = wall_pool(s)  # the workers start while the scan is read
+    try:
+        t = time.perf_counter()
+        cloud = read_scans([Path(p) for p in scans])
+        read_s = time.perf_counter() - t
+        log(f"read {len(cloud):,} points from {len(scans)} file(s) in {read_s:.1f} s")
+        result = detect(cloud, library, counts, s, progress, pool)
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
     result.timings["reading"] = read_s
     log(f"{len(result.segmentation.walls)} walls, {len(result.openings)} openings, "
         f"{len(result.detections)} objects in {result.timings['total']:.1f} s")
