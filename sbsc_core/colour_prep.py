@@ -10,7 +10,10 @@ from the wall itself and divide it out:
 1. The image is cut into cells of ``cell_m``; each cell gets its median colour and depth.
 2. Cells that are plain lit wall are those that do not stand out of the plane (objects
    do) and whose chromaticity is the wall's, or that are near-white and flat (a highlight
-   on the wall). Other cells (objects, signs, openings, no data) take the field of the
+   on the wall), and that are uniform: a cell with a share of pixels of another
+   chromaticity or depth holds an object's outline or print (the light text band of a
+   thin sign can have nearly the wall's chromaticity) and is not a sample of the
+   illumination. Other cells (objects, signs, openings, no data) take the field of the
    nearest wall cell.
 3. A median filter over ``illumination_window_m`` removes what is left of small objects
    while keeping the straight steps between stations sharp.
@@ -73,7 +76,8 @@ def illumination_field(ortho: Orthoimage, settings: ColourPrepSettings | None = 
     cell_dep = np.zeros((hc, wc), np.float32)
     cell_col[valid] = _median_valid(col_b[valid], cnt[valid])
     cell_dep[valid] = _median_valid(dep_b[valid][..., None], cnt[valid])[:, 0]
-    wall = _wall_cells(cell_col, cell_dep, valid, s)
+    mixed = _mixed_fraction(col_b, dep_b, cell_col, cell_dep, valid, s)
+    wall = _wall_cells(cell_col, cell_dep, valid, s, mixed)
     if not wall.any():
         return None, np.zeros(3)
     ref = np.median(cell_col[wall], axis=0)
@@ -100,19 +104,56 @@ def _median_valid(values: np.ndarray, count: np.ndarray) -> np.ndarray:
     return 0.5 * (a + b)
 
 
-def _wall_cells(cell_col: np.ndarray, cell_dep: np.ndarray, valid: np.ndarray, s: ColourPrepSettings) -> np.ndarray:
-    """Cells that show plain (lit) wall: flat, and of the wall's chromaticity or highlight-white."""
+def _chroma(rgb: np.ndarray) -> np.ndarray:
+    """rg-chromaticity (r, g) / (r + g + b) of (..., 3) colours: independent of the illumination's gain."""
+    return (rgb / np.maximum(rgb.sum(axis=-1, keepdims=True), 1.0))[..., :2]
+
+
+def _mixed_fraction(col_b: np.ndarray, dep_b: np.ndarray, cell_col: np.ndarray, cell_dep: np.ndarray,
+                    valid: np.ndarray, s: ColourPrepSettings) -> np.ndarray:
+    """Per cell, the share of its pixels whose chromaticity or depth differs from the cell's median.
+
+    A cell of plain wall is uniform under any illumination: a station step or a smooth
+    light gradient changes every channel by the same gain, so the chromaticity stays put.
+    A cell that holds part of an object's outline or its print (a sign's text band whose
+    median colour is close to the wall's) has a share of pixels of another chromaticity or
+    depth; such cells must not be taken as samples of the illumination.
+    """
+    out = np.ones(valid.shape, np.float32)
+    if not valid.any():
+        return out
+    pix = col_b[valid]  # (k, n, 3), NaN where no data
+    ok = np.isfinite(pix[..., 0])
+    dc = np.linalg.norm(_chroma(np.nan_to_num(pix)) - _chroma(cell_col[valid])[:, None, :], axis=-1)
+    dd = np.abs(np.nan_to_num(dep_b[valid]) - cell_dep[valid][:, None])
+    odd = ok & ((dc > s.chroma_tolerance) | (dd > s.wall_depth_tolerance_m))
+    out[valid] = odd.sum(axis=1) / np.maximum(ok.sum(axis=1), 1)
+    return out
+
+
+def _wall_cells(cell_col: np.ndarray, cell_dep: np.ndarray, valid: np.ndarray, s: ColourPrepSettings,
+                mixed: np.ndarray | None = None) -> np.ndarray:
+    """Cells that show plain (lit) wall: flat, uniform, and of the wall's chromaticity or highlight-white.
+
+    ``mixed`` is each cell's share of pixels of another chromaticity or depth
+    (``_mixed_fraction``); cells above ``mixed_fraction`` (or, on a noisy wall,
+    ``mixed_noise_factor`` x the typical share of the flat cells) hold an object's edge or
+    print and are left out, so the field is never taken from inside an object.
+    """
     flat = valid & (np.abs(cell_dep) <= s.wall_depth_tolerance_m)
     if not flat.any():
         return flat
-    total = np.maximum(cell_col.sum(axis=-1, keepdims=True), 1.0)
-    chroma = (cell_col / total)[..., :2]
+    chroma = _chroma(cell_col)
     ref_chroma = np.median(chroma[flat], axis=0)
     close = np.linalg.norm(chroma - ref_chroma, axis=-1) <= s.chroma_tolerance
     vmax = cell_col.max(axis=-1)
     sat = 1.0 - cell_col.min(axis=-1) / np.maximum(vmax, 1.0)
     white = (vmax >= 255.0 * s.highlight_value) & (sat <= s.highlight_saturation)
-    return flat & (close | white)
+    wall = flat & (close | white)
+    if mixed is not None and s.mixed_fraction < 1.0 and wall.any():
+        limit = max(s.mixed_fraction, s.mixed_noise_factor * float(np.median(mixed[wall])))
+        wall &= mixed <= limit
+    return wall
 
 
 def _upsample(cells: np.ndarray, colour: np.ndarray, mask: np.ndarray, g: int, shape: tuple[int, int],

@@ -7,8 +7,10 @@
    estimate of the wall colour (the visible wall area averaged over
    ``background_window_m``, which follows slow illumination changes), and the threshold is
    ``max(threshold_offset, noise_k x the wall's own median deviation)``, so a noisy scan
-   does not flood the image with foreground. Compact foreground regions give RoIs
-   (bounding rectangles), clustered when they overlap or touch.
+   does not flood the image with foreground. The frames (casings) hugging the openings
+   are taken out of J_BW (``opening_frames``), so an object touching one keeps a RoI of
+   its own. Compact foreground regions give RoIs (bounding rectangles), clustered when
+   they overlap or touch.
 2. **Patterns.** Each RoI's 15 global descriptors (``colour_descriptors``) are compared
    with the prototype of each expected class by a minimum-distance classifier on the
    normalised descriptors; a RoI joins the list {C} of every class whose distance rho_C
@@ -115,7 +117,60 @@ def colour_image(ortho: Orthoimage, area: WallArea, settings: ColourRecognitionS
     noise = float(np.median(_sample(delta[vis]))) if vis.any() else 0.0
     thr = max(settings.threshold_offset, settings.noise_k * noise)
     fg = _close((delta > thr) & usable) & usable
+    fg &= ~opening_frames(fg, area, ortho, settings)
     return ColourImage(rgb, lab, bg, delta, thr, fg, wall_rgb, noise_rgb)
+
+
+def opening_frames(fg: np.ndarray, area: WallArea, ortho: Orthoimage,
+                   settings: ColourRecognitionSettings) -> np.ndarray:
+    """Foreground pixels of the frames (casings) that hug the openings of the wall.
+
+    A door or window casing is a band of another colour around the opening (section 3.3
+    finds the opening, not its frame). In J_BW it is one large region, and an object
+    mounted next to it (an exit light just above a door) touches it and disappears into
+    an oversized RoI. Along each side of an opening rectangle, lines parallel to the side
+    are walked outwards: a line belongs to the frame while at least ``casing_fill`` of it
+    is foreground (an object beside the opening covers only a small part of the side's
+    length); the frame may start up to ``casing_gap_px`` lines off the rectangle (its edge
+    is only known to a few pixels) and is at most ``casing_max_m`` wide.
+    """
+    out = np.zeros(fg.shape, bool)
+    if not area.openings or settings.casing_max_m <= 0:
+        return out
+    h, w = fg.shape
+    reach = max(1, int(round(settings.casing_max_m / ortho.pixel_m)))
+    for op in area.openings:
+        (ra, ca), (rb, cb) = ortho.uv_to_pixel(op.u_min, op.v_max), ortho.uv_to_pixel(op.u_max, op.v_min)
+        # pixel edges of the rectangle (a pixel's centre is at integer + 0.5 of its edges)
+        r0, c0 = max(0, int(round(ra + 0.5))), max(0, int(round(ca + 0.5)))
+        r1, c1 = min(h, int(round(rb + 0.5))), min(w, int(round(cb + 0.5)))
+        if r1 <= r0 or c1 <= c0:
+            continue
+        # width of the frame band on each side (0: none), from the rectangle outwards
+        wt = _frame_width(fg[max(0, r0 - reach):r0, c0:c1][::-1], settings)
+        wb = _frame_width(fg[r1:r1 + reach, c0:c1], settings)
+        wl = _frame_width(fg[r0:r1, max(0, c0 - reach):c0].T[::-1], settings)
+        wr = _frame_width(fg[r0:r1, c1:c1 + reach].T, settings)
+        rt, cl = max(0, r0 - wt), max(0, c0 - wl)
+        out[rt:r0, cl:c1 + wr] = wt > 0
+        out[r1:r1 + wb, cl:c1 + wr] |= wb > 0
+        out[rt:r1 + wb, cl:c0] |= wl > 0
+        out[rt:r1 + wb, c1:c1 + wr] |= wr > 0
+    return out & fg
+
+
+def _frame_width(strip: np.ndarray, settings: ColourRecognitionSettings) -> int:
+    """Lines of ``strip`` (row k = k-th line outwards from an opening) up to the frame's outer edge; 0: no frame."""
+    if strip.size == 0:
+        return 0
+    full = strip.mean(axis=1) >= settings.casing_fill
+    start = next((k for k in range(min(len(full), settings.casing_gap_px + 1)) if full[k]), None)
+    if start is None:
+        return 0
+    end = start
+    while end < len(full) and full[end]:
+        end += 1
+    return end
 
 
 def _sample(values: np.ndarray, n: int = 100_000) -> np.ndarray:

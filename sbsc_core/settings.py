@@ -76,6 +76,8 @@ class ColourPrepSettings:
     highlight_value: float = 0.92  # HSV value above which a pixel may be a specular highlight
     highlight_saturation: float = 0.12  # ... when its saturation is below this
     snap_tolerance: float = 0.1  # a pixel within this relative colour error of a nearby cell field takes it
+    mixed_fraction: float = 0.05  # cells with more pixels of another chromaticity / depth hold an object's edge
+    mixed_noise_factor: float = 3.0  # ... or more than this x the wall cells' median share (noisy walls)
 
 
 @dataclass
@@ -164,6 +166,9 @@ class ColourRecognitionSettings:
     roi_min_area_px: int = 12  # ... and so are RoIs with fewer foreground pixels
     roi_merge_gap_px: int = 2  # RoIs closer than this are clustered
     max_roi_factor: float = 1.6  # RoIs larger than this x the largest footprint are refused
+    casing_max_m: float = 0.15  # a door / window frame hugging an opening is at most this wide (0: kept)
+    casing_fill: float = 0.7  # ... its lines parallel to the opening's side are foreground over this share
+    casing_gap_px: int = 3  # ... and it may start this many lines off the opening's rectangle
     glcm_levels: int = 8  # grey levels of the co-occurrence matrix (equation 14)
     cluster_merge_s: float = 0.05  # three-class clustering: S classes closer than this are one
     cluster_merge_ab: float = 4.0  # ... and a / b classes closer than this (Lab units)
@@ -191,7 +196,7 @@ class ConsensusSettings:
 
     exclusive_alpha: float = 0.5  # equation 15, case III
     min_alpha: float = 0.0  # cells at or below this are never selected
-    suppress_overlap: float = 0.5  # cross-class suppression: max overlap of two accepted objects
+    suppress_overlap: float = 0.25  # cross-class suppression: max overlap of two accepted objects
     prefer_depth: bool = True  # at equal alpha: both > depth only > colour only, then goodness
     alpha_tolerance: float = 0.05  # alphas this close count as equal (the tie-break decides)
     max_disagreement_px: float = 3.0  # equation 16 for centres this close, else depth's (.inf: always)

@@ -87,3 +87,21 @@ def test_no_wall_data_leaves_the_colour_alone() -> None:
     o = make_ortho(1.0, 1.0, features=[Hole("window", -1, 2, -1, 2)])
     p = prepare_colour(o)
     assert not p.mask.any() and (p.colour == 0).all()
+
+
+def test_a_thin_sign_with_a_near_wall_coloured_band_is_not_taken_as_wall() -> None:
+    """A flat sign's light text band has nearly the wall's chromaticity, but cells of it hold
+    red print: they are not samples of the illumination, and the band keeps its colour."""
+    band_rgb = (240, 238, 205)  # rg-chromaticity 0.016 from the wall's: within chroma_tolerance
+    v0, v1 = 1.215, 1.335  # band, below a red upper part; red strokes in its upper half
+    feats = [Patch(1.0, 1.21, v1, v1 + 0.21, (200, 30, 30)), Patch(1.0, 1.21, v0, v1, band_rgb)]
+    feats += [Patch(1.02 + 0.04 * k, 1.035 + 0.04 * k, v0 + 0.05, v0 + 0.09, (200, 30, 30)) for k in range(5)]
+    o = make_ortho(2.5, 2.7, features=feats, seed=5)
+    p = prepare_colour(o)
+    (ra, ca), (rb, cb) = _px(0.3, 2.0), _px(0.7, 1.8)
+    wall = p.colour[ra:rb, ca:cb].reshape(-1, 3).mean(axis=0)
+    (ra, ca), (rb, cb) = _px(1.02, v0 + 0.035), _px(1.19, v0 + 0.01)  # the band's unprinted lower part
+    band = p.colour[ra:rb, ca:cb].reshape(-1, 3).mean(axis=0)
+    assert np.abs(band - np.array(band_rgb)).max() < 8.0  # the band keeps its colour ...
+    assert np.abs(band - wall).max() > 25.0  # ... and stays apart from the wall
+    assert np.abs(wall - np.array(WALL)).max() < 4.0  # the plain wall is still the wall's colour

@@ -111,3 +111,42 @@ def test_a_protruding_class_is_not_accepted_on_a_flat_wall(library) -> None:
     assert not [x for x in match_colour(ortho, area, rois, protos, s) if x.class_id == "panel"]
     off = replace(s, depth_check_gain=0.0)
     assert [x for x in match_colour(ortho, area, rois, protos, off) if x.class_id == "panel"]
+
+
+def _door_with_casing(objects: list[tuple[slice, slice, tuple[int, int, int]]]):
+    """A wall with a door (rows 120.., cols 150..250), a 16 px brown casing hugging it and ``objects``."""
+    from sbsc_core.types import Opening
+
+    ortho, area = make_wall(seed=11, colour=WALL, holes=0)
+    r0, c0, c1, band = 120, 150, 250, 16
+    ortho.colour[r0 - band:, c0 - band:c1 + band] = (110, 70, 40)  # casing
+    door = np.zeros(area.visible.shape, bool)
+    door[r0:, c0:c1] = True
+    ortho.colour[door] = (30, 30, 30)
+    area.visible &= ~door
+    area.visible[r0 - band:, c0 - band:c1 + band] = False
+    area.opening_mask = door
+    px = ortho.pixel_m
+    h_m = ortho.frame.height_m
+    area.openings = [Opening(ortho.wall_id, "door", c0 * px, c1 * px, 0.0, h_m - r0 * px)]
+    for rows, cols, rgb in objects:
+        ortho.colour[rows, cols] = rgb
+        area.visible[rows, cols] = False
+    return ortho, area
+
+
+def test_a_door_casing_does_not_swallow_an_object_touching_it() -> None:
+    s = ColourRecognitionSettings()
+    exit_light = (slice(76, 104), slice(170, 230), (20, 150, 90))  # 28 x 60 px, touches the casing ...
+    leg = (slice(100, 106), slice(198, 203), (20, 150, 90))  # ... through a thin strip
+    switch = (slice(160, 176), slice(120, 130), (200, 40, 40))  # 6 px left of the casing, not touching it
+    ortho, area = _door_with_casing([exit_light, leg, switch])
+    rois = colour_rois(ortho, area, s)
+    def near(b, box):  # the closing of J_BW may grow a region by a pixel
+        return max(abs(x - y) for x, y in zip((b.r0, b.c0, b.r1, b.c1), box, strict=True)) <= 1
+
+    assert any(near(b, (76, 170, 104, 230)) for b in rois), rois  # the exit light alone
+    assert any(near(b, (160, 120, 176, 130)) for b in rois), rois  # the switch beside the casing, whole
+    assert all(b.height < 60 for b in rois)  # no RoI holds the casing
+    kept = replace(s, casing_max_m=0.0)  # without frame removal: one RoI of casing and exit light
+    assert any(b.r0 == 76 and b.height > 150 for b in colour_rois(ortho, area, kept))
