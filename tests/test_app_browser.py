@@ -106,6 +106,7 @@ def test_keyboard_review_survives_reload(browser, sample_server):
         page.set_input_files("#scan-file", str(write_small_ply(srv.base / "more.ply", n=777)))
         page.click("#scan-form button[type=submit]")
         page.wait_for_selector("#scan-msg:has-text('777 points')")
+        page.wait_for_selector("#scans tr")  # the list is re-rendered after the message
         assert page.locator("#scans tr").count() == 1
         page.click("#run-job")
         page.wait_for_selector("#job-live progress", state="visible")

@@ -144,6 +144,17 @@ def test_goodness_orders_hits() -> None:
     assert np.isfinite(_hit("a", (0, 0), 1.0).goodness)
 
 
+def test_a_colour_match_half_over_a_recognized_object_is_suppressed() -> None:
+    """Scenario I, every class searched: the colour candidate of a switch placed 3.7 cm under
+    a socket (footprints overlapping by 0.48) was a second object; real objects do not overlap."""
+    hits = {"socket": [_hit("socket", (50, 50), 1.0, 0.9, 0.03)],
+            "switch": [_hit("switch", (58, 49), 0.5, None, 0.03)]}  # 8 rows lower: overlap 0.47
+    out = suppress_conflicts(hits, S)
+    assert [h.centre for h in out["socket"]] == [(50, 50)] and out["switch"] == []
+    loose = suppress_conflicts(hits, ConsensusSettings(suppress_overlap=0.5))
+    assert len(loose["switch"]) == 1
+
+
 def test_consensus_all_keeps_the_count_for_the_places_that_are_left() -> None:
     from sbsc_core.consensus import consensus_all
 
