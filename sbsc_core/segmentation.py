@@ -29,6 +29,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import find_peaks
 
 from .errors import NoWallsError
 from .settings import SegmentationSettings
@@ -87,7 +88,7 @@ def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSetting
     if n == 0:
         raise NoWallsError("no walls found: the scan has no points")
     xyz = cloud.xyz
-    floor, ceiling = find_floor_ceiling(xyz[:, 2], s)
+    floor, ceiling = find_floor_ceiling(xyz[:, 2], s, xyz[:, :2])
     height = ceiling - floor
 
     # subsample of the wall band for fitting
@@ -124,34 +125,72 @@ def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSetting
     return Segmentation(floor_z=floor + z0, ceiling_z=ceiling + z0, walls=out)
 
 
-def find_floor_ceiling(z: np.ndarray, settings: SegmentationSettings | None = None) -> tuple[float, float]:
-    """(floor, ceiling): the two maxima of the Z histogram, at least ``min_room_height_m`` apart.
+def find_floor_ceiling(z: np.ndarray, settings: SegmentationSettings | None = None,
+                       xy: np.ndarray | None = None) -> tuple[float, float]:
+    """(floor, ceiling) levels from the maxima of the Z histogram (paper, section 3.1).
 
-    Each level is refined as the median Z of the points within 1.5 bins of its maximum.
-    Works in whatever frame ``z`` is given. Raises NoWallsError without two levels.
+    The levels are the histogram's peaks that stand out from their surroundings by at least
+    ``min_level_fraction`` of the largest one. The floor is the lowest level and the ceiling
+    the highest at least ``min_room_height_m`` above it, not the two largest: a table or
+    cabinet top near the stations can hold more points than the floor, whose part under each
+    station is outside the scanner's field of view. With ``xy`` (the points' plan
+    coordinates, aligned with ``z``) a level must also cover at least ``min_level_area``
+    of the plan area of the largest level; without a ceiling that wide (a scan without
+    ceiling points, where door and window heads form small levels) the ceiling is the top
+    of the cloud. Each level is refined as the median Z within 1.5 bins of its peak. Works
+    in whatever frame ``z`` is given. Raises NoWallsError without a floor and a ceiling.
     """
     s = settings or SegmentationSettings()
     z = np.asarray(z)
-    zs = z[:: max(1, math.ceil(len(z) / s.histogram_max_points))]
-    zs = zs[np.isfinite(zs)].astype(np.float64)
+    step = max(1, math.ceil(len(z) / s.histogram_max_points))
+    zs = z[::step]
+    keep = np.isfinite(zs)
+    zs = zs[keep].astype(np.float64)
     if len(zs) == 0:
         raise NoWallsError("no walls found: the scan has no points")
     lo, b = float(zs.min()), s.z_bin_m
     counts = np.bincount(((zs - lo) / b).astype(np.int64)).astype(np.float64)
     smooth = np.convolve(counts, np.ones(3), mode="same")
-    p1 = int(np.argmax(smooth))
-    sep = int(math.ceil(s.min_room_height_m / b))
-    far = smooth.copy()
-    far[max(0, p1 - sep + 1): p1 + sep] = 0.0
-    p2 = int(np.argmax(far))
-    if far[p2] <= 0 or far[p2] < s.min_level_fraction * smooth[p1]:
+    padded = np.concatenate(([0.0], smooth, [0.0]))  # a level in the first or last bin is a peak too
+    peaks, props = find_peaks(padded, prominence=s.min_level_fraction * float(smooth.max()))
+    peaks = peaks - 1
+    if len(peaks) and xy is not None:
+        areas = _level_areas(zs, np.asarray(xy)[::step][keep], lo + (peaks + 0.5) * b, b, s)
+        peaks = peaks[areas >= s.min_level_area * areas.max()]
+    if len(peaks) == 0:
+        raise NoWallsError("no walls found: the Z histogram has no level")
+    levels = [float(np.median(zs[np.abs(zs - (lo + (p + 0.5) * b)) <= 1.5 * b])) for p in sorted(peaks)]
+    floor = levels[0]
+    above = [v for v in levels if v >= floor + s.min_room_height_m]
+    if above:
+        return floor, above[-1]
+    top = float(np.quantile(zs, s.top_quantile))
+    if xy is None or top < floor + s.min_room_height_m:
         raise NoWallsError("no walls found: the Z histogram has no floor and ceiling pair "
-                           f"(one level at z = {lo + (p1 + 0.5) * b:.2f} m only)")
-    levels = []
-    for p in sorted((p1, p2)):
-        c = lo + (p + 0.5) * b
-        levels.append(float(np.median(zs[np.abs(zs - c) <= 1.5 * b])))
-    return levels[0], levels[1]
+                           f"(one level at z = {floor:.2f} m only)")
+    return floor, top
+
+
+def _level_areas(z: np.ndarray, xy: np.ndarray, levels: np.ndarray, b: float, s: SegmentationSettings
+                 ) -> np.ndarray:
+    """Plan area (m^2) over which each level is a horizontal surface.
+
+    A plan cell counts for a level when the slab of 3 bins around it holds at least
+    ``level_dominance`` times the points of each equal slab just above and below: a floor,
+    ceiling or table top does, a wall crossing the level (same points in every slab) does not.
+    """
+    cell = s.level_cell_m
+    ij = np.floor(np.asarray(xy, np.float64) / cell).astype(np.int64)
+    ij -= ij.min(axis=0)
+    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    n = int(key.max()) + 1
+    out = []
+    for zc in levels:
+        slab = [np.bincount(key[(z >= zc + k * b - 1.5 * b) & (z <= zc + k * b + 1.5 * b)], minlength=n)
+                for k in (0, -4, 4)]
+        flat = (slab[0] > 0) & (slab[0] >= s.level_dominance * np.maximum(slab[1], slab[2]))
+        out.append(float(flat.sum()) * cell * cell)
+    return np.asarray(out)
 
 
 def fit_line_2d(xy: np.ndarray, tolerances: tuple[float, ...] = ()) -> tuple[np.ndarray, float]:

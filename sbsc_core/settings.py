@@ -20,10 +20,14 @@ from .errors import InputError
 class SegmentationSettings:
     """Floor, ceiling and walls (paper, section 3.1)."""
 
-    # floor and ceiling: the two maxima of the Z histogram
+    # floor and ceiling: the lowest and highest levels (maxima) of the Z histogram
     z_bin_m: float = 0.02  # Z histogram bin for the floor / ceiling maxima
-    min_room_height_m: float = 1.8  # the two maxima are at least this far apart
-    min_level_fraction: float = 0.05  # the second maximum holds at least this x the first one
+    min_room_height_m: float = 1.8  # the ceiling is at least this far above the floor
+    min_level_fraction: float = 0.05  # a level stands out by at least this x the largest one
+    min_level_area: float = 0.25  # ... and covers at least this x the plan area of the widest level
+    level_cell_m: float = 0.1  # plan cells for that area
+    level_dominance: float = 2.0  # a cell is level there with this x the points of the slabs beside
+    top_quantile: float = 0.999  # without a ceiling level the walls end at this quantile of Z
     histogram_max_points: int = 2_000_000  # the histogram uses a regular subsample of this size
     slab_margin_m: float = 0.08  # points this close to floor / ceiling are not used to fit walls
     slab_tolerance_m: float = 0.015  # points this close to floor / ceiling belong to them, not to walls

@@ -1,9 +1,8 @@
 """Fast checks of scan differences another simulator / a real scanner produce (see
 benchmarks/bench_robustness.py for the full one_room benchmark).
 
-The two floor / ceiling cases are known failures of ``find_floor_ceiling`` (the two largest
-Z-histogram maxima): they are marked xfail until segmentation picks the lowest and highest
-levels; ``strict=False`` so that fixing them does not break the suite.
+The two floor / ceiling cases were failures of ``find_floor_ceiling`` when it took the two
+largest Z-histogram maxima (a table top outvoted the floor; door heads became the ceiling).
 """
 
 from __future__ import annotations
@@ -28,8 +27,6 @@ def _levels(rng: np.random.Generator, parts: list[tuple[float, int]],
     return rng.permutation(np.concatenate(z))
 
 
-@pytest.mark.xfail(reason="a dense table top near the stations outvotes the floor (bench_robustness 'clutter')",
-                   strict=False)
 def test_floor_is_the_lowest_level_under_a_table():
     # the Z histogram of one_room with furniture (2 cm bins): ceiling 1.63 M points, floor
     # 181 k (the scanner's blind cone hides the floor near each station), table top 150 k at
@@ -41,12 +38,23 @@ def test_floor_is_the_lowest_level_under_a_table():
     assert abs(floor) < 0.01 and abs(ceiling - 2.8) < 0.01
 
 
-@pytest.mark.xfail(reason="without ceiling points the door / window heads at 2.1 m become the ceiling "
-                          "(bench_robustness 'no_ceiling')", strict=False)
 def test_no_ceiling_points_keeps_the_walls_whole():
-    z = _levels(np.random.default_rng(2), [(0.0, 1_000_000), (2.1, 60_000)], [(0.0, 2.75, 1_500_000)])
-    floor, ceiling = find_floor_ceiling(z)
-    assert abs(floor) < 0.01 and ceiling > 2.6
+    """A 4 x 3 m room scanned without its ceiling: the door and window heads at 2.1 m are a
+    level of a few thin strips, not a ceiling; the walls end at the top of the cloud."""
+    rng = np.random.default_rng(2)
+    floor_xy = rng.uniform((0, 0), (4, 3), (1_000_000, 2))
+    heads_xy = np.concatenate([rng.uniform((1.0, 0.0), (1.9, 0.1), (30_000, 2)),   # door head
+                               rng.uniform((1.4, 2.9), (2.6, 3.0), (30_000, 2))])  # window head
+    t = rng.uniform(0, 14, 1_500_000)  # walls: along the perimeter
+    wall_xy = np.where(t[:, None] < 4, np.c_[t, 0 * t], np.where(t[:, None] < 7, np.c_[4 + 0 * t, t - 4],
+                       np.where(t[:, None] < 11, np.c_[11 - t, 3 + 0 * t], np.c_[0 * t, 14 - t])))
+    z = np.concatenate([rng.normal(0.0, 0.001, 1_000_000), rng.normal(2.1, 0.001, 60_000),
+                        rng.uniform(0.0, 2.75, 1_500_000)])
+    xy = np.concatenate([floor_xy, heads_xy, wall_xy])
+    floor, ceiling = find_floor_ceiling(z, xy=xy)
+    assert abs(floor) < 0.01 and ceiling > 2.7
+    # by Z alone the heads are the highest level
+    assert find_floor_ceiling(z)[1] == pytest.approx(2.1, abs=0.01)
 
 
 def test_rigid_truth_transform_keeps_geometry():
