@@ -170,12 +170,19 @@ def _cell_rank(depth: list[Candidate], colour: list[Candidate], i: int, j: int,
 class _Selection:
     """The iterative selection on one class's Psi (paper, Figure 13)."""
 
-    def __init__(self, depth: list[Candidate], colour: list[Candidate], settings: ConsensusSettings) -> None:
+    def __init__(self, depth: list[Candidate], colour: list[Candidate], settings: ConsensusSettings,
+                 weak_ids: set[int] | None = None) -> None:
         self.depth, self.colour, self.settings = depth, colour, settings
         self.psi = coherence_matrix(depth, colour, settings)
         nd, nc = len(depth), len(colour)
         self.rank = np.array([[_cell_rank(depth, colour, i, j, settings) for j in range(nc + 1)]
                               for i in range(nd + 1)])
+        for i, d in enumerate(depth):  # an outscored depth match confirms no colour candidate
+            if weak_ids and id(d) in weak_ids:
+                for j in range(nc):
+                    if self.psi[i, j] > 0:
+                        self.psi[i, j] = settings.exclusive_alpha
+                        self.rank[i, j] = _cell_rank(depth, colour, nd, j, settings)
 
     def best(self) -> tuple[float, float, int, int] | None:
         """(alpha, tie-break rank, row, column) of the best cell, None when Psi is null."""
@@ -231,13 +238,19 @@ def consensus_all(depth: list[Candidate], colour: list[Candidate], expected: dic
     accepted only when its footprint does not overlap an already accepted instance by more
     than ``suppress_overlap`` (then only that cell is dropped). So an instance that loses a
     place to another class does not use up its class's expected count, and its candidates
-    stay available. ``expected`` None searches every class without a count limit.
+    stay available. ``expected`` None searches every class without a count limit. Depth
+    candidates outscored at their place by another class's (:func:`drop_outscored_depth`)
+    do not confirm colour candidates: such a pair counts as the colour candidate alone
+    (alpha ``exclusive_alpha``, ranked as colour only). Otherwise the weaker depth match,
+    paired with a colour candidate of its class, reaches alpha 1 and beats the better depth
+    match (alpha 0.5, depth only), and with an expected count also uses up its class's count.
     """
+    weak_ids = {id(depth[k]) for k in outscored_depth(depth, settings)}
     names = sorted({c.class_id for c in depth} | {c.class_id for c in colour} | set(classes or []))
     if expected is not None:
         names = [n for n in names if expected.get(n, 0) > 0]
-    sels = {n: _Selection([c for c in depth if c.class_id == n], [c for c in colour if c.class_id == n], settings)
-            for n in names}
+    sels = {n: _Selection([c for c in depth if c.class_id == n], [c for c in colour if c.class_id == n], settings,
+                          weak_ids) for n in names}
     left = {n: (None if expected is None else int(expected[n])) for n in names}
     out: dict[str, list[ConsensusHit]] = {n: [] for n in sorted(set(names) | set(classes or []))}
     kept: list[ConsensusHit] = []
@@ -258,6 +271,23 @@ def consensus_all(depth: list[Candidate], colour: list[Candidate], expected: dic
         if left[n] is not None:
             left[n] -= 1
     return out
+
+
+def outscored_depth(depth: list[Candidate], settings: ConsensusSettings) -> set[int]:
+    """Indices of the depth candidates that another class's depth candidate at the same place
+    (footprints overlapping by more than ``suppress_overlap``) outscores by at least
+    ``depth_outscored_margin`` in rho_D.
+
+    Depth is metric and shape-specific: a socket that correlates 0.98 with the socket model
+    and 0.82 with the flush-socket model is a socket. Such a weaker depth match does not
+    confirm a colour candidate of its class (see :func:`consensus_all`).
+    """
+    margin = settings.depth_outscored_margin
+    if not np.isfinite(margin):
+        return set()
+    return {k for k, d in enumerate(depth)
+            if any(o.class_id != d.class_id and o.wall_id == d.wall_id and o.score >= d.score + margin
+                   and box_overlap(o.box, d.box) > settings.suppress_overlap for o in depth)}
 
 
 def _conflicts(hit: ConsensusHit, kept: list[ConsensusHit], settings: ConsensusSettings) -> bool:

@@ -155,6 +155,23 @@ def test_a_colour_match_half_over_a_recognized_object_is_suppressed() -> None:
     assert len(loose["switch"]) == 1
 
 
+def test_an_outscored_depth_match_confirms_no_colour_candidate() -> None:
+    """one_room (standard, seed 2): at a socket, depth says socket 0.98 and flush socket 0.82
+    and colour says flush socket; the flush socket's pair must not outrank the socket's depth
+    match, nor use up the count of the real flush socket elsewhere (depth 0.97)."""
+    from sbsc_core.consensus import consensus_all
+
+    d = [cand("depth", (50, 50), 0.98, cls="socket"), cand("depth", (50, 50), 0.82, cls="flush"),
+         cand("depth", (200, 200), 0.97, cls="flush")]
+    c = [cand("colour", (50, 50), 0.02, cls="flush")]
+    out = consensus_all(d, c, {"socket": 1, "flush": 1}, S)
+    assert [h.centre for h in out["socket"]] == [(50, 50)]
+    assert [h.centre for h in out["flush"]] == [(200, 200)]
+    # without the rule the colour-confirmed weaker match wins the place and the count
+    off = consensus_all(d, c, {"socket": 1, "flush": 1}, ConsensusSettings(depth_outscored_margin=float("inf")))
+    assert [h.centre for h in off["flush"]] == [pytest.approx((50, 50))] and off["socket"] == []
+
+
 def test_consensus_all_keeps_the_count_for_the_places_that_are_left() -> None:
     from sbsc_core.consensus import consensus_all
 
