@@ -29,6 +29,13 @@ Additions to the paper, each a named setting:
 * Models are also tried rotated in the wall plane (``rotations``), lifting the paper's
   stated limitation that depth matching is not rotation invariant; several instances per
   RoI are found by non-maximum suppression on the correlation map.
+* Unseen wall (no depth data reaching the image's border, e.g. below a scanner's field of
+  view) is unknown, not wall: a footprint partly seen is also correlated over its seen
+  pixels only (masked NCC), needs ``min_known_share`` of it seen, and the plausibility
+  checks ignore unseen pixels.
+* A slowly varying level of the plain wall (a step of a few mm where a misregistered
+  station alone sees the wall) is subtracted before relief is thresholded for RoIs and
+  the plausibility checks; the correlation keeps the scene's own relief.
 """
 
 from __future__ import annotations
@@ -44,6 +51,8 @@ from .templates import ModelTemplate
 from .types import Box, Candidate, Orthoimage, WallArea
 
 _DEPTH_UNIT_M = 1e-5  # int16 gradient unit for cv2.Canny(dx, dy, ...)
+_LEVEL_EDGE_PX = 2  # wall level: pixels this close to relief (an object's sloped edge) are no plain wall
+_MASKED_FLOOR = 0.5  # masked NCC also down to this x min_known_share (a too little seen object peaks there)
 
 
 # --------------------------------------------------------------------------- J_D
@@ -70,7 +79,18 @@ def fill_gaps(values: np.ndarray, ok: np.ndarray, sigma_px: float, min_weight: f
 
 
 def depth_image(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSettings) -> np.ndarray:
-    """The depth image J_D: metres out of the wall plane, openings at 0.
+    """The depth image J_D: metres out of the wall plane, openings at 0 (see :func:`depth_image_known`)."""
+    return depth_image_known(ortho, area, settings)[0]
+
+
+def depth_image_known(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSettings
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """(J_D, known): J_D in metres out of the wall plane, openings at 0; ``known`` marks its
+    pixels that have depth data (after the gap filling), lie in a hole enclosed by data
+    (filled from its rim: a shadow beside an object, a socket's recess, whose fill is a
+    good guess and tells classes apart) or in an opening (no wall, hence no object: 0).
+    Only no-data regions reaching the image's border (wall the scanner did not see, e.g.
+    below its field of view) are unknown.
 
     Sampling gaps of a sparse scan are filled from their neighbours (``gap_fill_sigma_px``)
     and each larger hole (an occlusion shadow beside an object, an unseen recess in it)
@@ -94,7 +114,16 @@ def depth_image(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSet
     out = fill_holes_low(out, ok, ~ok & ~opening)
     if settings.median_px in (3, 5):  # speckle (outliers, isolated no-data pixels) off
         out = cv2.medianBlur(out, settings.median_px)
-    return np.where(opening, 0.0, out).astype(np.float32)
+    return np.where(opening, 0.0, out).astype(np.float32), ok | opening | _enclosed(~ok & ~opening)
+
+
+def _enclosed(holes: np.ndarray) -> np.ndarray:
+    """The 8-connected regions of ``holes`` that do not reach the image's border."""
+    lab, n = ndimage.label(holes, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return np.zeros_like(holes)
+    edge = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+    return (lab > 0) & ~np.isin(lab, edge)
 
 
 def fill_holes_low(values: np.ndarray, ok: np.ndarray, holes: np.ndarray) -> np.ndarray:
@@ -117,6 +146,58 @@ def fill_holes_low(values: np.ndarray, ok: np.ndarray, holes: np.ndarray) -> np.
     out = values.copy()
     out[holes] = low[lab[holes] - 1]
     return out
+
+
+def wall_level(jd: np.ndarray, known: np.ndarray, pixel_m: float, settings: DepthRecognitionSettings
+               ) -> np.ndarray:
+    """The local level of the plain wall in J_D (metres), 0 where the wall lies on the plane.
+
+    Two stations registered a few mm apart see one wall at two depths: where only one of
+    them sees it, J_D has a step that the relief thresholds take for an object, merging the
+    objects on it into one RoI and failing their isolation. The level is the mean of the
+    plain-wall pixels (known, within ``level_plain_m`` of the plane, not beside relief above
+    it) per ``level_cell_m`` cell, then the median of the cells in ``level_window_m`` (an
+    object smaller than half the window does not move it), shrunk towards 0 by
+    ``level_dead_m`` (a clean wall gets exactly 0: its results do not change) and clamped
+    to ``level_max_m``. A region of non-zero level shorter than ``level_min_extent_m`` is a
+    large flat object (a sign covering most of a window), not a step: it is set to 0.
+    """
+    h, w = jd.shape
+    g = max(1, int(round(settings.level_cell_m / pixel_m)))
+    k = max(0, int(round(settings.level_window_m / settings.level_cell_m)) // 2)
+    hb, wb = -(-h // g), -(-w // g)
+    if settings.level_max_m <= 0 or min(hb, wb) < 1:
+        return np.zeros_like(jd)
+    high = (np.abs(jd) >= settings.level_plain_m).astype(np.uint8)
+    edge = np.ones((2 * _LEVEL_EDGE_PX + 1,) * 2, np.uint8)
+    plain = known & (cv2.dilate(high, edge) == 0)
+    vals = np.zeros((hb * g, wb * g), np.float64)
+    use = np.zeros((hb * g, wb * g), np.float64)
+    vals[:h, :w] = np.where(plain, jd, 0.0)
+    use[:h, :w] = plain
+    count = use.reshape(hb, g, wb, g).sum(axis=(1, 3))
+    cell = np.full((hb, wb), np.nan, np.float32)
+    enough = count >= settings.level_min_share * g * g
+    if not enough.any():
+        return np.zeros_like(jd)
+    cell[enough] = (vals.reshape(hb, g, wb, g).sum(axis=(1, 3)) / np.maximum(count, 1))[enough]
+    if not np.any(np.abs(cell[enough]) > settings.level_dead_m):  # a clean wall (the usual case)
+        return np.zeros_like(jd)
+    pad = np.pad(cell, k, constant_values=np.nan)
+    stack = np.stack([pad[i:i + hb, j:j + wb] for i in range(2 * k + 1) for j in range(2 * k + 1)])
+    has = np.isfinite(stack).any(axis=0)
+    level = np.zeros((hb, wb), np.float32)
+    if has.any():
+        level[has] = np.nanmedian(stack[:, has], axis=0)
+    level = np.sign(level) * np.clip(np.abs(level) - settings.level_dead_m, 0.0, settings.level_max_m)
+    lab, _ = ndimage.label(level != 0, structure=np.ones((3, 3), bool))
+    for i, sl in enumerate(ndimage.find_objects(lab), start=1):
+        if max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start) * g * pixel_m < settings.level_min_extent_m:
+            level[sl][lab[sl] == i] = 0.0  # a compact flat object (a sign), no step of the wall
+    if not level.any():
+        return np.zeros_like(jd)
+    full = cv2.resize(level.astype(np.float32), (wb * g, hb * g), interpolation=cv2.INTER_LINEAR)
+    return np.ascontiguousarray(full[:h, :w])
 
 
 def _residual_plane(d: np.ndarray, use: np.ndarray, max_samples: int = 20000) -> np.ndarray | None:
@@ -235,13 +316,23 @@ def depth_rois(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSett
     smallest is dropped too (a pipe, a cable, a step in the plaster): such regions would
     otherwise merge the objects near them into one wall-sized RoI.
     """
-    jd = depth_image(ortho, area, settings)
+    jd, known = depth_image_known(ortho, area, settings)
+    jd = levelled(jd, known, ortho, area, settings)
     limits = None
     if templates:
         sides = [(t.height_px, t.width_px) for t in templates.values()]
         limits = (settings.max_roi_factor * max(max(s) for s in sides), 0.5 * min(min(s) for s in sides))
     margin = int(round(settings.border_margin_m / ortho.pixel_m))
     return _rois_from_jd(jd, _plain_wall(ortho, area, jd, settings), settings, margin, limits)
+
+
+def levelled(jd: np.ndarray, known: np.ndarray, ortho: Orthoimage, area: WallArea,
+             settings: DepthRecognitionSettings) -> np.ndarray:
+    """J_D minus the local wall level (:func:`wall_level`); openings stay at 0."""
+    level = wall_level(jd, known, ortho.pixel_m, settings)
+    if area.opening_mask is not None and area.opening_mask.shape == jd.shape:
+        level[area.opening_mask] = 0.0
+    return (jd - level).astype(np.float32)
 
 
 def _plain_wall(ortho: Orthoimage, area: WallArea, jd: np.ndarray, settings: DepthRecognitionSettings
@@ -361,6 +452,10 @@ def match_template_in_rois(
     gain_range: tuple[float, float] | None = None,
     min_energy: float = 0.0,
     accept: Callable[[float, float, float], bool] | None = None,
+    known: np.ndarray | None = None,
+    min_known: float = 0.0,
+    full_known: float = 1.0,
+    masked_pre: float = -1.0,
 ) -> list[tuple[float, float, float, Box, float]]:
     """Normalised cross-correlation of ``template`` (padded by ``pad_px`` of zeros) around RoIs.
 
@@ -374,6 +469,14 @@ def match_template_in_rois(
     windows whose energy (sum of squared deviations) is at most ``min_energy`` are never
     peaks (their correlation is undefined), and so are those that ``accept(row, col, gain)``
     refuses.
+
+    With ``known`` (a bool mask of the pixels that have data, 2-D images only), a peak whose
+    footprint has data on less than ``min_known`` of it is refused with its neighbourhood,
+    and a footprint with less than ``full_known`` is also correlated over its known pixels
+    only (masked NCC; the higher of the two coefficients counts, and the gain is then the
+    masked one): a filled guess of the unseen part does not hide a partly seen object. Full
+    windows keep the plain ``cv2.matchTemplate``; the masked map is only computed around the
+    partly seen windows that reach ``masked_pre`` in the plain one.
     """
     h, w = template.shape[:2]
     tp = padded_template(template, pad_px, sigma_px)
@@ -402,6 +505,23 @@ def match_template_in_rois(
         xs = np.arange(res.shape[1]) + c_a + cx_off
         valid = ((ys >= cr0) & (ys <= cr1))[:, None] & ((xs >= cc0) & (xs <= cc1))[None, :]
         valid &= _window_energy(region, ph, pw) > min_energy  # a flat patch has no defined correlation
+        kreg = share = None
+        masked = np.zeros(res.shape, bool)
+        if known is not None and image.ndim == 2:
+            kreg = crop_padded(known, r_a, r_b, c_a, c_b).astype(np.float32)
+            share = _footprint_share(kreg, ph, pw, pad_px, res.shape)
+            # masked also a little below min_known: an object seen too little must still peak
+            # there (and be refused), not on the border of the allowed windows beside it
+            partial = valid & (share < full_known) & (share >= _MASKED_FLOOR * min_known)
+            todo = partial & (res >= masked_pre)
+            if todo.any():  # the masked map only over the windows that may need it
+                ys_, xs_ = np.nonzero(todo)
+                y0, y1, x0, x1 = ys_.min(), ys_.max() + 1, xs_.min(), xs_.max() + 1
+                mres = np.full(res.shape, -1.0, np.float32)
+                mres[y0:y1, x0:x1] = masked_ncc(region[y0:y1 + ph - 1, x0:x1 + pw - 1],
+                                                kreg[y0:y1 + ph - 1, x0:x1 + pw - 1], tp)
+                masked = partial & (mres > res)
+                res = np.where(masked, mres, res)
         work = np.where(valid, res, -np.inf)
         found = 0
         hy, hx = max(1, h // 2), max(1, w // 2)
@@ -410,8 +530,14 @@ def match_template_in_rois(
             score = float(work[y, x])
             if not np.isfinite(score) or score < threshold:
                 break
+            if share is not None and share[y, x] < min_known:  # seen too little: no object here
+                work[max(0, y - hy): y + hy + 1, max(0, x - hx): x + hx + 1] = -np.inf
+                continue
             patch = region[y:y + ph, x:x + pw]
-            gain = float((t0 * (patch - patch.reshape(ph * pw, -1).mean(axis=0))).sum() / tt)
+            if masked[y, x] and kreg is not None:
+                gain = _masked_gain(patch, kreg[y:y + ph, x:x + pw] > 0, tp)
+            else:
+                gain = float((t0 * (patch - patch.reshape(ph * pw, -1).mean(axis=0))).sum() / tt)
             ok = gain_range is None or gain_range[0] <= gain <= gain_range[1]
             if ok:
                 dy, dx = _subpixel(res, int(y), int(x))
@@ -424,6 +550,60 @@ def match_template_in_rois(
             else:  # a wrong amplitude or context: not this class here, look on
                 work[y, x] = -np.inf
     return out
+
+
+def _footprint_share(kreg: np.ndarray, ph: int, pw: int, pad_px: int, shape: tuple[int, ...]) -> np.ndarray:
+    """Share of known pixels in the footprint (the padded window less its pad), top-left indexed."""
+    fh, fw = ph - 2 * pad_px, pw - 2 * pad_px
+    s = cv2.boxFilter(kreg, cv2.CV_32F, (fw, fh), anchor=(0, 0), normalize=True, borderType=cv2.BORDER_CONSTANT)
+    return s[pad_px:pad_px + shape[0], pad_px:pad_px + shape[1]]
+
+
+def masked_ncc(region: np.ndarray, known: np.ndarray, template: np.ndarray, min_pixels: int = 16) -> np.ndarray:
+    """Normalised cross-correlation of ``template`` over the ``known`` pixels of each window.
+
+    Like ``cv2.TM_CCOEFF_NORMED`` (same output shape), but the means and energies of both
+    image and template are taken over the window's known pixels only (Padfield, "Masked
+    object registration in the Fourier domain", 2012): unseen pixels neither add nor
+    remove evidence. Windows with fewer than ``min_pixels`` known pixels or no variance get -1.
+    """
+    th, tw = template.shape
+    m = (known > 0).astype(np.float32)
+    scale = 1000.0  # metres to mm: float32 sums stay well conditioned
+    base = float(np.mean(region[m > 0])) if m.any() else 0.0
+    f = ((region.astype(np.float64) - base) * scale * m).astype(np.float32)
+    t = ((template.astype(np.float64) - template.mean()) * scale).astype(np.float32)
+    oh, ow = region.shape[0] - th + 1, region.shape[1] - tw + 1
+
+    def box(x: np.ndarray) -> np.ndarray:
+        return cv2.boxFilter(x.astype(np.float64), -1, (tw, th), anchor=(0, 0), normalize=False,
+                             borderType=cv2.BORDER_CONSTANT)[:oh, :ow]
+
+    n = box(m)
+    sf, sff = box(f), box(f.astype(np.float64) ** 2)
+    st = cv2.matchTemplate(m, t, cv2.TM_CCORR).astype(np.float64)
+    stt = cv2.matchTemplate(m, t * t, cv2.TM_CCORR).astype(np.float64)
+    sft = cv2.matchTemplate(f, t, cv2.TM_CCORR).astype(np.float64)
+    nn = np.maximum(n, 1.0)
+    num = sft - sf * st / nn
+    vf = sff - sf * sf / nn
+    vt = stt - st * st / nn
+    den = np.sqrt(np.maximum(vf, 0.0) * np.maximum(vt, 0.0))
+    ok = (n >= min_pixels) & (den > 1e-9 * np.maximum(nn, 1.0))
+    out = np.full((oh, ow), -1.0)
+    out[ok] = np.clip(num[ok] / den[ok], -1.0, 1.0)
+    return out.astype(np.float32)
+
+
+def _masked_gain(patch: np.ndarray, known: np.ndarray, template: np.ndarray) -> float:
+    """Least-squares amplitude of ``patch`` relative to ``template`` over the ``known`` pixels."""
+    if known.sum() < 2:
+        return 0.0
+    t = template[known].astype(np.float64)
+    x = patch[known].astype(np.float64)
+    t -= t.mean()
+    tt = float((t * t).sum())
+    return float((t * (x - x.mean())).sum() / tt) if tt > 1e-18 else 0.0
 
 
 def _window_energy(region: np.ndarray, ph: int, pw: int) -> np.ndarray:
@@ -442,13 +622,16 @@ def _window_energy(region: np.ndarray, ph: int, pw: int) -> np.ndarray:
     return total
 
 
-def isolation(jd: np.ndarray, box: Box, threshold_m: float, gap_px: int, width_px: int) -> float:
+def isolation(jd: np.ndarray, box: Box, threshold_m: float, gap_px: int, width_px: int,
+              known: np.ndarray | None = None, min_known: float = 0.5) -> float:
     """The largest share, over the four sides of ``box``, of a strip of relief above ``threshold_m``.
 
     Each strip runs along one side at ``gap_px`` .. ``gap_px + width_px`` pixels outside the
     footprint (the gap leaves the object's own blurred edge out). An object standing alone
     on the wall has flat strips (share ~0); a model matched on a part of something larger
-    (a door casing, one half of a double socket) has relief continuing into a strip.
+    (a door casing, one half of a double socket) has relief continuing into a strip. With
+    ``known``, the share is over a strip's known pixels, and a strip with less than
+    ``min_known`` of them known is unknown (it counts as 0, like an unseen strip).
     """
     out = 0.0
     g, wd = gap_px, width_px
@@ -456,18 +639,27 @@ def isolation(jd: np.ndarray, box: Box, threshold_m: float, gap_px: int, width_p
              Box(box.r0, box.c0 - g - wd, box.r1, box.c0 - g), Box(box.r0, box.c1 + g, box.r1, box.c1 + g + wd))
     for sb in sides:
         strip = crop_padded(jd, sb.r0, sb.r1, sb.c0, sb.c1)
-        if strip.size:
-            out = max(out, float(np.mean(np.abs(strip) > threshold_m)))
+        if not strip.size:
+            continue
+        stands = np.abs(strip) > threshold_m
+        if known is None:
+            out = max(out, float(np.mean(stands)))
+            continue
+        k = crop_padded(known, sb.r0, sb.r1, sb.c0, sb.c1)
+        nk = int(np.count_nonzero(k))
+        if nk and nk >= min_known * k.size:
+            out = max(out, float(np.count_nonzero(stands & k)) / nk)
     return out
 
 
 def relief_overlap(jd: np.ndarray, model: np.ndarray, box: Box, pad_px: int, threshold_m: float,
-                   gain: float) -> float:
+                   gain: float, known: np.ndarray | None = None) -> float:
     """Intersection over union of where the model and the scene stand out by ``threshold_m``.
 
     ``model`` is the padded (and smoothed) depth model over ``box`` grown by ``pad_px``; the
     scene's threshold is scaled by the match's ``gain``. The correlation alone tolerates a
-    footprint of the wrong size (a 12 cm plate on an 8 cm socket); this does not.
+    footprint of the wrong size (a 12 cm plate on an 8 cm socket); this does not. With
+    ``known``, only the known pixels are compared (an unseen part is neither relief nor wall).
     """
     patch = crop_padded(jd, box.r0 - pad_px, box.r1 + pad_px, box.c0 - pad_px, box.c1 + pad_px)
     if patch.shape != model.shape:
@@ -475,6 +667,10 @@ def relief_overlap(jd: np.ndarray, model: np.ndarray, box: Box, pad_px: int, thr
     sign = 1.0 if float(np.sum(model)) >= 0 else -1.0
     m = sign * model > threshold_m
     s = sign * patch > threshold_m * max(gain, 1e-6)
+    if known is not None:
+        k = crop_padded(known, box.r0 - pad_px, box.r1 + pad_px, box.c0 - pad_px, box.c1 + pad_px)
+        m &= k
+        s &= k
     union = int(np.count_nonzero(m | s))
     return float(np.count_nonzero(m & s)) / union if union else 0.0
 
@@ -493,9 +689,11 @@ def match_depth(
     """
     if not rois:
         return []
-    jd = depth_image(ortho, area, settings)
-    noise_relief, _ = relief_thresholds(jd, _plain_wall(ortho, area, jd, settings), settings)
-    jm = _smooth(jd, settings.match_sigma_px)
+    jd, known = depth_image_known(ortho, area, settings)
+    jl = levelled(jd, known, ortho, area, settings)
+    noise_relief, _ = relief_thresholds(jl, _plain_wall(ortho, area, jl, settings), settings)
+    jm = _smooth(jd, settings.match_sigma_px)  # correlated: the scene's own relief
+    jml = _smooth(jl, settings.match_sigma_px)  # checked: relief above the local wall
     flat_m = 1e-5  # a window whose relief varies by less than this is flat (exactly 0 in openings)
     out: list[Candidate] = []
     for cid in sorted(templates):
@@ -514,17 +712,18 @@ def match_depth(
                           model: np.ndarray = smooth_model) -> bool:
                 box = box_at((r, c), h, w)
                 thr = max(settings.isolation_relief_fraction * relief * gain, noise_relief)
-                if isolation(jm, box, thr, settings.isolation_gap_px,
-                             settings.isolation_width_px) > settings.isolation_max_occupancy:
+                if isolation(jml, box, thr, settings.isolation_gap_px, settings.isolation_width_px,
+                             known, settings.min_known_share) > settings.isolation_max_occupancy:
                     return False
-                return relief_overlap(jm, model, box, settings.template_pad_px,
+                return relief_overlap(jml, model, box, settings.template_pad_px,
                                       settings.isolation_relief_fraction * relief,
-                                      gain) >= settings.min_relief_iou
+                                      gain, known) >= settings.min_relief_iou
 
             peaks = match_template_in_rois(jm, rot, rois, settings.mu_d, settings.template_pad_px,
                                            settings.search_margin_px, settings.max_peaks_per_roi,
                                            settings.match_sigma_px, settings.gain_range, min_energy,
-                                           plausible)
+                                           plausible, known, settings.min_known_share,
+                                           settings.full_known_share, settings.masked_pre_threshold)
             for score, r, c, roi, _gain in peaks:
                 box = box_at((r, c), h, w)
                 found.append(Candidate(cid, ortho.wall_id, "depth", box, (r, c), score, roi, deg))

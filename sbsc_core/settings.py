@@ -152,6 +152,16 @@ class DepthRecognitionSettings:
     gap_fill_sigma_px: float = 1.0  # sampling gaps are filled by a normalised Gaussian of this size
     gap_fill_min_weight: float = 0.3  # ... where known neighbours weigh at least this much
     median_px: int = 3  # median filter of J_D against speckle (3 or 5; other values: off)
+    min_known_share: float = 0.6  # a match needs depth data on this share of its footprint
+    full_known_share: float = 0.95  # footprints with less data are also correlated on their data only
+    masked_pre_threshold: float = 0.3  # ... where their plain correlation reaches this (speed)
+    level_cell_m: float = 0.05  # local wall level: mean of the plain-wall pixels per cell of this size
+    level_window_m: float = 0.25  # ... then the median of the cells within this window
+    level_plain_m: float = 0.006  # ... plain-wall pixels are this close to the plane (a step, not an object)
+    level_min_share: float = 0.3  # ... a cell needs this share of plain-wall pixels
+    level_dead_m: float = 0.0005  # ... levels within this of the plane are 0 (the rest shrunk by it)
+    level_max_m: float = 0.006  # ... and it is clamped to this (misregistration steps are a few mm)
+    level_min_extent_m: float = 0.5  # ... non-zero only in regions at least this long (no flat sign)
 
 
 @dataclass
@@ -204,7 +214,7 @@ class ConsensusSettings:
     prefer_depth: bool = True  # at equal alpha: both > depth only > colour only, then goodness
     alpha_tolerance: float = 0.05  # alphas this close count as equal (the tie-break decides)
     max_disagreement_px: float = 3.0  # equation 16 for centres this close, else depth's (.inf: always)
-    depth_outscored_margin: float = 0.1  # a depth match beaten by this at its place drops out (.inf: never)
+    depth_outscored_margin: float = 0.1  # a depth match beaten by this at its place confirms no colour match
 
 
 @dataclass

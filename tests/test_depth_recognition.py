@@ -148,3 +148,124 @@ def test_holes_take_the_lowest_relief_around_them() -> None:
     rois = depth_rois(ortho, area, s)
     panels = [x for x in match_depth(ortho, area, rois, templates, s) if x.class_id == "panel"]
     assert len(panels) == 1 and np.hypot(panels[0].centre[0] - 120, panels[0].centre[1] - 200) < 1
+
+
+# --------------------------------------------------------------------------- unseen pixels
+
+
+def _unseen_below(ortho, area, row: int) -> None:
+    """No data below ``row`` (the wall under a scanner's field of view)."""
+    ortho.depth[row:] = np.nan
+    ortho.mask[row:] = False
+    area.visible[row:] = False
+
+
+def test_masked_ncc_is_the_correlation_over_known_pixels() -> None:
+    from sbsc_core.depth_recognition import masked_ncc
+
+    rng = np.random.default_rng(0)
+    region = rng.normal(0, 0.003, (30, 40)).astype(np.float32)
+    tmpl = rng.normal(0, 0.003, (9, 11)).astype(np.float32)
+    known = rng.random((30, 40)) > 0.3
+    got = masked_ncc(region, known, tmpl)
+    for y, x in [(0, 0), (5, 17), (21, 29), (10, 3)]:
+        m = known[y:y + 9, x:x + 11]
+        a, b = region[y:y + 9, x:x + 11][m].astype(float), tmpl[m].astype(float)
+        a, b = a - a.mean(), b - b.mean()
+        assert got[y, x] == pytest.approx((a * b).sum() / np.sqrt((a * a).sum() * (b * b).sum()), abs=1e-4)
+    # all known: the plain normalised cross-correlation
+    import cv2
+    full = masked_ncc(region, np.ones_like(known), tmpl)
+    assert np.allclose(full, cv2.matchTemplate(region, tmpl, cv2.TM_CCOEFF_NORMED), atol=1e-4)
+
+
+def test_partly_seen_object_is_matched_on_its_seen_part() -> None:
+    """A panel whose lower 30 % is unseen: the filled wall level there hid it from the plain NCC."""
+    templates = make_templates(synthetic_library(), PIXEL_M)
+    s = DepthRecognitionSettings()
+    ortho, area = make_wall(seed=12, holes=0)
+    paste(ortho, area, templates["panel"], (150.0, 200.0), seed=1)  # rows 120..179
+    _unseen_below(ortho, area, 162)
+    rois = depth_rois(ortho, area, s)
+    assert any(_contains(b, 150.0, 200.0) for b in rois)
+    panels = [x for x in match_depth(ortho, area, rois, templates, s) if x.class_id == "panel"]
+    assert len(panels) == 1 and np.hypot(panels[0].centre[0] - 150, panels[0].centre[1] - 200) < 1.5
+    # the plain correlation alone (no masked path) misses it (at best a match pushed up into the seen wall)
+    plain = replace(s, full_known_share=0.0)
+    assert not [x for x in match_depth(ortho, area, rois, templates, plain)
+                if x.class_id == "panel" and np.hypot(x.centre[0] - 150, x.centre[1] - 200) < 3]
+
+
+def test_an_object_seen_on_less_than_min_known_share_is_no_match() -> None:
+    templates = make_templates(synthetic_library(), PIXEL_M)
+    s = DepthRecognitionSettings()
+    ortho, area = make_wall(seed=13, holes=0)
+    paste(ortho, area, templates["panel"], (150.0, 200.0), seed=1)
+    _unseen_below(ortho, area, 148)  # 47 % of it seen
+    rois = depth_rois(ortho, area, s)
+    # no match, neither here nor pushed up into the seen wall beside the refused peak
+    assert not [x for x in match_depth(ortho, area, rois, templates, s) if x.class_id == "panel"]
+    loose = replace(s, min_known_share=0.3)
+    panels = [x for x in match_depth(ortho, area, rois, templates, loose) if x.class_id == "panel"]
+    assert len(panels) == 1 and np.hypot(panels[0].centre[0] - 150, panels[0].centre[1] - 200) < 1.5
+
+
+def test_plausibility_checks_ignore_unseen_pixels() -> None:
+    from sbsc_core.depth_recognition import isolation, padded_template, relief_overlap
+
+    model = np.full((20, 20), 0.01, np.float32)
+    jd = np.zeros((60, 60), np.float32)
+    jd[20:40, 20:40] = 0.01
+    jd[30:, :] = 0.0  # unseen below row 30, filled at wall level
+    jd[42:, 20:] = 0.01  # ... and a guess that would look like relief below it
+    known = np.ones_like(jd, bool)
+    known[30:] = False
+    box = Box(20, 20, 40, 40)
+    tp = padded_template(model, 4)
+    assert relief_overlap(jd, tp, box, 4, 0.005, 1.0) < 0.5
+    assert relief_overlap(jd, tp, box, 4, 0.005, 1.0, known) == pytest.approx(1.0)
+    assert isolation(jd, box, 0.005, 2, 3) == 1.0  # the strip below "has relief"
+    assert isolation(jd, box, 0.005, 2, 3, known) == 0.0  # ... but it is unseen
+
+
+# --------------------------------------------------------------------------- stepped wall
+
+
+def _flush_templates() -> dict:
+    from sbsc_core.types import ModelLibrary
+    from tests.recognition_synth import make_model, socket_like
+
+    view, depth = socket_like(w_px=24, h_px=24, relief_m=0.0037)  # a flush built-in socket
+    return make_templates(ModelLibrary({"flush": make_model("flush", view, depth)}, root="synthetic"), PIXEL_M)
+
+
+def test_wall_level_follows_a_long_step_but_not_a_flat_sign() -> None:
+    from sbsc_core.depth_recognition import depth_image_known, wall_level
+
+    s = replace(DepthRecognitionSettings(), refit_plane=False)  # the level alone, not the plane fit
+    ortho, area = make_wall(seed=14, holes=0)
+    ortho.depth[40:100, 100:160] += 0.003  # a 30 cm flat sign
+    jd, known = depth_image_known(ortho, area, s)
+    assert np.all(wall_level(jd, known, ortho.pixel_m, s) == 0.0)  # the sign is no step of the wall
+    ortho.depth[240:, :400] += 0.003  # a second station's wall, 3 mm off, bottom left
+    jd, known = depth_image_known(ortho, area, s)
+    level = wall_level(jd, known, ortho.pixel_m, s)
+    assert np.all(np.abs(level[265:, 20:375] - (0.003 - s.level_dead_m)) < 0.0005)
+    assert np.all(level[:200] == 0.0) and np.all(level[:, 430:] == 0.0)  # the sign, the plain wall
+
+
+def test_flush_object_on_a_stepped_wall_is_found() -> None:
+    """A 3 mm step of the wall under a 3.7 mm flush socket: isolation used to refuse it."""
+    templates = _flush_templates()
+    s = DepthRecognitionSettings()
+    ortho, area = make_wall(seed=15, holes=0)
+    ortho.depth[255:, :350] += 0.003  # a second station's wall, 3 mm off, bottom left
+    paste(ortho, area, templates["flush"], (272.0, 200.0), seed=2)
+    ortho.depth[260:285, 187:213] += 0.003  # the socket is mounted on the stepped wall
+    rois = depth_rois(ortho, area, s)
+    assert [b for b in rois if _contains(b, 272.0, 200.0) and b.width < 40]  # its own RoI
+    found = [x for x in match_depth(ortho, area, rois, templates, s) if x.class_id == "flush"]
+    assert len(found) == 1 and np.hypot(found[0].centre[0] - 272, found[0].centre[1] - 200) < 1.5
+    flat = replace(s, level_max_m=0.0)  # without the wall level: the step hides it
+    assert not [x for x in match_depth(ortho, area, depth_rois(ortho, area, flat), templates, flat)
+                if x.class_id == "flush"]
