@@ -41,6 +41,7 @@ Additions to the paper, each a named setting:
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -306,18 +307,34 @@ def cluster_boxes(boxes: list[Box], gap_px: int = 0, min_overlap: float = 0.0) -
     return sorted(work, key=lambda b: (b.r0, b.c0, b.r1, b.c1))
 
 
+@dataclass
+class DepthImages:
+    """What both depth stages read of one wall, computed once (:func:`depth_images`)."""
+
+    jd: np.ndarray  # J_D (depth_image_known)
+    known: np.ndarray  # its pixels with data, enclosed holes or openings
+    levelled: np.ndarray  # J_D minus the local wall level (levelled)
+
+
+def depth_images(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSettings) -> DepthImages:
+    """J_D, its known mask and J_D above the local wall level of one wall."""
+    jd, known = depth_image_known(ortho, area, settings)
+    return DepthImages(jd, known, levelled(jd, known, ortho, area, settings))
+
+
 def depth_rois(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSettings,
-               templates: dict[str, ModelTemplate] | None = None) -> list[Box]:
+               templates: dict[str, ModelTemplate] | None = None,
+               images: DepthImages | None = None) -> list[Box]:
     """RoIs of J_D: closed regions of depth discontinuities, clustered (section 4.2).
 
     Relief within ``border_margin_m`` of the image's sides (where the wall meets the floor,
     the ceiling and the next walls) is no object. With the ``templates`` searched, a
     region longer than ``max_roi_factor`` times the largest model and thinner than half the
     smallest is dropped too (a pipe, a cable, a step in the plaster): such regions would
-    otherwise merge the objects near them into one wall-sized RoI.
+    otherwise merge the objects near them into one wall-sized RoI. ``images`` (of this
+    wall) saves computing them again.
     """
-    jd, known = depth_image_known(ortho, area, settings)
-    jd = levelled(jd, known, ortho, area, settings)
+    jd = (images or depth_images(ortho, area, settings)).levelled
     limits = None
     if templates:
         sides = [(t.height_px, t.width_px) for t in templates.values()]
@@ -681,16 +698,18 @@ def match_depth(
     rois: list[Box],
     templates: dict[str, ModelTemplate],
     settings: DepthRecognitionSettings,
+    images: DepthImages | None = None,
 ) -> list[Candidate]:
     """Candidates {D} of every class with a depth model: rho_D >= mu_D around the RoIs.
 
     ``score`` is rho_D, ``box`` the (possibly rotated) footprint at the best match and
     ``centre`` its sub-pixel centre; several instances per class and wall are possible.
+    ``images`` (of this wall, as given to :func:`depth_rois`) saves computing them again.
     """
     if not rois:
         return []
-    jd, known = depth_image_known(ortho, area, settings)
-    jl = levelled(jd, known, ortho, area, settings)
+    images = images or depth_images(ortho, area, settings)
+    jd, known, jl = images.jd, images.known, images.levelled
     noise_relief, _ = relief_thresholds(jl, _plain_wall(ortho, area, jl, settings), settings)
     jm = _smooth(jd, settings.match_sigma_px)  # correlated: the scene's own relief
     jml = _smooth(jl, settings.match_sigma_px)  # checked: relief above the local wall

@@ -40,7 +40,7 @@ from .colour_recognition import (
     match_colour,
 )
 from .consensus import consensus_all
-from .depth_recognition import depth_rois, match_depth
+from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
 from .io.documents import detections_document, read_expected
@@ -114,8 +114,9 @@ def process_wall(cloud: PointCloud, wall: Wall, templates: dict[str, ModelTempla
     area = find_wall_area(ortho, s.wall_area)
     t_stage["wall_area"] = time.perf_counter() - t
     t = time.perf_counter()
-    d_rois = depth_rois(ortho, area, s.depth, templates)
-    d_cands = match_depth(ortho, area, d_rois, templates, s.depth)
+    d_img = depth_images(ortho, area, s.depth)  # J_D and its wall level, computed once per wall
+    d_rois = depth_rois(ortho, area, s.depth, templates, d_img)
+    d_cands = match_depth(ortho, area, d_rois, templates, s.depth, d_img)
     t_stage["depth"] = time.perf_counter() - t
     t = time.perf_counter()
     c_img = colour_image(ortho, area, s.colour)  # J_C and J_BW, computed once per wall
