@@ -186,8 +186,9 @@ def test_click_accept_records_decision_and_syncs(setup):
         session = wait_for(lambda: next(iter(scene.sessions.values()), None), what="session")
         did = sp.detections["detections"][0]["id"]
         tab.click_node(f"/spots/{did}")
-        wait_for(lambda: session.selected == did and did in session.ui_info.content, what="selection")
-        assert "pending" in session.ui_info.content and session.ui_colour.visible
+        wait_for(lambda: session.selected == did and did in session.ui_info.content
+                 and session.ui_colour.visible, what="selection")
+        assert "pending" in session.ui_info.content
         assert session.ui_accept.disabled  # nobody signed in yet
         tab.set_gui(session.ui_token, "tok-alice")
         tab.press(session.ui_sign_in)
