@@ -26,8 +26,8 @@ def default_data_dir() -> Path:
 
 
 def default_static_dir() -> Path:
-    """``static/`` beside the ``app`` package in the source tree."""
-    return Path(__file__).resolve().parent.parent / "static"
+    """The pages shipped as package data in ``app/static/``."""
+    return Path(__file__).resolve().parent / "static"
 
 
 class AppSettings(BaseSettings):

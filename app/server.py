@@ -2,7 +2,7 @@
 
 Start-up migrates the database (Alembic), empties the scratch directory, fails the jobs a
 previous server left running and starts the job supervisor; shutdown stops the workers.
-The pages in ``static/`` are served at ``/``, the API under ``/api``.
+The pages in ``app/static/`` are served at ``/``, the API under ``/api``.
 """
 
 from __future__ import annotations

@@ -136,7 +136,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument("--sets", nargs="+", default=["standard", "alt", "cross"], choices=list(SETS))
     ap.add_argument("--scene", nargs="+", default=["one_room"],
-                    help="scene descriptions in sample_projects/ (name without .yaml) or paths")
+                    help="bundled scene descriptions in sbsc_core/data/ (name without .yaml) or paths")
     ap.add_argument("--step", type=float, default=0.12, help="scanner angular step in degrees")
     ap.add_argument("--run-dir", default="runs/bench_designs")
     ap.add_argument("--far-mm", type=float, default=5.0, help="report TPs placed further off than this")

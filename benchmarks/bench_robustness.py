@@ -461,7 +461,7 @@ def main() -> None:
     ap.add_argument("--sets", nargs="+", default=["standard", "alt"])
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--variants", nargs="+", default=[v.name for v in VARIANTS], choices=list(BY_NAME))
-    ap.add_argument("--scene", default="one_room", help="scene in sample_projects/ or a .yaml path")
+    ap.add_argument("--scene", default="one_room", help="bundled scene name (sbsc_core/data/) or a .yaml path")
     ap.add_argument("--step", type=float, default=None, help="base angular step (default: the scene's)")
     ap.add_argument("--run-dir", default="/tmp/robust")
     ap.add_argument("--far-mm", type=float, default=5.0)

@@ -16,13 +16,18 @@ from .errors import SbscError
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
+    from .paths import scene_path
     from .simulate.designs import design_builder
-    from .simulate.scenarios import simulate_scenario
+    from .simulate.scenarios import simulate_scenario, simulate_scene
 
     builder = design_builder(args.designs)
     library = design_builder(args.library_designs) if args.library_designs else builder
-    simulate_scenario(args.scenario, Path(args.out), seed=args.seed, angular_step_deg=args.step,
-                      log=_log(args), object_builder=builder, library_builder=library)
+    if args.scene:
+        simulate_scene(scene_path(args.scene), Path(args.out), seed=args.seed, angular_step_deg=args.step,
+                       log=_log(args), object_builder=builder, library_builder=library)
+    else:
+        simulate_scenario(args.scenario, Path(args.out), seed=args.seed, angular_step_deg=args.step,
+                          log=_log(args), object_builder=builder, library_builder=library)
     return 0
 
 
@@ -90,7 +95,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("simulate", help="scan a virtual floor (Scenario I or II) with ground truth")
-    s.add_argument("--scenario", required=True, choices=["I", "II"])
+    which = s.add_mutually_exclusive_group(required=True)
+    which.add_argument("--scenario", choices=["I", "II"], help="the paper's floor: I (neutral walls) or II (low contrast)")
+    which.add_argument("--scene", help="a bundled scene by name (one_room, scenario_I, scenario_II) or a .yaml description")
     s.add_argument("--out", required=True)
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--step", type=float, default=None, help="scanner angular step in degrees")

@@ -28,6 +28,7 @@ import numpy as np
 from sbsc_core.errors import InputError
 from sbsc_core.io.atomic import atomic_output_dir
 from sbsc_core.io.ply import write_ply
+from sbsc_core.paths import sample_projects_dir
 
 ROOT = Path(__file__).resolve().parent.parent
 PIXEL_M = 0.005
@@ -190,8 +191,8 @@ def simulate_boxes(scene_file: Path, out: Path, step_deg: float = 0.3) -> None:
 
 
 def simulate_one_room(out: Path, step_deg: float = 0.3) -> Path:
-    """``sample_projects/one_room.yaml`` scanned: the simulator's, or plain boxes while it is incomplete."""
-    scene = ROOT / "sample_projects" / "one_room.yaml"
+    """the bundled ``one_room.yaml`` scanned: the simulator's, or plain boxes while it is incomplete."""
+    scene = sample_projects_dir() / "one_room.yaml"
     try:
         from sbsc_core.simulate.scenarios import simulate_scene
 

@@ -200,7 +200,7 @@ def _bundled_library():
 
     root = bundled_models_dir()
     if not (root.is_dir() and any(root.iterdir())):
-        pytest.skip("the bundled library sample_projects/models is not there yet")
+        pytest.skip("the bundled library sbsc_core/data/models is not there yet")
     return load_model_library(root)
 
 

@@ -11,7 +11,8 @@ from sbsc_core.errors import InputError
 from sbsc_core.io.ply import write_ply
 from sbsc_core.io.scans import colours_16_to_8, read_scan, read_scans
 
-REAL = Path("/work/shared/data/real-formats")
+from .shared_data import shared_data
+
 RNG = np.random.default_rng(7)
 
 
@@ -49,9 +50,16 @@ def _write_ply_struct(path: Path, rec: np.ndarray, fmt: str, extra_elements: str
 # --------------------------------------------------------------------------- real files
 
 
-def test_real_e57_matches_pye57():
+@pytest.fixture
+def real() -> Path:
+    """The real-format files of other projects (pye57, laspy): ``shared/data/real-formats``."""
+    return shared_data("real-formats")
+
+
+def test_real_e57_matches_pye57(real):
     import pye57
 
+    REAL = real
     cloud = read_scan(REAL / "pumpAVisualReferenceImage.e57")
     assert len(cloud) == 155_201  # all points are flagged valid in this file
     assert np.isfinite(cloud.xyz).all()
@@ -64,9 +72,10 @@ def test_real_e57_matches_pye57():
 
 
 @pytest.mark.parametrize("name", ["simple.las", "simple.laz"])
-def test_real_las_laz(name):
+def test_real_las_laz(name, real):
     import laspy
 
+    REAL = real
     cloud = read_scan(REAL / name)
     ref = laspy.read(REAL / name)
     assert len(cloud) == 1065
@@ -309,9 +318,10 @@ def test_unknown_extension_and_missing_file(tmp_path):
         read_scans([])
 
 
-def test_e57_without_colour_and_truncated_las_refused(tmp_path):
+def test_e57_without_colour_and_truncated_las_refused(tmp_path, real):
     import pye57
 
+    REAL = real
     xyz, rgb = _cloud(50)
     with pye57.E57(str(tmp_path / "nc.e57"), mode="w") as e:
         e.write_scan_raw({k: v for k, v in _e57_scan(xyz, rgb).items() if not k.startswith("color")})

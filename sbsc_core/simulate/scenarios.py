@@ -5,7 +5,7 @@ Table 1's numbers sit on 24 of its 28 walls, which are painted in neutral colour
 Scenario II is the same floor with the walls repainted close to the objects' colours (the
 paper: down to 1.56 % mean RGB difference, for the electrical panel).
 
-The two shipped descriptions ``sample_projects/scenario_I.yaml`` and ``scenario_II.yaml``
+The two shipped descriptions ``sbsc_core/data/scenario_I.yaml`` and ``scenario_II.yaml``
 are written by :func:`write_scenario_files` from :func:`scenario_description` and kept
 under version control; regenerate them with ``python -m sbsc_core.simulate.scenarios``.
 """
