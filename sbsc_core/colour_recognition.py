@@ -42,13 +42,13 @@ import cv2
 import numpy as np
 
 from .colour_descriptors import descriptor_distance, global_descriptors, normalise_descriptors
-from .depth_recognition import (
+from .depth_recognition import fill_gaps
+from .matching import (
     box_at,
     boxes_from_mask,
     cluster_boxes,
     crop_padded,
-    fill_gaps,
-    match_template_in_rois,
+    match_in_rois,
     rotated_variants,
 )
 from .settings import ColourRecognitionSettings
@@ -391,13 +391,13 @@ def _place(img: ColourImage, roi: Box, proto: WallPrototype, settings: ColourRec
             slack_c = settings.search_margin_px + abs(roi.width - sw) / 2.0
             area = Box(int(np.floor(gr - slack_r)), int(np.floor(gc - slack_c)),
                        int(np.ceil(gr + slack_r)) + 1, int(np.ceil(gc + slack_c)) + 1)
-            peaks = match_template_in_rois(diff, view, [area], -1.0, settings.search_margin_px // 2, 0, 1,
-                                           min_energy=1e-6 * view.size)
+            peaks = match_in_rois(diff, view, [area], threshold=-1.0, pad_px=settings.search_margin_px // 2,
+                                  margin_px=0, max_peaks=1, min_energy=1e-6 * view.size)
             if not peaks:
                 continue
-            rank = peaks[0][0] + (settings.rotation_margin if deg == 0 else 0.0)
+            rank = peaks[0].score + (settings.rotation_margin if deg == 0 else 0.0)
             if best is None or rank > best[0]:
-                best = (rank, (peaks[0][1], peaks[0][2]), deg, view.shape[:2])
+                best = (rank, (peaks[0].row, peaks[0].col), deg, view.shape[:2])
         if best is not None:
             _, centre, deg, (h, w) = best
             return centre, deg, box_at(centre, h, w)

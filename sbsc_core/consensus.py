@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .depth_recognition import box_at, box_overlap
+from .matching import box_at, box_overlap
 from .settings import ConsensusSettings
 from .types import Box, Candidate
 

@@ -40,20 +40,28 @@ Additions to the paper, each a named setting:
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from scipy import ndimage
 
+from .matching import (
+    box_at,
+    boxes_from_mask,
+    cluster_boxes,
+    crop_padded,
+    match_in_rois,
+    nms,
+    padded_template,
+    rotated_variants,
+)
 from .settings import DepthRecognitionSettings
 from .templates import ModelTemplate
 from .types import Box, Candidate, Orthoimage, WallArea
 
 _DEPTH_UNIT_M = 1e-5  # int16 gradient unit for cv2.Canny(dx, dy, ...)
 _LEVEL_EDGE_PX = 2  # wall level: pixels this close to relief (an object's sloped edge) are no plain wall
-_MASKED_FLOOR = 0.5  # masked NCC also down to this x min_known_share (a too little seen object peaks there)
 
 
 # --------------------------------------------------------------------------- J_D
@@ -268,45 +276,6 @@ def relief_edges(jd: np.ndarray, settings: DepthRecognitionSettings, high_m_per_
     return cv2.Canny(dx, dy, settings.canny_low_ratio * high, high, L2gradient=True) > 0
 
 
-def boxes_from_mask(mask: np.ndarray, min_side_px: int, min_area_px: int = 1) -> list[Box]:
-    """Bounding rectangles of the 8-connected regions of ``mask`` that are large enough."""
-    n, _, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
-    out = []
-    for i in range(1, n):
-        x, y, w, h, a = (int(v) for v in stats[i])
-        if max(w, h) >= min_side_px and a >= min_area_px:
-            out.append(Box(y, x, y + h, x + w))
-    return out
-
-
-def cluster_boxes(boxes: list[Box], gap_px: int = 0, min_overlap: float = 0.0) -> list[Box]:
-    """Merge boxes that overlap (or lie within ``gap_px``) until none do (paper, Figure 3 e).
-
-    With ``min_overlap`` > 0 two boxes are merged only when their intersection exceeds
-    that fraction of the smaller one.
-    """
-    work = list(boxes)
-    changed = True
-    while changed:
-        changed = False
-        out: list[Box] = []
-        for b in work:
-            merged = True
-            while merged:
-                merged = False
-                for i, o in enumerate(out):
-                    grown = Box(o.r0 - gap_px, o.c0 - gap_px, o.r1 + gap_px, o.c1 + gap_px)
-                    inter = grown.intersection(b)
-                    if inter > 0 and (min_overlap <= 0 or o.intersection(b) > min_overlap * min(o.area, b.area)):
-                        b = o.union_box(b)
-                        out.pop(i)
-                        merged = changed = True
-                        break
-            out.append(b)
-        work = out
-    return sorted(work, key=lambda b: (b.r0, b.c0, b.r1, b.c1))
-
-
 @dataclass
 class DepthImages:
     """What both depth stages read of one wall, computed once (:func:`depth_images`)."""
@@ -380,263 +349,6 @@ def _rois_from_jd(jd: np.ndarray, wall: np.ndarray, settings: DepthRecognitionSe
 
 
 # --------------------------------------------------------------------------- matching
-
-
-def rotated_variants(img: np.ndarray, rotations: tuple[int, ...]) -> list[tuple[int, np.ndarray]]:
-    """(degrees, image) for each distinct in-plane rotation (counter-clockwise, multiples of 90)."""
-    out: list[tuple[int, np.ndarray]] = []
-    for deg in rotations:
-        if deg % 90:
-            raise ValueError(f"rotation {deg} is not a multiple of 90 degrees")
-        r = np.ascontiguousarray(np.rot90(img, (deg // 90) % 4))
-        if any(o.shape == r.shape and np.allclose(o, r, atol=1e-6, equal_nan=True) for _, o in out):
-            continue
-        out.append((deg % 360, r))
-    return out
-
-
-def _subpixel(res: np.ndarray, y: int, x: int) -> tuple[float, float]:
-    """Parabolic refinement of a correlation peak (offsets in pixels, within +-0.5)."""
-    def fit(a: float, b: float, c: float) -> float:
-        den = a - 2.0 * b + c
-        if not np.isfinite(den) or den >= 0:
-            return 0.0
-        return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
-
-    dy = fit(res[y - 1, x], res[y, x], res[y + 1, x]) if 0 < y < res.shape[0] - 1 else 0.0
-    dx = fit(res[y, x - 1], res[y, x], res[y, x + 1]) if 0 < x < res.shape[1] - 1 else 0.0
-    return dy, dx
-
-
-def box_at(centre: tuple[float, float], h: int, w: int) -> Box:
-    """The h x w footprint whose centre is nearest to ``centre`` (row, col)."""
-    r0 = int(np.floor(centre[0] - (h - 1) / 2.0 + 0.5))
-    c0 = int(np.floor(centre[1] - (w - 1) / 2.0 + 0.5))
-    return Box(r0, c0, r0 + h, c0 + w)
-
-
-def box_overlap(a: Box, b: Box) -> float:
-    """Intersection over the smaller area (1 when one box lies inside the other)."""
-    small = min(a.area, b.area)
-    return a.intersection(b) / small if small > 0 else 0.0
-
-
-def nms(cands: list[Candidate], overlap: float, higher_is_better: bool = True,
-        upright_bonus: float = 0.0) -> list[Candidate]:
-    """Keep the best of candidates of one class whose boxes overlap by more than ``overlap``.
-
-    Unrotated candidates rank ``upright_bonus`` higher (objects are usually mounted upright).
-    """
-    sign = 1.0 if higher_is_better else -1.0
-    order = sorted(cands, key=lambda c: -(sign * c.score + (upright_bonus if c.rotation_deg == 0 else 0.0)))
-    kept: list[Candidate] = []
-    for c in order:
-        if all(k.wall_id != c.wall_id or k.class_id != c.class_id or box_overlap(k.box, c.box) <= overlap
-               for k in kept):
-            kept.append(c)
-    return kept
-
-
-def padded_template(template: np.ndarray, pad_px: int, sigma_px: float = 0.0) -> np.ndarray:
-    """``template`` with a border of ``pad_px`` zeros (the wall), Gaussian-smoothed if asked."""
-    tp = cv2.copyMakeBorder(np.ascontiguousarray(template, dtype=np.float32), pad_px, pad_px, pad_px, pad_px,
-                            cv2.BORDER_CONSTANT, value=0)
-    if sigma_px > 0:
-        tp = cv2.GaussianBlur(tp, (0, 0), sigma_px, borderType=cv2.BORDER_CONSTANT)
-    return tp
-
-
-def crop_padded(image: np.ndarray, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
-    """``image[r0:r1, c0:c1]`` where the parts outside the image are zeros."""
-    h, w = image.shape[:2]
-    out = np.zeros((r1 - r0, c1 - c0) + image.shape[2:], image.dtype)
-    a, b = max(r0, 0), min(r1, h)
-    c, d = max(c0, 0), min(c1, w)
-    if a < b and c < d:
-        out[a - r0:b - r0, c - c0:d - c0] = image[a:b, c:d]
-    return out
-
-
-def match_template_in_rois(
-    image: np.ndarray,
-    template: np.ndarray,
-    rois: list[Box],
-    threshold: float,
-    pad_px: int,
-    margin_px: int,
-    max_peaks: int,
-    sigma_px: float = 0.0,
-    gain_range: tuple[float, float] | None = None,
-    min_energy: float = 0.0,
-    accept: Callable[[float, float, float], bool] | None = None,
-    known: np.ndarray | None = None,
-    min_known: float = 0.0,
-    full_known: float = 1.0,
-    masked_pre: float = -1.0,
-) -> list[tuple[float, float, float, Box, float]]:
-    """Normalised cross-correlation of ``template`` (padded by ``pad_px`` of zeros) around RoIs.
-
-    ``image`` is (H, W) or (H, W, C) float32 with the background at 0 (already smoothed by
-    ``sigma_px`` if the template is to be). For every RoI, the template's centre may lie
-    anywhere in the RoI grown by ``margin_px``; the correlation map's peaks >= ``threshold``
-    are returned greedily (each suppresses a neighbourhood of half the template), at most
-    ``max_peaks`` per RoI, as (score, row, col, roi, gain) with a sub-pixel centre in image
-    pixel coordinates and the least-squares amplitude ``gain`` of the image patch relative
-    to the (padded) template; peaks whose gain is outside ``gain_range`` are skipped, and
-    windows whose energy (sum of squared deviations) is at most ``min_energy`` are never
-    peaks (their correlation is undefined), and so are those that ``accept(row, col, gain)``
-    refuses.
-
-    With ``known`` (a bool mask of the pixels that have data, 2-D images only), a peak whose
-    footprint has data on less than ``min_known`` of it is refused with its neighbourhood,
-    and a footprint with less than ``full_known`` is also correlated over its known pixels
-    only (masked NCC; the higher of the two coefficients counts, and the gain is then the
-    masked one): a filled guess of the unseen part does not hide a partly seen object. Full
-    windows keep the plain ``cv2.matchTemplate``; the masked map is only computed around the
-    partly seen windows that reach ``masked_pre`` in the plain one.
-    """
-    h, w = template.shape[:2]
-    tp = padded_template(template, pad_px, sigma_px)
-    ph, pw = tp.shape[:2]
-    t0 = tp - tp.reshape(ph * pw, -1).mean(axis=0)
-    tt = float((t0 * t0).sum())
-    if tt < 1e-18:
-        return []
-    cy_off = pad_px + (h - 1) / 2.0  # template centre relative to the padded top-left
-    cx_off = pad_px + (w - 1) / 2.0
-    out = []
-    for roi in rois:
-        # range of template centres (image coordinates), then of padded top-lefts
-        cr0, cr1 = roi.r0 - margin_px, roi.r1 - 1 + margin_px
-        cc0, cc1 = roi.c0 - margin_px, roi.c1 - 1 + margin_px
-        tl_r0 = int(np.floor(cr0 - cy_off)) - 1
-        tl_r1 = int(np.ceil(cr1 - cy_off)) + 1
-        tl_c0 = int(np.floor(cc0 - cx_off)) - 1
-        tl_c1 = int(np.ceil(cc1 - cx_off)) + 1
-        r_a, r_b = tl_r0, tl_r1 + ph
-        c_a, c_b = tl_c0, tl_c1 + pw
-        region = crop_padded(image, r_a, r_b, c_a, c_b)
-        res = cv2.matchTemplate(region, tp, cv2.TM_CCOEFF_NORMED)
-        res = np.nan_to_num(res, nan=-1.0, posinf=-1.0, neginf=-1.0)
-        ys = np.arange(res.shape[0]) + r_a + cy_off
-        xs = np.arange(res.shape[1]) + c_a + cx_off
-        valid = ((ys >= cr0) & (ys <= cr1))[:, None] & ((xs >= cc0) & (xs <= cc1))[None, :]
-        valid &= _window_energy(region, ph, pw) > min_energy  # a flat patch has no defined correlation
-        kreg = share = None
-        masked = np.zeros(res.shape, bool)
-        if known is not None and image.ndim == 2:
-            kreg = crop_padded(known, r_a, r_b, c_a, c_b).astype(np.float32)
-            share = _footprint_share(kreg, ph, pw, pad_px, res.shape)
-            # masked also a little below min_known: an object seen too little must still peak
-            # there (and be refused), not on the border of the allowed windows beside it
-            partial = valid & (share < full_known) & (share >= _MASKED_FLOOR * min_known)
-            todo = partial & (res >= masked_pre)
-            if todo.any():  # the masked map only over the windows that may need it
-                ys_, xs_ = np.nonzero(todo)
-                y0, y1, x0, x1 = ys_.min(), ys_.max() + 1, xs_.min(), xs_.max() + 1
-                mres = np.full(res.shape, -1.0, np.float32)
-                mres[y0:y1, x0:x1] = masked_ncc(region[y0:y1 + ph - 1, x0:x1 + pw - 1],
-                                                kreg[y0:y1 + ph - 1, x0:x1 + pw - 1], tp)
-                masked = partial & (mres > res)
-                res = np.where(masked, mres, res)
-        work = np.where(valid, res, -np.inf)
-        found = 0
-        hy, hx = max(1, h // 2), max(1, w // 2)
-        while found < max_peaks:
-            y, x = np.unravel_index(int(np.argmax(work)), work.shape)
-            score = float(work[y, x])
-            if not np.isfinite(score) or score < threshold:
-                break
-            if share is not None and share[y, x] < min_known:  # seen too little: no object here
-                work[max(0, y - hy): y + hy + 1, max(0, x - hx): x + hx + 1] = -np.inf
-                continue
-            patch = region[y:y + ph, x:x + pw]
-            if masked[y, x] and kreg is not None:
-                gain = _masked_gain(patch, kreg[y:y + ph, x:x + pw] > 0, tp)
-            else:
-                gain = float((t0 * (patch - patch.reshape(ph * pw, -1).mean(axis=0))).sum() / tt)
-            ok = gain_range is None or gain_range[0] <= gain <= gain_range[1]
-            if ok:
-                dy, dx = _subpixel(res, int(y), int(x))
-                r, c = float(ys[y] + dy), float(xs[x] + dx)
-                ok = accept is None or accept(r, c, gain)
-            if ok:
-                out.append((score, r, c, roi, gain))
-                found += 1
-                work[max(0, y - hy): y + hy + 1, max(0, x - hx): x + hx + 1] = -np.inf
-            else:  # a wrong amplitude or context: not this class here, look on
-                work[y, x] = -np.inf
-    return out
-
-
-def _footprint_share(kreg: np.ndarray, ph: int, pw: int, pad_px: int, shape: tuple[int, ...]) -> np.ndarray:
-    """Share of known pixels in the footprint (the padded window less its pad), top-left indexed."""
-    fh, fw = ph - 2 * pad_px, pw - 2 * pad_px
-    s = cv2.boxFilter(kreg, cv2.CV_32F, (fw, fh), anchor=(0, 0), normalize=True, borderType=cv2.BORDER_CONSTANT)
-    return s[pad_px:pad_px + shape[0], pad_px:pad_px + shape[1]]
-
-
-def masked_ncc(region: np.ndarray, known: np.ndarray, template: np.ndarray, min_pixels: int = 16) -> np.ndarray:
-    """Normalised cross-correlation of ``template`` over the ``known`` pixels of each window.
-
-    Like ``cv2.TM_CCOEFF_NORMED`` (same output shape), but the means and energies of both
-    image and template are taken over the window's known pixels only (Padfield, "Masked
-    object registration in the Fourier domain", 2012): unseen pixels neither add nor
-    remove evidence. Windows with fewer than ``min_pixels`` known pixels or no variance get -1.
-    """
-    th, tw = template.shape
-    m = (known > 0).astype(np.float32)
-    scale = 1000.0  # metres to mm: float32 sums stay well conditioned
-    base = float(np.mean(region[m > 0])) if m.any() else 0.0
-    f = ((region.astype(np.float64) - base) * scale * m).astype(np.float32)
-    t = ((template.astype(np.float64) - template.mean()) * scale).astype(np.float32)
-    oh, ow = region.shape[0] - th + 1, region.shape[1] - tw + 1
-
-    def box(x: np.ndarray) -> np.ndarray:
-        return cv2.boxFilter(x.astype(np.float64), -1, (tw, th), anchor=(0, 0), normalize=False,
-                             borderType=cv2.BORDER_CONSTANT)[:oh, :ow]
-
-    n = box(m)
-    sf, sff = box(f), box(f.astype(np.float64) ** 2)
-    st = cv2.matchTemplate(m, t, cv2.TM_CCORR).astype(np.float64)
-    stt = cv2.matchTemplate(m, t * t, cv2.TM_CCORR).astype(np.float64)
-    sft = cv2.matchTemplate(f, t, cv2.TM_CCORR).astype(np.float64)
-    nn = np.maximum(n, 1.0)
-    num = sft - sf * st / nn
-    vf = sff - sf * sf / nn
-    vt = stt - st * st / nn
-    den = np.sqrt(np.maximum(vf, 0.0) * np.maximum(vt, 0.0))
-    ok = (n >= min_pixels) & (den > 1e-9 * np.maximum(nn, 1.0))
-    out = np.full((oh, ow), -1.0)
-    out[ok] = np.clip(num[ok] / den[ok], -1.0, 1.0)
-    return out.astype(np.float32)
-
-
-def _masked_gain(patch: np.ndarray, known: np.ndarray, template: np.ndarray) -> float:
-    """Least-squares amplitude of ``patch`` relative to ``template`` over the ``known`` pixels."""
-    if known.sum() < 2:
-        return 0.0
-    t = template[known].astype(np.float64)
-    x = patch[known].astype(np.float64)
-    t -= t.mean()
-    tt = float((t * t).sum())
-    return float((t * (x - x.mean())).sum() / tt) if tt > 1e-18 else 0.0
-
-
-def _window_energy(region: np.ndarray, ph: int, pw: int) -> np.ndarray:
-    """Sum of squared deviations from the mean of every ph x pw window (top-left indexed)."""
-    x = region.astype(np.float64)
-    if x.ndim == 2:
-        x = x[..., None]
-    n = ph * pw
-    oh, ow = x.shape[0] - ph + 1, x.shape[1] - pw + 1
-    total = np.zeros((oh, ow))
-    for ch in range(x.shape[2]):
-        c = np.ascontiguousarray(x[..., ch])
-        s1 = cv2.boxFilter(c, -1, (pw, ph), anchor=(0, 0), normalize=False, borderType=cv2.BORDER_CONSTANT)
-        s2 = cv2.sqrBoxFilter(c, -1, (pw, ph), anchor=(0, 0), normalize=False, borderType=cv2.BORDER_CONSTANT)
-        total += s2[:oh, :ow] - s1[:oh, :ow] ** 2 / n
-    return total
 
 
 def isolation(jd: np.ndarray, box: Box, threshold_m: float, gap_px: int, width_px: int,
@@ -738,13 +450,14 @@ def match_depth(
                                       settings.isolation_relief_fraction * relief,
                                       gain, known) >= settings.min_relief_iou
 
-            peaks = match_template_in_rois(jm, rot, rois, settings.mu_d, settings.template_pad_px,
-                                           settings.search_margin_px, settings.max_peaks_per_roi,
-                                           settings.match_sigma_px, settings.gain_range, min_energy,
-                                           plausible, known, settings.min_known_share,
-                                           settings.full_known_share, settings.masked_pre_threshold)
-            for score, r, c, roi, _gain in peaks:
-                box = box_at((r, c), h, w)
-                found.append(Candidate(cid, ortho.wall_id, "depth", box, (r, c), score, roi, deg))
+            peaks = match_in_rois(jm, rot, rois, threshold=settings.mu_d, pad_px=settings.template_pad_px,
+                                  margin_px=settings.search_margin_px, max_peaks=settings.max_peaks_per_roi,
+                                  sigma_px=settings.match_sigma_px, gain_range=settings.gain_range,
+                                  min_energy=min_energy, accept=plausible, known=known,
+                                  min_known=settings.min_known_share, full_known=settings.full_known_share,
+                                  masked_pre=settings.masked_pre_threshold)
+            for m in peaks:
+                box = box_at((m.row, m.col), h, w)
+                found.append(Candidate(cid, ortho.wall_id, "depth", box, (m.row, m.col), m.score, m.roi, deg))
         out.extend(nms(found, settings.nms_overlap, upright_bonus=settings.rotation_margin))
     return out

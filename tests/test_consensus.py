@@ -11,7 +11,7 @@ from sbsc_core.consensus import (
     suppress_conflicts,
     weighted_centre,
 )
-from sbsc_core.depth_recognition import box_at
+from sbsc_core.matching import box_at
 from sbsc_core.settings import ConsensusSettings
 from sbsc_core.types import Box, Candidate
 

@@ -5,7 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from sbsc_core.depth_recognition import cluster_boxes, depth_rois, match_depth
+from sbsc_core.depth_recognition import depth_rois, match_depth
+from sbsc_core.matching import cluster_boxes
 from sbsc_core.settings import DepthRecognitionSettings
 from sbsc_core.templates import make_templates
 from sbsc_core.types import Box
@@ -161,7 +162,7 @@ def _unseen_below(ortho, area, row: int) -> None:
 
 
 def test_masked_ncc_is_the_correlation_over_known_pixels() -> None:
-    from sbsc_core.depth_recognition import masked_ncc
+    from sbsc_core.matching import masked_ncc
 
     rng = np.random.default_rng(0)
     region = rng.normal(0, 0.003, (30, 40)).astype(np.float32)
@@ -211,7 +212,8 @@ def test_an_object_seen_on_less_than_min_known_share_is_no_match() -> None:
 
 
 def test_plausibility_checks_ignore_unseen_pixels() -> None:
-    from sbsc_core.depth_recognition import isolation, padded_template, relief_overlap
+    from sbsc_core.depth_recognition import isolation, relief_overlap
+    from sbsc_core.matching import padded_template
 
     model = np.full((20, 20), 0.01, np.float32)
     jd = np.zeros((60, 60), np.float32)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from sbsc_core.consensus import ConsensusHit
-from sbsc_core.depth_recognition import box_at
 from sbsc_core.errors import SbscError
+from sbsc_core.matching import box_at
 from sbsc_core.templates import make_templates
 from sbsc_core.types import Orthoimage, WallFrame
 from tests.recognition_synth import synthetic_library
