@@ -129,7 +129,7 @@ def process_wall(cloud: PointCloud, wall: Wall, templates: dict[str, ModelTempla
 def _wall_cloud(cloud: PointCloud, wall: Wall) -> tuple[PointCloud, Wall]:
     """The points of one wall as a cloud of their own (what a worker process receives)."""
     sub = PointCloud(cloud.xyz[wall.point_index], cloud.rgb[wall.point_index], cloud.origin, cloud.sources)
-    return sub, Wall(wall.id, wall.frame, np.arange(len(wall.point_index), dtype=np.int64))
+    return sub, Wall(wall.id, wall.frame, np.arange(len(wall.point_index), dtype=np.int64), wall.storey)
 
 
 def _process_wall_job(sub: PointCloud, wall: Wall, templates: dict[str, ModelTemplate],
@@ -285,7 +285,15 @@ def detect_to_dir(
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
     result.timings["reading"] = read_s
-    log(f"{len(result.segmentation.walls)} walls, {len(result.openings)} openings, "
+    seg = result.segmentation
+    if seg.stray_points:
+        log(f"ignored {seg.stray_points:,} stray points outside the dense part of the scan")
+    for st in seg.storeys:
+        walls = [w for w in seg.walls if w.storey == st.id]
+        found = sum(1 for d in result.detections if d.wall_id in {w.id for w in walls})
+        log(f"storey {st.id}: floor z = {st.floor_z:.2f} m, ceiling z = {st.ceiling_z:.2f} m, "
+            f"{len(walls)} walls, {found} objects")
+    log(f"{len(seg.walls)} walls, {len(result.openings)} openings, "
         f"{len(result.detections)} objects in {result.timings['total']:.1f} s")
     progress("writing", 0.0)
     with atomic_output_dir(out) as tmp:
@@ -296,6 +304,8 @@ def detect_to_dir(
         "walls": len(result.segmentation.walls),
         "openings": len(result.openings),
         "detections": len(result.detections),
+        "storeys": len(seg.storeys),
+        "stray_points": seg.stray_points,
         "timings": result.timings,
     }
 
@@ -341,11 +351,15 @@ def write_outputs(result: DetectionResult, out: Path, pixel_m: float) -> None:
         cv2.imwrite(str(images / f"{wid}_overlay.png"), overlay_image(w, dets))
         rois[wid] = {"depth": [_box_uv(w.ortho, b) for b in w.depth_rois],
                      "colour": [_box_uv(w.ortho, b) for b in w.colour_rois]}
-    doc = detections_document(
-        [(wall.id, wall.frame) for wall in result.segmentation.walls],
-        result.openings, result.detections,
-        extra={"pixel_m": pixel_m, "classes_searched": result.classes},
-    )
+    seg = result.segmentation
+    extra: dict = {"pixel_m": pixel_m, "classes_searched": result.classes, "stray_points": seg.stray_points}
+    if len(seg.storeys) > 1:  # contract 4: a one-storey scan omits the storeys
+        extra["storeys"] = [st.to_dict() for st in seg.storeys]
+    doc = detections_document([(wall.id, wall.frame) for wall in seg.walls], result.openings,
+                              result.detections, extra=extra)
+    if len(seg.storeys) > 1:
+        for wall, entry in zip(seg.walls, doc["walls"], strict=True):
+            entry["storey"] = wall.storey
     (out / "detections.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
     (out / "rois.json").write_text(
         json.dumps({"schema": "sbsc.rois/1", "pixel_m": pixel_m, "walls": rois}, indent=1) + "\n",

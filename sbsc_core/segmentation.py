@@ -33,9 +33,11 @@ from scipy.signal import find_peaks
 
 from .errors import NoWallsError
 from .settings import SegmentationSettings
-from .types import PointCloud, Segmentation, Wall, WallFrame
+from .stray_points import DenseBox, dense_box, inside_box
+from .types import PointCloud, Segmentation, Storey, Wall, WallFrame
 
-__all__ = ["segment_floor_ceiling_walls", "find_floor_ceiling", "fit_line_2d"]
+__all__ = ["segment_floor_ceiling_walls", "find_storeys", "find_floor_ceiling", "fit_line_2d",
+           "assign_points_to_walls"]
 
 _DENSE_VOXELS = 1 << 24  # voxel grids up to this size are grouped with bincount, larger ones by sorting
 _CHUNK = 1 << 22  # points handled at once where temporaries would otherwise grow with the wall
@@ -77,23 +79,53 @@ class _Segment:
 
 
 def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSettings | None = None) -> Segmentation:
-    """Floor and ceiling levels and the walls of ``cloud`` with their frames and points.
+    """Storeys, their floor and ceiling levels and the walls of ``cloud`` with frames and points.
 
-    Walls get ids ``W01, W02, ...`` ordered by their centre (north to south, then west to
-    east, in plan) and their direction. Raises :class:`~sbsc_core.errors.NoWallsError`
-    when the cloud has no floor / ceiling pair or no wall.
+    Stray points (outside the dense part, see :mod:`~sbsc_core.stray_points`) are ignored and
+    counted. The storeys are the parts of the Z range between slabs (:func:`find_storeys`);
+    the paper's method runs on each storey as on a floor. Walls get ids ``W01, W02, ...``
+    ordered by their centre (north to south, then west to east, in plan) and their direction;
+    with several storeys the ids carry the storey (``S1-W01``). Raises
+    :class:`~sbsc_core.errors.NoWallsError` when the cloud has no floor / ceiling pair or no
+    wall, :class:`~sbsc_core.errors.InputError` when its dense part is not a building's.
     """
     s = settings or SegmentationSettings()
     n = len(cloud)
     if n == 0:
         raise NoWallsError("no walls found: the scan has no points")
     xyz = cloud.xyz
-    floor, ceiling = find_floor_ceiling(xyz[:, 2], s, xyz[:, :2])
-    height = ceiling - floor
+    box = dense_box(xyz, s, where=", ".join(cloud.sources) or "scan")
+    stray = n - _count_inside(xyz, box)
 
-    # subsample of the wall band for fitting
+    # regular subsample of the dense part for the levels and for fitting
     step = max(1, math.ceil(n / (2 * s.fit_max_points)))
     sample = xyz[::step]
+    sample = sample[inside_box(sample, box)]
+    levels = find_storeys(sample[:, 2], s, sample[:, :2])
+    multi = len(levels) > 1
+    z0 = float(cloud.origin[2])
+    storeys: list[Storey] = []
+    walls: list[Wall] = []
+    for k, (floor, ceiling) in enumerate(levels):
+        sid = f"S{k + 1}"
+        storeys.append(Storey(sid, floor + z0, ceiling + z0))
+        try:
+            found = _storey_walls(xyz, sample, box, floor, ceiling, cloud.origin, s)
+        except NoWallsError as exc:
+            if not multi:
+                raise
+            raise NoWallsError(f"storey {sid} (z = {floor + z0:.2f} to {ceiling + z0:.2f} m): {exc}") from None
+        prefix = f"{sid}-" if multi else ""
+        walls += [Wall(id=f"{prefix}W{i + 1:02d}", frame=f, point_index=idx, storey=sid)
+                  for i, (f, idx) in enumerate(found)]
+    return Segmentation(floor_z=storeys[0].floor_z, ceiling_z=storeys[-1].ceiling_z, walls=walls,
+                        storeys=storeys, stray_points=int(stray))
+
+
+def _storey_walls(xyz: np.ndarray, sample: np.ndarray, box: DenseBox, floor: float, ceiling: float,
+                  origin: np.ndarray, s: SegmentationSettings) -> list[tuple[WallFrame, np.ndarray]]:
+    """Section 3.1 on one storey: its walls (frame, point indices into ``xyz``) in id order."""
+    height = ceiling - floor
     zs = sample[:, 2]
     band = sample[(zs > floor + s.slab_margin_m) & (zs < ceiling - s.slab_margin_m)]
     if len(band) > s.fit_max_points:
@@ -107,22 +139,80 @@ def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSetting
     segs = _split_at_junctions(segs, s)
     _snap_corners(segs, s)
     segs = [g for g in segs if _big_enough(g, floor, height, s)]
+    segs = _drop_recessed(segs, s)
     if not segs:
         raise NoWallsError("no walls found: no wall face is long and high enough")
-    del sample, band, slab
+    del band, slab
 
-    index = _assign_points(xyz, segs, floor + s.slab_tolerance_m, ceiling - s.slab_tolerance_m, s)
+    index = _assign_points(xyz, segs, floor + s.slab_tolerance_m, ceiling - s.slab_tolerance_m, s, box)
     walls: list[tuple[WallFrame, np.ndarray]] = []
     for seg, idx in zip(segs, index, strict=True):
-        frame = _final_frame(xyz, idx, seg, floor, height, cloud.origin, s)
-        if frame is not None and frame.width_m >= s.min_wall_length_m:
-            walls.append((frame, idx))
+        done = _final_frame(xyz, idx, seg, floor, ceiling, origin, s)
+        if done is not None and done[0].width_m >= s.min_wall_length_m:
+            walls.append(done)
     if not walls:
         raise NoWallsError("no walls found: no wall kept its points")
     walls.sort(key=_order_key)
-    out = [Wall(id=f"W{i + 1:02d}", frame=f, point_index=idx) for i, (f, idx) in enumerate(walls)]
-    z0 = float(cloud.origin[2])
-    return Segmentation(floor_z=floor + z0, ceiling_z=ceiling + z0, walls=out)
+    return walls
+
+
+def _count_inside(xyz: np.ndarray, box: DenseBox) -> int:
+    return sum(int(inside_box(xyz[a: a + _CHUNK], box).sum()) for a in range(0, len(xyz), _CHUNK))
+
+
+def find_storeys(z: np.ndarray, settings: SegmentationSettings | None = None,
+                 xy: np.ndarray | None = None) -> list[tuple[float, float]]:
+    """(floor, ceiling) of every storey, bottom up, in the frame of ``z``.
+
+    Storeys are separated by slabs: Z ranges of at least ``min_slab_m`` where the histogram
+    of Z (``storey_bin_m`` bins) holds less than ``slab_gap_fraction`` of its median bin
+    between the lowest and the highest point (a floor's walls fill every bin between its
+    floor and its ceiling; inside a slab there is nothing to see). A part lower than
+    ``min_room_height_m`` is no storey of its own: it joins its neighbour across the thinner
+    slab. Each part's floor and ceiling are then found by :func:`find_floor_ceiling`. The
+    thresholds are fractions, so a regular subsample gives the same storeys.
+    """
+    s = settings or SegmentationSettings()
+    z = np.asarray(z)
+    step = max(1, math.ceil(len(z) / s.histogram_max_points))
+    zs = z[::step]
+    keep = np.isfinite(zs)
+    zs = zs[keep].astype(np.float64)
+    if len(zs) == 0:
+        raise NoWallsError("no walls found: the scan has no points")
+    xs = None if xy is None else np.asarray(xy)[::step][keep]
+    lo, b = float(zs.min()), s.storey_bin_m
+    counts = np.bincount(((zs - lo) / b).astype(np.int64)).astype(np.float64)
+    empty = counts < s.slab_gap_fraction * float(np.median(counts))
+    # runs of empty bins: (first, end) bin numbers
+    edges = np.diff(np.concatenate(([0], empty.astype(np.int8), [0])))
+    runs = [(a, e) for a, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True)
+            if (e - a) * b >= s.min_slab_m]
+    # parts between the slabs: [start, end) bins, merged while one is too low for a storey
+    cuts = [(a, e) for a, e in runs if 0 < a and e < len(counts)]
+    parts = [[0, len(counts)]]
+    for a, e in cuts:
+        parts[-1][1] = a
+        parts.append([e, len(counts)])
+    gaps = [e - a for a, e in cuts]
+    while len(parts) > 1:
+        heights = [(p1 - p0) * b for p0, p1 in parts]
+        k = int(np.argmin(heights))
+        if heights[k] >= s.min_room_height_m:
+            break
+        # join with the neighbour across the thinner slab
+        if k == 0 or (k < len(parts) - 1 and gaps[k] < gaps[k - 1]):
+            j = k
+        else:
+            j = k - 1
+        parts[j] = [parts[j][0], parts[j + 1][1]]
+        del parts[j + 1], gaps[j]
+    out = []
+    for p0, p1 in parts:
+        z_a, z_b = lo + p0 * b, lo + p1 * b
+        sel = (zs >= z_a) & (zs < z_b)
+        out.append(find_floor_ceiling(zs[sel], s, None if xs is None else xs[sel]))
+    return out
 
 
 def find_floor_ceiling(z: np.ndarray, settings: SegmentationSettings | None = None,
@@ -372,6 +462,34 @@ def _big_enough(g: _Segment, floor: float, height: float, s: SegmentationSetting
     return len(layers) * s.fit_cell_m >= s.min_wall_height_fraction * height
 
 
+def _drop_recessed(segs: list[_Segment], s: SegmentationSettings) -> list[_Segment]:
+    """Drop planes set back in an opening of a wall: a door leaf a few cm behind the wall face.
+
+    A plane is such a recess when another plane of the same facing stands in front of it by
+    at most ``recess_max_m``, spans its whole length, and reaches higher than it by more
+    than a voxel (the wall goes on above the door; the leaf stops at the door head).
+    """
+    out = []
+    for g in segs:
+        top_g = float(g.cells[:, 2].max())
+        recessed = False
+        for h in segs:
+            if h is g or float(g.n @ h.n) < math.cos(math.radians(s.angle_tolerance_deg)):
+                continue
+            ahead = h.s - float(g.cells[:, :2].mean(axis=0) @ h.n)  # how far h's face is in front of g
+            if not 0.5 * s.wall_plane_tolerance_m < ahead <= s.recess_max_m:
+                continue
+            ug = g.cells[:, :2] @ h.t
+            if ug.min() < h.u0 - s.fit_cell_m or ug.max() > h.u1 + s.fit_cell_m:
+                continue
+            if float(h.cells[:, 2].max()) > top_g + 2 * s.fit_cell_m:
+                recessed = True
+                break
+        if not recessed:
+            out.append(g)
+    return out
+
+
 # --------------------------------------------------------------------------- room side
 
 
@@ -523,13 +641,17 @@ def _region_cells(g: _Segment, s: SegmentationSettings, lo: np.ndarray, nx: int,
     return np.unique(ij[:, 1] * nx + ij[:, 0])
 
 
-def _band_index(z: np.ndarray, z_lo: float, z_hi: float, chunk: int = 1 << 23) -> np.ndarray:
-    """Indices of the points with z_lo < z < z_hi (int32 when they fit), chunk by chunk."""
-    dtype = np.int32 if len(z) < 2**31 - 1 else np.int64
+def _band_index(xyz: np.ndarray, z_lo: float, z_hi: float, box: DenseBox | None = None,
+                chunk: int = 1 << 23) -> np.ndarray:
+    """Indices of the points with z_lo < z < z_hi inside ``box`` (int32 when they fit), chunk by chunk."""
+    dtype = np.int32 if len(xyz) < 2**31 - 1 else np.int64
     parts = []
-    for a in range(0, len(z), chunk):
-        zc = z[a: a + chunk]
-        parts.append((np.flatnonzero((zc > z_lo) & (zc < z_hi)) + a).astype(dtype))
+    for a in range(0, len(xyz), chunk):
+        zc = xyz[a: a + chunk, 2]
+        ok = (zc > z_lo) & (zc < z_hi)
+        if box is not None:
+            ok &= inside_box(xyz[a: a + chunk], box)
+        parts.append((np.flatnonzero(ok) + a).astype(dtype))
     return np.concatenate(parts) if parts else np.zeros(0, dtype)
 
 
@@ -544,7 +666,7 @@ def _bucket(a: np.ndarray, lo: float, cell: float, n: int) -> np.ndarray:
 
 
 def _assign_points(xyz: np.ndarray, segs: list[_Segment], z_lo: float, z_hi: float,
-                   s: SegmentationSettings) -> list[np.ndarray]:
+                   s: SegmentationSettings, box: DenseBox | None = None) -> list[np.ndarray]:
     """Indices of the points of each wall: in its slab and nearer to its plane than to any other's.
 
     Every point is decided on its own, so a large cloud is cut into consecutive parts that
@@ -553,18 +675,18 @@ def _assign_points(xyz: np.ndarray, segs: list[_Segment], z_lo: float, z_hi: flo
     n = len(xyz)
     parts = min(_ASSIGN_THREADS, os.cpu_count() or 1) if n >= _THREAD_MIN_POINTS else 1
     if parts <= 1:
-        return _assign_part(xyz, segs, z_lo, z_hi, s)
+        return _assign_part(xyz, segs, z_lo, z_hi, s, box)
     cuts = [n * k // parts for k in range(parts + 1)]
     with ThreadPoolExecutor(max_workers=parts) as pool:
-        done = list(pool.map(lambda k: _assign_part(xyz[cuts[k]:cuts[k + 1]], segs, z_lo, z_hi, s),
+        done = list(pool.map(lambda k: _assign_part(xyz[cuts[k]:cuts[k + 1]], segs, z_lo, z_hi, s, box),
                              range(parts)))
     return [np.concatenate([idx[w] + cuts[k] for k, idx in enumerate(done)]) for w in range(len(segs))]
 
 
 def _assign_part(xyz: np.ndarray, segs: list[_Segment], z_lo: float, z_hi: float,
-                 s: SegmentationSettings) -> list[np.ndarray]:
+                 s: SegmentationSettings, box: DenseBox | None = None) -> list[np.ndarray]:
     """:func:`_assign_points` on one part of the cloud (indices relative to the part)."""
-    band = _band_index(xyz[:, 2], z_lo, z_hi)
+    band = _band_index(xyz, z_lo, z_hi, box)
     if len(band) == 0:
         return [np.zeros(0, np.int64) for _ in segs]
     x = xyz[band, 0]
@@ -612,9 +734,15 @@ def _assign_part(xyz: np.ndarray, segs: list[_Segment], z_lo: float, z_hi: float
     return [band[grouped[bounds[w + 1]: bounds[w + 2]]].astype(np.int64) for w in range(len(segs))]
 
 
-def _final_frame(xyz: np.ndarray, idx: np.ndarray, g: _Segment, floor: float, height: float,
-                 origin: np.ndarray, s: SegmentationSettings) -> WallFrame | None:
-    """Trimmed least-squares plane on the wall's own points, extents and contract-4 frame."""
+def _final_frame(xyz: np.ndarray, idx: np.ndarray, g: _Segment, floor: float, ceiling: float,
+                 origin: np.ndarray, s: SegmentationSettings) -> tuple[WallFrame, np.ndarray] | None:
+    """Trimmed least-squares plane on the wall's own points, extents and contract-4 frame.
+
+    The wall's height is its own: the top of the points on its plane (its room's ceiling,
+    which may be lower than the storey's highest one), or the storey's ceiling when the
+    points reach it. Points at and above a lower top (its room's ceiling) leave the wall.
+    Returns the frame and the wall's point indices.
+    """
     if len(idx) < 10:
         return None
     sub = idx[:: max(1, math.ceil(len(idx) / s.refit_max_points))]
@@ -639,9 +767,51 @@ def _final_frame(xyz: np.ndarray, idx: np.ndarray, g: _Segment, floor: float, he
     u1 = f1 if g.e1 is None else float(g.e1 @ t)
     if u1 - u0 <= 0:
         return None
+    top = float(np.quantile(xyz[idx[on], 2], s.wall_top_quantile))
+    if top >= ceiling - s.slab_tolerance_m - s.slab_margin_m:
+        top = ceiling
+    else:  # a lower room ceiling: it is the wall's top, its points are no wall points
+        idx = idx[xyz[idx, 2] < top - s.slab_tolerance_m]
     corner = np.array([*(off * n + u0 * t), floor]) + origin
-    return WallFrame(origin=corner, axis_u=np.array([t[0], t[1], 0.0]), axis_v=np.array([0.0, 0.0, 1.0]),
-                     normal=np.array([n[0], n[1], 0.0]), width_m=u1 - u0, height_m=height)
+    frame = WallFrame(origin=corner, axis_u=np.array([t[0], t[1], 0.0]), axis_v=np.array([0.0, 0.0, 1.0]),
+                      normal=np.array([n[0], n[1], 0.0]), width_m=u1 - u0, height_m=top - floor)
+    return frame, idx
+
+
+def assign_points_to_walls(xyz: np.ndarray, origin: np.ndarray, walls: list[Wall],
+                           settings: SegmentationSettings | None = None) -> list[np.ndarray]:
+    """Indices into ``xyz`` of the points of each wall, from the walls' frames alone.
+
+    A pure function of one chunk of points (``xyz`` float32 relative to ``origin``), so
+    a cloud too large for memory is assigned chunk by chunk (add the chunk's offset to the
+    indices). A point belongs to a wall when it lies over the wall's frame (``u`` within
+    ``wall_plane_tolerance_m`` of ``0..width``, ``slab_tolerance_m`` above its floor and
+    below its top) between ``behind_depth_m`` behind and ``object_depth_m`` in front of the
+    plane; of several such walls the one whose plane is nearest gets it.
+    """
+    s = settings or SegmentationSettings()
+    n = len(xyz)
+    best = np.full(n, np.inf, np.float32)
+    owner = np.full(n, -1, np.int32)
+    tol, sl = s.wall_plane_tolerance_m, s.slab_tolerance_m
+    for w, wall in enumerate(walls):
+        f = wall.frame
+        o = (f.origin - np.asarray(origin, np.float64)).astype(np.float32)
+        for a in range(0, n, _CHUNK):
+            c = xyz[a: a + _CHUNK] - o
+            v = c[:, 2]
+            u = c[:, 0] * np.float32(f.axis_u[0]) + c[:, 1] * np.float32(f.axis_u[1])
+            d = c[:, 0] * np.float32(f.normal[0]) + c[:, 1] * np.float32(f.normal[1])
+            ok = ((d >= -s.behind_depth_m) & (d <= s.object_depth_m) & (u >= -tol) & (u <= f.width_m + tol)
+                  & (v > sl) & (v < f.height_m - sl))
+            ad = np.abs(d)
+            ok &= ad < best[a: a + _CHUNK]
+            sel = np.flatnonzero(ok)
+            best[a + sel] = ad[sel]
+            owner[a + sel] = w
+    grouped = np.argsort(owner, kind="stable")
+    bounds = np.concatenate([[0], np.cumsum(np.bincount(owner.astype(np.int64) + 1, minlength=len(walls) + 1))])
+    return [grouped[bounds[w + 1]: bounds[w + 2]].astype(np.int64) for w in range(len(walls))]
 
 
 def _free_extent(u: np.ndarray, centre: float, gap: float) -> tuple[float, float]:

@@ -55,6 +55,19 @@ class SegmentationSettings:
     extent_gap_m: float = 0.3  # a free end is where the wall's points stop for longer than this
     assign_cell_m: float = 0.25  # XY bucket used to find the points of each wall quickly
     refit_max_points: int = 50_000  # points used for the final least-squares plane of each wall
+    wall_top_quantile: float = 0.998  # a wall's top (its own room's ceiling) is this quantile of its plane's z
+    recess_max_m: float = 0.3  # a plane this far behind a wall, inside it and not reaching its top is no wall
+    # stray points and the dense extent (see stray_points.py)
+    stray_sample_points: int = 2_000_000  # the dense part is found on a regular subsample of this size
+    stray_cell_m: float = 1.0  # voxel of the occupancy grid
+    stray_min_fraction: float = 0.02  # a voxel is dense with this x the points of a typical point's voxel
+    stray_min_points: int = 3  # ... and at least this many
+    stray_margin_m: float = 1.0  # the dense box is grown by this
+    max_extent_m: float = 2000.0  # a dense part wider than this is not a building
+    # storeys: parts of the Z range separated by slabs (Z bins with almost no points)
+    storey_bin_m: float = 0.02  # Z histogram bin of the storey profile
+    slab_gap_fraction: float = 0.03  # a bin is in a slab with less than this x the median bin count
+    min_slab_m: float = 0.08  # a slab between two storeys is at least this thick
 
 
 @dataclass

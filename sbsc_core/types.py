@@ -94,15 +94,31 @@ class Wall:
     id: str
     frame: WallFrame
     point_index: np.ndarray  # (K,) int64 indices into PointCloud
+    storey: str | None = None  # id of its storey (``S1``, ...)
+
+
+@dataclass(frozen=True)
+class Storey:
+    """One storey of a scan: its floor and (highest) ceiling level, world Z (contract 4)."""
+
+    id: str  # "S1", "S2", ... bottom up
+    floor_z: float
+    ceiling_z: float
+
+    def to_dict(self) -> dict:
+        return {"id": self.id, "floor_z": round(float(self.floor_z), 4),
+                "ceiling_z": round(float(self.ceiling_z), 4)}
 
 
 @dataclass
 class Segmentation:
-    """Result of floor / ceiling / wall segmentation."""
+    """Result of floor / ceiling / wall segmentation: the walls of every storey in one list."""
 
-    floor_z: float  # world Z
-    ceiling_z: float  # world Z
+    floor_z: float  # world Z of the lowest floor
+    ceiling_z: float  # world Z of the highest ceiling
     walls: list[Wall]
+    storeys: list[Storey] = field(default_factory=list)  # bottom up
+    stray_points: int = 0  # points outside the dense part of the scan, ignored
 
 
 @dataclass

@@ -23,7 +23,7 @@ from ..types import PointCloud
 
 SCAN_EXTENSIONS: tuple[str, ...] = (".ply", ".e57", ".las", ".laz", ".pcd", ".xyz", ".pts", ".txt")
 CHUNK_POINTS = 1 << 21  # points converted per step (bounds the float64 working set)
-_ORIGIN_SAMPLE = 100_000  # points of the first chunk whose mean sets the origin
+_ORIGIN_SAMPLE = 100_000  # points of the first chunk whose median sets the origin
 _READ_THREADS = 4  # at most this many threads convert chunks of a binary PLY
 
 
@@ -36,7 +36,7 @@ class _Collector:
     ``capacity`` (an upper bound of the point count) lets the output arrays be
     allocated once; without it chunks are kept and joined at the end. ``origin``
     fixes the recentring origin (several files sharing one); otherwise it is the
-    rounded mean of the first chunk. Colours are kept as given (uint8, or uint16
+    rounded median of the first chunk. Colours are kept as given (uint8, or uint16
     until :meth:`finish` decides whether they use 16 bits).
     """
 
@@ -54,11 +54,11 @@ class _Collector:
             self._rgb = np.empty((capacity, 3), rgb_dtype)
 
     def set_origin(self, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> None:
-        """Fix the origin, unless given, as the rounded mean of the first points of these columns."""
+        """Fix the origin, unless given, as the rounded median of the first points of these columns."""
         if self.origin is None:
             k = min(len(x), _ORIGIN_SAMPLE)
             with np.errstate(all="ignore"):
-                mean = np.array([np.nanmean(np.asarray(c[:k], np.float64)) for c in (x, y, z)])
+                mean = np.array([np.nanmedian(np.asarray(c[:k], np.float64)) for c in (x, y, z)])  # stray-proof
             self.origin = np.where(np.isfinite(mean), np.round(mean), 0.0) + 0.0
 
     def add(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, rgb: np.ndarray) -> None:
@@ -493,8 +493,8 @@ def _read_las(path: Path, origin: np.ndarray | None) -> PointCloud:
             total = int(header.point_count)
             if total == 0:
                 raise InputError(path, "no points")
-            if origin is None:
-                origin = np.round((np.asarray(header.mins) + np.asarray(header.maxs)) / 2.0)
+            # without a given origin the collector takes the median of the first points: the
+            # header's box may be sized by a stray point
             col = _Collector(path, capacity=total, origin=origin, rgb_dtype=np.uint16)
             for pts in reader.chunk_iterator(CHUNK_POINTS):
                 rgb = np.stack([np.asarray(pts.red), np.asarray(pts.green), np.asarray(pts.blue)], axis=1)
