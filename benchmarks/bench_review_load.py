@@ -63,7 +63,7 @@ def free_port() -> int:
 
 def start_server(data: Path, port: int) -> subprocess.Popen:
     env = {**__import__("os").environ, "SBSC_DATA_DIR": str(data), "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "sbsc_core", "serve", "--port", str(port)], env=env,
+    proc = subprocess.Popen([sys.executable, "-m", "app", "serve", "--port", str(port)], env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=str(ROOT))
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:

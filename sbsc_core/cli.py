@@ -1,18 +1,358 @@
 """The ``sbsc`` command line (contract 6).
 
-Every command exits 0 on success. Bad input prints one line, ``sbsc: error: ...``, naming
-the file or field and the reason, and exits 2; no partial output is left behind.
-Each sub-command imports its implementation lazily so that ``sbsc --help`` stays fast.
+Conventions, the same for every command:
+
+- ``--version``; ``-q/--quiet``, ``-v/--verbose`` and ``--debug`` anywhere on the line
+  (before or after the command).
+- Messages and progress go to stderr: progress bars per stage and per wall only when stderr
+  is a terminal and ``-q`` is not given; ``-q`` keeps only warnings and errors; ``-v`` adds
+  details. ``--json`` prints a machine-readable summary on stdout (``evaluate --json -``).
+- Exit 0 on success. Bad input prints one line, ``sbsc: error: ...``, naming the file or
+  field and the reason, and exits 2; no partial output is left behind, and a missing parent
+  folder of an output is an error, never created. An internal error is one line too (exit 1)
+  with a hint to ``--debug``, which shows the traceback. Numerical warnings are not printed.
+
+Each command imports its implementation lazily so that ``sbsc --help`` stays fast. Commands
+of other packages (the review app's ``serve`` and ``user``) register through the entry-point
+group ``sbsc.commands``: a callable that receives a :class:`Commands` and adds its sub-parsers.
+The library never imports them.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import dataclasses
+import json
+import logging
+import os
 import sys
-from collections.abc import Sequence
+import traceback
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from importlib.metadata import entry_points
 from pathlib import Path
+from typing import Any
 
-from .errors import SbscError
+from . import __version__
+from .errors import InputError, SbscError
+
+ENTRY_POINT_GROUP = "sbsc.commands"
+LOGGER = "sbsc"
+EXIT_BAD_INPUT = 2
+EXIT_INTERNAL = 1
+
+Command = Callable[[argparse.Namespace], int | None]
+Registrar = Callable[["Commands"], None]
+
+
+# --------------------------------------------------------------------------- parser
+
+
+class Parser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors are one line, like every other error."""
+
+    def error(self, message: str):  # noqa: D401 - argparse API
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def common_options() -> argparse.ArgumentParser:
+    """``-q``, ``-v`` and ``--debug``, accepted before and after the command.
+
+    Their defaults are suppressed so that a sub-parser does not reset what the main
+    parser has read.
+    """
+    c = argparse.ArgumentParser(add_help=False)
+    g = c.add_argument_group("output")
+    g.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                   help="print only warnings and errors; no progress")
+    g.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
+                   help="print more details (debug messages)")
+    g.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                   help="show the traceback of an error and every warning")
+    return c
+
+
+class Commands:
+    """The sub-commands of ``sbsc``; what an ``sbsc.commands`` entry point receives."""
+
+    def __init__(self, subparsers: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+        self.subparsers = subparsers
+        self.common = common
+        self.names: list[str] = []
+
+    def add(self, name: str, *, help: str, func: Command | None = None,
+            description: str | None = None) -> argparse.ArgumentParser:
+        """Add the sub-command ``name`` (with the common options) and return its parser.
+
+        A name that is already taken raises ``ValueError``.
+        """
+        if name in self.subparsers.choices:
+            raise ValueError(f"command {name!r} exists already")
+        p = self.subparsers.add_parser(name, help=help, description=description or help,
+                                       parents=[self.common])
+        if func is not None:
+            p.set_defaults(func=func)
+        self.names.append(name)
+        return p
+
+
+def output_option(p: argparse.ArgumentParser, what: str, required: bool = True) -> None:
+    p.add_argument("--out", required=required, metavar="DIR" if what == "dir" else "FILE",
+                   help=("output folder (created; its parent folder must exist)" if what == "dir"
+                         else "output file (its folder must exist)"))
+
+
+def json_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+
+
+def _add_simulate(cmds: Commands) -> None:
+    s = cmds.add("simulate", func=_cmd_simulate,
+                 help="scan a virtual floor (a bundled scene or a description) with ground truth")
+    which = s.add_mutually_exclusive_group(required=True)
+    which.add_argument("--scenario", choices=["I", "II"],
+                       help="the paper's floor: I (neutral walls) or II (walls close to the objects' colours)")
+    which.add_argument("--scene", metavar="NAME|FILE",
+                       help="a bundled scene (one_room, scenario_I, scenario_II) or a scene description .yaml")
+    output_option(s, "dir")
+    s.add_argument("--seed", type=int, default=0, help="random seed of the scanner noise and the design changes (default: 0)")
+    s.add_argument("--step", type=float, default=None, metavar="DEG",
+                   help="scanner angular step in degrees (default: the scene's)")
+    s.add_argument("--designs", choices=["standard", "alt"], default="standard",
+                   help="design set the objects are built with (default: standard)")
+    s.add_argument("--library-designs", choices=["standard", "alt"], default=None,
+                   help="design set of the model library (default: the same as --designs)")
+    json_option(s)
+
+
+def _add_detect(cmds: Commands) -> None:
+    d = cmds.add("detect", func=_cmd_detect, help="recognize objects on the walls of a scan")
+    d.add_argument("scans", nargs="+", metavar="SCAN",
+                   help="scan files of one building (.ply .e57 .las .laz .pcd .xyz .pts .txt), registered")
+    d.add_argument("--models", required=True, metavar="DIR", help="model library directory (contract 2)")
+    d.add_argument("--expected", metavar="FILE", help="expected.json (contract 3); default: search every class")
+    output_option(d, "dir")
+    d.add_argument("--settings", metavar="FILE", help="JSON/YAML file overriding DetectionSettings")
+    json_option(d)
+
+
+def _add_evaluate(cmds: Commands) -> None:
+    e = cmds.add("evaluate", func=_cmd_evaluate,
+                 help="compare detections with ground truth (the paper's Table 1)")
+    e.add_argument("--detections", required=True, metavar="FILE", help="detections.json of sbsc detect")
+    e.add_argument("--truth", required=True, metavar="FILE", help="ground_truth.json of sbsc simulate")
+    e.add_argument("--json", metavar="FILE",
+                   help="also write the table as JSON to FILE; '-' prints only the JSON on stdout")
+    e.add_argument("--max-distance", type=float, default=0.10, metavar="M",
+                   help="match radius in metres (default: 0.10)")
+
+
+def _add_export_ifc(cmds: Commands) -> None:
+    x = cmds.add("export-ifc", func=_cmd_export_ifc, help="write detections as an IFC as-is model")
+    x.add_argument("detections", metavar="DETECTIONS", help="detections.json of sbsc detect")
+    output_option(x, "file")
+    x.add_argument("--schema", default="IFC4", metavar="SCHEMA",
+                   help="IFC4 (default), IFC4X3 or IFC2X3")
+    x.add_argument("--accepted-only", action="store_true",
+                   help="only detections a reviewer accepted (review documents)")
+    x.add_argument("--models", metavar="DIR", help="model library for IFC classes (default: bundled)")
+    x.add_argument("--crs", metavar="EPSG:NNNN",
+                   help="projected CRS of the scan's coordinates (default: the CRS recorded in the detections, if any)")
+    json_option(x)
+
+
+def _add_compare(cmds: Commands) -> None:
+    c = cmds.add("compare", func=_cmd_compare, help="Scan-vs-BIM: detections against an as-designed IFC")
+    c.add_argument("--as-designed", required=True, metavar="IFC", help="the as-designed IFC model")
+    c.add_argument("--detections", required=True, metavar="FILE", help="detections.json of sbsc detect")
+    output_option(c, "dir")
+    c.add_argument("--tolerance", type=float, default=0.10, metavar="M",
+                   help="displacement tolerance in metres (default: 0.10)")
+    json_option(c)
+
+
+BUILTIN: tuple[Registrar, ...] = (_add_simulate, _add_detect, _add_evaluate, _add_export_ifc, _add_compare)
+
+
+def plugin_registrars() -> list[Registrar]:
+    """The callables of the ``sbsc.commands`` entry points of the installed packages."""
+    found = []
+    for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        try:
+            found.append(ep.load())
+        except Exception as exc:  # a broken plugin must not break the other commands
+            logging.getLogger(LOGGER).warning("sbsc: command %r not loaded: %s", ep.name, exc)
+    return found
+
+
+def build_parser(registrars: Sequence[Registrar] | None = None) -> argparse.ArgumentParser:
+    """The parser of ``sbsc`` with the built-in commands and those of ``registrars``.
+
+    ``registrars`` defaults to the ``sbsc.commands`` entry points; a registrar adding a name
+    that already exists is skipped.
+    """
+    common = common_options()
+    p = Parser(prog="sbsc", parents=[common],
+               description="Find secondary building service components (sockets, switches, signs, ...) "
+                           "in coloured laser scans, review them and export them to IFC.",
+               epilog="Options -q, -v and --debug may also follow the command.")
+    p.add_argument("--version", action="version", version=f"sbsc {__version__}",
+                   help="print the version and exit")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    cmds = Commands(sub, common)
+    for reg in BUILTIN:
+        reg(cmds)
+    for reg in plugin_registrars() if registrars is None else registrars:
+        try:
+            reg(cmds)
+        except ValueError as exc:
+            logging.getLogger(LOGGER).warning("sbsc: %s: %s", getattr(reg, "__name__", reg), exc)
+    return p
+
+
+# --------------------------------------------------------------------------- output
+
+
+class Console:
+    """Where a command writes: log messages and progress bars on stderr, results on stdout."""
+
+    def __init__(self, quiet: bool = False, verbose: int = 0, debug: bool = False) -> None:
+        self.quiet, self.verbose, self.debug = quiet, verbose, debug
+        self.progress_enabled = not quiet and _isatty(sys.stderr)
+        self._bar = None
+        self._stage: str | None = None
+        self.logger = logging.getLogger(LOGGER)
+
+    def info(self, msg: str) -> None:
+        self.logger.info(msg)
+
+    def progress(self, stage: str, fraction: float) -> None:
+        """A bar per stage; the ``walls`` stage counts walls (``Progress`` of the pipeline)."""
+        if not self.progress_enabled:
+            return
+        from tqdm import tqdm
+
+        if stage != self._stage:
+            self.close()
+            self._stage = stage
+            if stage == "done":
+                return
+            total, unit = 100, "%"
+            if stage == "walls" and fraction > 0:
+                n = 1.0 / fraction
+                if abs(n - round(n)) < 1e-6:
+                    total, unit = round(n), " walls"
+            self._bar = tqdm(total=total, desc=f"{stage:<12}", unit=unit, file=sys.stderr, leave=False,
+                             dynamic_ncols=True, bar_format="{desc} {percentage:3.0f}%|{bar}| "
+                             "{n_fmt}/{total_fmt}{unit} [{elapsed}]" if unit != "%" else
+                             "{desc} {percentage:3.0f}%|{bar}| [{elapsed}]")
+        if self._bar is not None:
+            n = round(fraction * self._bar.total)
+            self._bar.update(max(0, n - self._bar.n))
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.refresh()  # the stage's last state, then the line is cleared
+            self._bar.close()
+            self._bar = None
+
+    def result(self, data: Any) -> None:
+        """The ``--json`` summary on stdout."""
+        print(json.dumps(_jsonable(data), indent=2), flush=True)
+
+
+def _isatty(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+class _TqdmHandler(logging.Handler):
+    """Log lines on stderr that do not break a progress bar."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            msg = self.format(record)
+            from tqdm import tqdm
+
+            tqdm.write(msg, file=sys.stderr)
+        except Exception:  # pragma: no cover - logging must not raise
+            self.handleError(record)
+
+
+def _jsonable(x: Any) -> Any:
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        return _jsonable(dataclasses.asdict(x))
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, Path):
+        return str(x)
+    if hasattr(x, "tolist"):
+        return x.tolist()
+    return x
+
+
+_console: Console | None = None
+
+
+def console() -> Console:
+    """The console of the running command (a quiet one outside ``main``)."""
+    return _console or Console(quiet=True)
+
+
+@contextlib.contextmanager
+def _configured(con: Console) -> Iterator[None]:
+    """Log handler and warning filters for one run of ``main``; undone afterwards."""
+    global _console
+    level = (logging.DEBUG if con.verbose or con.debug else logging.WARNING if con.quiet else logging.INFO)
+    handler = _TqdmHandler()
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    loggers = [logging.getLogger(n) for n in (LOGGER, "sbsc_core")]
+    saved = [(lg, lg.level, lg.propagate) for lg in loggers]
+    env_saved = os.environ.get("PYTHONWARNINGS")
+    for lg in loggers:
+        lg.addHandler(handler)
+        lg.setLevel(level)
+        lg.propagate = False
+    _console = con
+    try:
+        with warnings.catch_warnings():
+            if not con.debug:
+                # numpy's RuntimeWarnings (empty slices, NaN means) are expected on real scans;
+                # worker processes inherit the filter through the environment
+                warnings.simplefilter("ignore", RuntimeWarning)
+                os.environ["PYTHONWARNINGS"] = "ignore::RuntimeWarning"
+            yield
+    finally:
+        con.close()
+        _console = None
+        for lg, lvl, prop in saved:
+            lg.removeHandler(handler)
+            lg.setLevel(lvl)
+            lg.propagate = prop
+        if env_saved is None:
+            os.environ.pop("PYTHONWARNINGS", None)
+        else:
+            os.environ["PYTHONWARNINGS"] = env_saved
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def output_parent(path: str | Path, option: str = "--out") -> Path:
+    """``path`` if its parent folder exists; else the one-line error (never created silently)."""
+    p = Path(path)
+    parent = p.absolute().parent
+    if not parent.is_dir():
+        raise InputError(option, f"folder {parent} does not exist (create it first)")
+    return p
+
+
+# --------------------------------------------------------------------------- commands
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
@@ -20,148 +360,129 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from .simulate.designs import design_builder
     from .simulate.scenarios import simulate_scenario, simulate_scene
 
+    con = console()
+    out = output_parent(args.out)
     builder = design_builder(args.designs)
     library = design_builder(args.library_designs) if args.library_designs else builder
     if args.scene:
-        simulate_scene(scene_path(args.scene), Path(args.out), seed=args.seed, angular_step_deg=args.step,
-                       log=_log(args), object_builder=builder, library_builder=library)
+        summary = simulate_scene(scene_path(args.scene), out, seed=args.seed, angular_step_deg=args.step,
+                                 log=con.info, object_builder=builder, library_builder=library)
     else:
-        simulate_scenario(args.scenario, Path(args.out), seed=args.seed, angular_step_deg=args.step,
-                          log=_log(args), object_builder=builder, library_builder=library)
+        summary = simulate_scenario(args.scenario, out, seed=args.seed, angular_step_deg=args.step,
+                                    log=con.info, object_builder=builder, library_builder=library)
+    if args.json:
+        con.result({"out": out, **_jsonable(summary)})
     return 0
 
 
 def _cmd_detect(args: argparse.Namespace) -> int:
     from .pipeline import detect_to_dir
 
-    detect_to_dir(
+    con = console()
+    out = output_parent(args.out)
+    summary = detect_to_dir(
         [Path(s) for s in args.scans], Path(args.models),
         expected=Path(args.expected) if args.expected else None,
-        out=Path(args.out), settings_file=Path(args.settings) if args.settings else None,
-        log=_log(args),
+        out=out, settings_file=Path(args.settings) if args.settings else None,
+        log=con.info, progress=con.progress,
     )
+    con.close()
+    con.info(f"wrote {out / 'detections.json'}")
+    if args.json:
+        con.result({"out": out, **summary})
     return 0
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from .evaluate import evaluate_files
+    from .evaluate import evaluate, format_table, read_detections, read_truth
 
-    print(evaluate_files(Path(args.detections), Path(args.truth),
-                         json_out=Path(args.json) if args.json else None,
-                         max_distance_m=args.max_distance))
-    return 0
+    if not (args.max_distance > 0):
+        raise InputError("--max-distance", f"must be > 0, got {args.max_distance}")
+    to_stdout = args.json == "-"
+    json_out = output_parent(args.json, "--json") if args.json and not to_stdout else None
+    table = evaluate(read_detections(Path(args.detections)), read_truth(Path(args.truth)),
+                     args.max_distance)
+    if to_stdout:
+        console().result(table.to_dict())
+        return 0
+    if json_out is not None:
+        from .io.atomic import write_json_atomic
 
-
-def _cmd_serve(args: argparse.Namespace) -> int:
-    from app.server import serve
-
-    serve(host=args.host, port=args.port, open_browser=args.open)
-    return 0
-
-
-def _cmd_user_add(args: argparse.Namespace) -> int:
-    from app.users import add_user_cli
-
-    print(add_user_cli(args.name, args.role))
+        write_json_atomic(json_out, table.to_dict())
+    print(format_table(table))
     return 0
 
 
 def _cmd_export_ifc(args: argparse.Namespace) -> int:
     from .bim.export import export_ifc_file
 
-    export_ifc_file(Path(args.detections), Path(args.out), schema=args.schema,
-                    accepted_only=args.accepted_only,
-                    models=Path(args.models) if args.models else None)
+    con = console()
+    out = output_parent(args.out)
+    summary = export_ifc_file(Path(args.detections), out, schema=args.schema,
+                              accepted_only=args.accepted_only,
+                              models=Path(args.models) if args.models else None,
+                              **({"crs": args.crs} if args.crs else {}))
+    summary = summary or {}
+    counts = ", ".join(f"{v} {k}" for k, v in summary.items() if isinstance(v, int))
+    con.info(f"wrote {out}" + (f" ({summary.get('schema', '')}: {counts})" if counts else ""))
+    if args.json:
+        con.result({"out": out, **summary})
     return 0
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     from .bim.compare import compare_to_dir
 
-    compare_to_dir(Path(args.as_designed), Path(args.detections), Path(args.out),
-                   tolerance_m=args.tolerance)
+    con = console()
+    out = output_parent(args.out)
+    comparison = compare_to_dir(Path(args.as_designed), Path(args.detections), out,
+                                tolerance_m=args.tolerance)
+    summary = comparison.summary()
+    con.info(f"wrote {out}/comparison.json, report.html, findings.bcf: "
+             + ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in summary.items()))
+    if args.json:
+        con.result({"out": out, "summary": summary, "findings": len(comparison.findings)})
     return 0
 
 
-def _log(args: argparse.Namespace):
-    if getattr(args, "quiet", False):
-        return lambda msg: None
-    return lambda msg: print(msg, file=sys.stderr, flush=True)
+# --------------------------------------------------------------------------- main
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sbsc", description=__doc__.splitlines()[0])
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
-    sub = p.add_subparsers(dest="command", required=True)
-
-    s = sub.add_parser("simulate", help="scan a virtual floor (Scenario I or II) with ground truth")
-    which = s.add_mutually_exclusive_group(required=True)
-    which.add_argument("--scenario", choices=["I", "II"], help="the paper's floor: I (neutral walls) or II (low contrast)")
-    which.add_argument("--scene", help="a bundled scene by name (one_room, scenario_I, scenario_II) or a .yaml description")
-    s.add_argument("--out", required=True)
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--step", type=float, default=None, help="scanner angular step in degrees")
-    s.add_argument("--designs", choices=["standard", "alt"], default="standard",
-                   help="design set the objects are built with (default: standard)")
-    s.add_argument("--library-designs", choices=["standard", "alt"], default=None,
-                   help="design set of the model library (default: the same as --designs)")
-    s.set_defaults(func=_cmd_simulate)
-
-    d = sub.add_parser("detect", help="recognize objects on the walls of a scan")
-    d.add_argument("scans", nargs="+", metavar="SCAN")
-    d.add_argument("--models", required=True, help="model library directory (contract 2)")
-    d.add_argument("--expected", help="expected.json (contract 3); default: search every class")
-    d.add_argument("--out", required=True)
-    d.add_argument("--settings", help="JSON/YAML file overriding DetectionSettings")
-    d.set_defaults(func=_cmd_detect)
-
-    e = sub.add_parser("evaluate", help="compare detections with ground truth (paper's Table 1)")
-    e.add_argument("--detections", required=True)
-    e.add_argument("--truth", required=True)
-    e.add_argument("--json")
-    e.add_argument("--max-distance", type=float, default=0.10, help="match radius in metres")
-    e.set_defaults(func=_cmd_evaluate)
-
-    v = sub.add_parser("serve", help="run the review app")
-    v.add_argument("--host", default="127.0.0.1")
-    v.add_argument("--port", type=int, default=8000)
-    v.add_argument("--open", action="store_true", help="open the browser")
-    v.set_defaults(func=_cmd_serve)
-
-    u = sub.add_parser("user", help="manage API users")
-    usub = u.add_subparsers(dest="user_command", required=True)
-    ua = usub.add_parser("add", help="create a user and print its API token once")
-    ua.add_argument("name")
-    ua.add_argument("--role", required=True, choices=["reviewer", "manager", "admin"])
-    ua.set_defaults(func=_cmd_user_add)
-
-    x = sub.add_parser("export-ifc", help="write detections as an IFC as-is model")
-    x.add_argument("detections")
-    x.add_argument("--out", required=True)
-    x.add_argument("--schema", default="IFC4", help="IFC4 (default) or IFC4X3")
-    x.add_argument("--accepted-only", action="store_true")
-    x.add_argument("--models", help="model library for IFC classes (default: bundled)")
-    x.set_defaults(func=_cmd_export_ifc)
-
-    c = sub.add_parser("compare", help="Scan-vs-BIM: detections against an as-designed IFC")
-    c.add_argument("--as-designed", required=True)
-    c.add_argument("--detections", required=True)
-    c.add_argument("--out", required=True)
-    c.add_argument("--tolerance", type=float, default=0.10, help="displacement tolerance, metres")
-    c.set_defaults(func=_cmd_compare)
-    return p
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except SbscError as exc:
-        print(f"sbsc: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("sbsc: interrupted", file=sys.stderr)
-        return 130
+def main(argv: Sequence[str] | None = None, registrars: Sequence[Registrar] | None = None) -> int:
+    """Run ``sbsc`` with ``argv`` (default: the process's arguments); return the exit code."""
+    args = build_parser(registrars).parse_args(argv)
+    con = Console(quiet=getattr(args, "quiet", False), verbose=getattr(args, "verbose", 0) or 0,
+                  debug=getattr(args, "debug", False))
+    with _configured(con):
+        try:
+            return int(args.func(args) or 0)
+        except SbscError as exc:
+            con.close()
+            if con.debug:
+                traceback.print_exc()
+            print(f"sbsc: error: {exc}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        except KeyboardInterrupt:
+            con.close()
+            print("sbsc: interrupted", file=sys.stderr)
+            return 130
+        except OSError as exc:  # a file of the user's that cannot be read or written
+            con.close()
+            if con.debug:
+                traceback.print_exc()
+            where = f"{exc.filename}: " if exc.filename else ""
+            print(f"sbsc: error: {where}{exc.strerror or exc} (--debug shows the traceback)",
+                  file=sys.stderr)
+            return EXIT_BAD_INPUT if exc.filename else EXIT_INTERNAL
+        except Exception as exc:
+            con.close()
+            if con.debug:
+                traceback.print_exc()
+                return EXIT_INTERNAL
+            text = " ".join(str(exc).split()) or "no message"
+            print(f"sbsc: internal error: {type(exc).__name__}: {text} "
+                  "(run again with --debug for the traceback)", file=sys.stderr)
+            return EXIT_INTERNAL
 
 
 if __name__ == "__main__":

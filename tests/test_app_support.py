@@ -235,7 +235,7 @@ class ServerProcess:
         offset = self.log_path.stat().st_size if self.log_path.exists() else 0
         logf = open(self.log_path, "ab")  # noqa: SIM115 - the child holds it
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "sbsc_core", "serve", "--host", "127.0.0.1", "--port", "0"],
+            [sys.executable, "-m", "app", "serve", "--host", "127.0.0.1", "--port", "0"],
             env=self.env, stdout=logf, stderr=subprocess.STDOUT, cwd=str(ROOT))
         logf.close()
         deadline = time.monotonic() + timeout_s

@@ -31,6 +31,7 @@ def _one_line_error(capsys, code: int, *names: str) -> str:
 
 def test_export_ifc_command(tmp_path, detections):
     out = tmp_path / "out" / "model.ifc"
+    out.parent.mkdir()
     assert main(["-q", "export-ifc", str(detections), "--out", str(out), "--schema", "IFC4X3",
                  "--accepted-only"]) == 0
     f = ifcopenshell.open(str(out))

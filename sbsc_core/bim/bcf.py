@@ -76,10 +76,13 @@ def _viewpoint(comparison: Comparison, item: ComparisonItem) -> mdl.Visualizatio
     up = np.array([0.0, 0.0, 1.0])
     up = up - np.dot(up, direction) * direction
     up /= np.linalg.norm(up)
-    guids = [item.designed.guid] if item.designed is not None else []
+    if item.designed is not None:
+        components = build_components(item.designed.guid)
+    else:  # an unexpected object is not in the design: nothing to select (BCF 2.1 forbids an empty Selection)
+        components = mdl.Components(visibility=mdl.ComponentVisibility(default_visibility=True))
     return mdl.VisualizationInfo(
         guid=str(uuid.uuid4()),
-        components=build_components(*guids),
+        components=components,
         perspective_camera=build_camera_from_vectors(list(map(float, eye)), list(map(float, direction)),
                                                      list(map(float, up))),
     )

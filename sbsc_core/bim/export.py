@@ -560,8 +560,11 @@ def write_ifc_atomic(model: ifcopenshell.file, out: Path) -> None:
 
 
 def export_ifc_file(detections: Path, out: Path, schema: str = "IFC4", accepted_only: bool = False,
-                    models: Path | None = None) -> None:
-    """``sbsc export-ifc``: read ``detections``, write ``out`` (nothing on error)."""
+                    models: Path | None = None) -> dict[str, Any]:
+    """``sbsc export-ifc``: read ``detections``, write ``out`` (nothing on error).
+
+    Returns a summary: the schema and how many walls, openings and objects were written.
+    """
     detections = Path(detections)
     schema = normalise_schema(schema, where="--schema")
     typings = class_typings(models=Path(models)) if models is not None else class_typings()
@@ -569,3 +572,6 @@ def export_ifc_file(detections: Path, out: Path, schema: str = "IFC4", accepted_
     parse_detections_document(raw, where=str(detections))
     model = export_ifc(raw, schema=schema, accepted_only=accepted_only, typings=typings)
     write_ifc_atomic(model, out)
+    return {"schema": schema, "walls": len(model.by_type("IfcWall")),
+            "openings": len(model.by_type("IfcOpeningElement")),
+            "objects": len(selected_detections(raw.get("detections", []), accepted_only))}

@@ -1,0 +1,50 @@
+"""The review app's commands of ``sbsc``: ``serve`` and ``user``.
+
+They reach the command line through the entry-point group ``sbsc.commands`` (see
+``pyproject.toml``), so the library ``sbsc_core`` never imports the web layer. Without
+installed metadata (a bare source tree), ``python -m app`` runs the same command line.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from sbsc_core.cli import Commands
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    from .server import serve
+
+    serve(host=args.host, port=args.port, open_browser=args.open)
+    return 0
+
+
+def _cmd_user_add(args: argparse.Namespace) -> int:
+    from .users import add_user_cli
+
+    print(add_user_cli(args.name, args.role))
+    return 0
+
+
+def register_serve(cmds: Commands) -> None:
+    """``sbsc serve [--host H] [--port P] [--open]``."""
+    v = cmds.add("serve", func=_cmd_serve, help="run the review app (data in $SBSC_DATA_DIR)")
+    v.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1)")
+    v.add_argument("--port", type=int, default=8000,
+                   help="port to listen on; 0 picks a free one (default: 8000)")
+    v.add_argument("--open", action="store_true", help="open the browser on the start page")
+
+
+def register_user(cmds: Commands) -> None:
+    """``sbsc user add NAME --role reviewer|manager|admin``."""
+    u = cmds.add("user", help="manage API users of the review app")
+    usub = u.add_subparsers(dest="user_command", required=True, metavar="ACTION")
+    ua = usub.add_parser("add", parents=[cmds.common], help="create a user and print its API token once",
+                         description="create a user and print its API token once")
+    ua.add_argument("name", metavar="NAME", help="the user's name")
+    ua.add_argument("--role", required=True, choices=["reviewer", "manager", "admin"],
+                    help="what the user may do: reviewer (review), manager (also sign off), admin (everything)")
+    ua.set_defaults(func=_cmd_user_add)
+
+
+REGISTRARS = (register_serve, register_user)
