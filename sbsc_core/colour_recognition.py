@@ -48,8 +48,11 @@ from .matching import (
     boxes_from_mask,
     cluster_boxes,
     crop_padded,
+    estimate_turn,
     match_in_rois,
+    rotate_template,
     rotated_variants,
+    turn_angles,
 )
 from .settings import ColourRecognitionSettings
 from .templates import ModelTemplate
@@ -363,48 +366,94 @@ def size_mismatch(roi: Box, size_px: tuple[float, float], rotations: bool) -> fl
     return min(straight, max(ratio(rh, w), ratio(rw, h)))
 
 
-def rotate_offset(offset: tuple[float, float], deg: int) -> tuple[float, float]:
-    """A (row, col) offset from a footprint's centre after ``np.rot90`` by ``deg`` (counter-clockwise)."""
+def rotate_offset(offset: tuple[float, float], deg: float) -> tuple[float, float]:
+    """A (row, col) offset from a footprint's centre after turning it by ``deg`` (counter-clockwise)."""
     dr, dc = offset
-    for _ in range((deg // 90) % 4):
-        dr, dc = -dc, dr
-    return dr, dc
+    a = np.deg2rad(float(deg))
+    if abs(float(deg) / 90.0 - round(float(deg) / 90.0)) < 1e-9:  # exact for quarter turns
+        for _ in range(int(round(float(deg) / 90.0)) % 4):
+            dr, dc = -dc, dr
+        return dr, dc
+    return dr * np.cos(a) - dc * np.sin(a), dr * np.sin(a) + dc * np.cos(a)
+
+
+def turned_extent(mask: np.ndarray, settings: ColourRecognitionSettings) -> tuple[float, tuple[int, int]] | None:
+    """(turn, (h, w)) of a RoI's foreground turned by at least ``min_turn_deg``: its turn
+    (:func:`~sbsc_core.matching.estimate_turn`) and the size of its bounding box turned back."""
+    if not settings.free_rotation:
+        return None
+    turn = estimate_turn(mask)
+    if turn is None or abs(turn) < settings.min_turn_deg:
+        return None
+    ys, xs = np.nonzero(mask)
+    a = np.deg2rad(turn)
+    best = None
+    for sgn in (1.0, -1.0):  # the turn back is the one that gives the smaller box
+        u = xs * np.cos(a) + sgn * ys * np.sin(a)
+        v = -sgn * xs * np.sin(a) + ys * np.cos(a)
+        size = (int(round(np.ptp(v))) + 1, int(round(np.ptp(u))) + 1)
+        if best is None or size[0] * size[1] < best[0] * best[1]:
+            best = size
+    return turn, best
+
+
+def _best_placement(roi: Box, proto: WallPrototype, settings: ColourRecognitionSettings, diff: np.ndarray,
+                    variants: list[tuple[float, np.ndarray]]) -> tuple[float, tuple[float, float], float,
+                                                                       tuple[int, int]] | None:
+    """(rank, centre, rotation, view shape) of the best-correlating view of ``variants`` in a RoI."""
+    rc = roi.centre
+    best = None
+    for deg, view in variants:
+        quarter = int(round(float(deg) / 90.0)) % 2
+        sh, sw = proto.size_px[::-1] if quarter else proto.size_px
+        off = rotate_offset(proto.offset_px, deg)
+        gr, gc = rc[0] - off[0], rc[1] - off[1]
+        slack_r = settings.search_margin_px + abs(roi.height - sh) / 2.0
+        slack_c = settings.search_margin_px + abs(roi.width - sw) / 2.0
+        area = Box(int(np.floor(gr - slack_r)), int(np.floor(gc - slack_c)),
+                   int(np.ceil(gr + slack_r)) + 1, int(np.ceil(gc + slack_c)) + 1)
+        peaks = match_in_rois(diff, view, [area], threshold=-1.0, pad_px=settings.search_margin_px // 2,
+                              margin_px=0, max_peaks=1, min_energy=1e-6 * view.size)
+        if not peaks:
+            continue
+        rank = peaks[0].score + (settings.rotation_margin if deg == 0 else 0.0)
+        if best is None or rank > best[0]:
+            best = (rank, (peaks[0].row, peaks[0].col), deg, view.shape[:2])
+    return best
 
 
 def _place(img: ColourImage, roi: Box, proto: WallPrototype, settings: ColourRecognitionSettings,
-           diff: np.ndarray) -> tuple[tuple[float, float], int, Box]:
+           diff: np.ndarray, turn: float | None = None) -> tuple[tuple[float, float], float, Box]:
     """Footprint centre, rotation and box of a class in a RoI (cross-correlation, else centroid).
 
     The footprint centre is searched around the RoI centre minus the prototype's offset of
-    its visible part, within ``search_margin_px`` plus half the size difference.
+    its visible part, within ``search_margin_px`` plus half the size difference. A RoI
+    turned by ``turn`` is also tried with the view turned by it plus multiples of 90
+    degrees, then refined by ``turn_refine_deg`` around the best of those.
     """
     fh, fw = proto.footprint
     rc = roi.centre
     guess = (rc[0] - proto.offset_px[0], rc[1] - proto.offset_px[1])
     if settings.refine_position and proto.views:
-        best = None
-        for deg, view in proto.views:
-            sh, sw = proto.size_px if deg % 180 == 0 else proto.size_px[::-1]
-            off = rotate_offset(proto.offset_px, deg)
-            gr, gc = rc[0] - off[0], rc[1] - off[1]
-            slack_r = settings.search_margin_px + abs(roi.height - sh) / 2.0
-            slack_c = settings.search_margin_px + abs(roi.width - sw) / 2.0
-            area = Box(int(np.floor(gr - slack_r)), int(np.floor(gc - slack_c)),
-                       int(np.ceil(gr + slack_r)) + 1, int(np.ceil(gc + slack_c)) + 1)
-            peaks = match_in_rois(diff, view, [area], threshold=-1.0, pad_px=settings.search_margin_px // 2,
-                                  margin_px=0, max_peaks=1, min_energy=1e-6 * view.size)
-            if not peaks:
-                continue
-            rank = peaks[0].score + (settings.rotation_margin if deg == 0 else 0.0)
-            if best is None or rank > best[0]:
-                best = (rank, (peaks[0].row, peaks[0].col), deg, view.shape[:2])
+        best = _best_placement(roi, proto, settings, diff, proto.views)
+        if turn is not None:
+            base = proto.views[0][1]
+            coarse = _best_placement(roi, proto, settings, diff,
+                                     [(a, rotate_template(base, a)) for a in turn_angles(turn)])
+            if coarse is not None:
+                fine = _best_placement(roi, proto, settings, diff, [
+                    (a, rotate_template(base, a)) for a in
+                    (round((coarse[2] + d) % 360.0, 3) for d in settings.turn_refine_deg)])
+                for b in (coarse, fine):
+                    if b is not None and (best is None or b[0] > best[0]):
+                        best = b
         if best is not None:
             _, centre, deg, (h, w) = best
             return centre, deg, box_at(centre, h, w)
     return guess, 0, box_at(guess, fh, fw)
 
 
-def depth_agrees(depth: np.ndarray, t: ModelTemplate, box: Box, rotation_deg: int,
+def depth_agrees(depth: np.ndarray, t: ModelTemplate, box: Box, rotation_deg: float,
                  settings: ColourRecognitionSettings) -> bool:
     """False when a class that stands out of the wall is placed where the scan shows a flat wall.
 
@@ -416,7 +465,7 @@ def depth_agrees(depth: np.ndarray, t: ModelTemplate, box: Box, rotation_deg: in
     """
     if settings.depth_check_gain <= 0 or t.depth is None or t.relief_m() < settings.depth_check_min_relief_m:
         return True
-    model = np.ascontiguousarray(np.rot90(t.depth_filled(), (rotation_deg // 90) % 4))
+    model = rotate_template(t.depth_filled(), rotation_deg)
     if model.shape != (box.height, box.width):
         return True
     patch = crop_padded(depth, box.r0, box.r1, box.c0, box.c1)
@@ -472,16 +521,18 @@ def match_colour(
             continue
         crop = img.rgb[roi.r0:roi.r1, roi.c0:roi.c1]
         pattern = normalise_descriptors(global_descriptors(crop, fg, settings), settings)
+        turned = turned_extent(fg, settings)
+        extent = roi if turned is None else Box(0, 0, *turned[1])
         scored = []
         for cid, p in protos.items():
-            if size_mismatch(roi, p.size_px, any_rot) > settings.size_tolerance:
+            if size_mismatch(extent, p.size_px, any_rot) > settings.size_tolerance:
                 continue
             scored.append((prototype_distance(pattern, p, settings.nearest_sample), cid))
         scored.sort()
         for rho, cid in scored:
             if rho > settings.mu_c:
                 break
-            centre, deg, box = _place(img, roi, protos[cid], settings, diff)
+            centre, deg, box = _place(img, roi, protos[cid], settings, diff, None if turned is None else turned[0])
             if not depth_agrees(relief, prototypes.templates[cid], box, deg, settings):
                 continue  # a protruding class where the wall is flat: not this class
             out.append(Candidate(cid, ortho.wall_id, "colour", box, centre, rho, roi, deg))

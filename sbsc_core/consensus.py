@@ -65,7 +65,7 @@ class ConsensusHit:
     depth: Candidate | None = None
     colour: Candidate | None = None
     box: Box | None = None  # the footprint at ``centre``
-    rotation_deg: int = 0
+    rotation_deg: float = 0.0
 
     @property
     def goodness(self) -> float:
@@ -152,8 +152,24 @@ def make_hit(d: Candidate | None, c: Candidate | None, alpha: float,
         rho_depth=None if d is None else float(d.score),
         rho_colour=None if c is None else float(c.score),
         source=source, depth=d, colour=c,
-        box=box_at(centre, ref.box.height, ref.box.width), rotation_deg=ref.rotation_deg,
+        box=box_at(centre, ref.box.height, ref.box.width), rotation_deg=hit_rotation(d, c),
     )
+
+
+def hit_rotation(d: Candidate | None, c: Candidate | None, agree_deg: float = 5.0) -> float:
+    """The model's turn at a hit: the depth match's (metric), but when the colour match's turn
+    agrees with it modulo 90 degrees (within ``agree_deg``), the quarter turn the colour
+    pattern tells (a square relief looks alike at every quarter turn, its print does not)."""
+    if d is None:
+        return float(c.rotation_deg) if c is not None else 0.0
+    if c is None:
+        return float(d.rotation_deg)
+    a, b = float(d.rotation_deg), float(c.rotation_deg)
+    diff = (b - a) % 360.0
+    k = int(round(diff / 90.0)) % 4
+    if abs(diff - 90.0 * round(diff / 90.0)) <= agree_deg:
+        return (a + 90.0 * k) % 360.0
+    return a
 
 
 def _cell_rank(depth: list[Candidate], colour: list[Candidate], i: int, j: int,

@@ -40,6 +40,7 @@ Additions to the paper, each a named setting:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -51,10 +52,13 @@ from .matching import (
     boxes_from_mask,
     cluster_boxes,
     crop_padded,
+    estimate_turn,
     match_in_rois,
     nms,
     padded_template,
+    rotate_template,
     rotated_variants,
+    turn_angles,
 )
 from .settings import DepthRecognitionSettings
 from .templates import ModelTemplate
@@ -412,11 +416,15 @@ def match_depth(
     settings: DepthRecognitionSettings,
     images: DepthImages | None = None,
 ) -> list[Candidate]:
-    """Candidates {D} of every class with a depth model: rho_D >= mu_D around the RoIs.
+    """Candidates {D} of every class with a depth model: rho_D >= mu_D around the RoIs (Algorithm I).
 
     ``score`` is rho_D, ``box`` the (possibly rotated) footprint at the best match and
     ``centre`` its sub-pixel centre; several instances per class and wall are possible.
-    ``images`` (of this wall, as given to :func:`depth_rois`) saves computing them again.
+    Every model is tried at ``settings.rotations``; with ``free_rotation``, a RoI whose
+    relief is turned (:func:`roi_turns`) is also searched with the model turned by that
+    angle plus multiples of 90 degrees, then refined by ``turn_refine_deg`` around the
+    best of those (coarse to fine). ``images`` (of this wall, as given to
+    :func:`depth_rois`) saves computing them again.
     """
     if not rois:
         return []
@@ -425,7 +433,34 @@ def match_depth(
     noise_relief, _ = relief_thresholds(jl, _plain_wall(ortho, area, jl, settings), settings)
     jm = _smooth(jd, settings.match_sigma_px)  # correlated: the scene's own relief
     jml = _smooth(jl, settings.match_sigma_px)  # checked: relief above the local wall
-    flat_m = 1e-5  # a window whose relief varies by less than this is flat (exactly 0 in openings)
+    turns = roi_turns(jml, rois, max(noise_relief, settings.min_relief_m), settings) if settings.free_rotation else []
+
+    def search(cid: str, deg: float, rot: np.ndarray, where: list[Box]) -> list[Candidate]:
+        h, w = rot.shape
+        flat_m = 1e-5  # a window whose relief varies by less than this is flat (exactly 0 in openings)
+        min_energy = (h + 2 * settings.template_pad_px) * (w + 2 * settings.template_pad_px) * flat_m ** 2
+        relief = float(np.median(np.abs(rot[np.abs(rot) > 0.1 * np.abs(rot).max()])))
+        smooth_model = padded_template(rot, settings.template_pad_px, settings.match_sigma_px)
+
+        def plausible(r: float, c: float, gain: float) -> bool:
+            box = box_at((r, c), h, w)
+            thr = max(settings.isolation_relief_fraction * relief * gain, noise_relief)
+            if isolation(jml, box, thr, settings.isolation_gap_px, settings.isolation_width_px,
+                         known, settings.min_known_share) > settings.isolation_max_occupancy:
+                return False
+            return relief_overlap(jml, smooth_model, box, settings.template_pad_px,
+                                  settings.isolation_relief_fraction * relief,
+                                  gain, known) >= settings.min_relief_iou
+
+        peaks = match_in_rois(jm, rot, where, threshold=settings.mu_d, pad_px=settings.template_pad_px,
+                              margin_px=settings.search_margin_px, max_peaks=settings.max_peaks_per_roi,
+                              sigma_px=settings.match_sigma_px, gain_range=settings.gain_range,
+                              min_energy=min_energy, accept=plausible, known=known,
+                              min_known=settings.min_known_share, full_known=settings.full_known_share,
+                              masked_pre=settings.masked_pre_threshold)
+        return [Candidate(cid, ortho.wall_id, "depth", box_at((m.row, m.col), h, w), (m.row, m.col), m.score,
+                          m.roi, deg) for m in peaks]
+
     out: list[Candidate] = []
     for cid in sorted(templates):
         t = templates[cid]
@@ -434,30 +469,69 @@ def match_depth(
             continue
         found: list[Candidate] = []
         for deg, rot in rotated_variants(model, settings.rotations):
-            h, w = rot.shape
-            min_energy = (h + 2 * settings.template_pad_px) * (w + 2 * settings.template_pad_px) * flat_m ** 2
-            relief = float(np.median(np.abs(rot[np.abs(rot) > 0.1 * np.abs(rot).max()])))
-            smooth_model = padded_template(rot, settings.template_pad_px, settings.match_sigma_px)
+            found.extend(search(cid, deg, rot, rois))
+        def turned(a: float, where: list[Box], cid: str = cid, model: np.ndarray = model) -> list[Candidate]:
+            return search(cid, a, rotate_template(model, a), where)
 
-            def plausible(r: float, c: float, gain: float, h: int = h, w: int = w, relief: float = relief,
-                          model: np.ndarray = smooth_model) -> bool:
-                box = box_at((r, c), h, w)
-                thr = max(settings.isolation_relief_fraction * relief * gain, noise_relief)
-                if isolation(jml, box, thr, settings.isolation_gap_px, settings.isolation_width_px,
-                             known, settings.min_known_share) > settings.isolation_max_occupancy:
-                    return False
-                return relief_overlap(jml, model, box, settings.template_pad_px,
-                                      settings.isolation_relief_fraction * relief,
-                                      gain, known) >= settings.min_relief_iou
-
-            peaks = match_in_rois(jm, rot, rois, threshold=settings.mu_d, pad_px=settings.template_pad_px,
-                                  margin_px=settings.search_margin_px, max_peaks=settings.max_peaks_per_roi,
-                                  sigma_px=settings.match_sigma_px, gain_range=settings.gain_range,
-                                  min_energy=min_energy, accept=plausible, known=known,
-                                  min_known=settings.min_known_share, full_known=settings.full_known_share,
-                                  masked_pre=settings.masked_pre_threshold)
-            for m in peaks:
-                box = box_at((m.row, m.col), h, w)
-                found.append(Candidate(cid, ortho.wall_id, "depth", box, (m.row, m.col), m.score, m.roi, deg))
-        out.extend(nms(found, settings.nms_overlap, upright_bonus=settings.rotation_margin))
+        for roi, turn in turns:
+            found.extend(search_turned(turned, roi, turn, settings.turn_refine_deg))
+        kept = nms(found, settings.nms_overlap, upright_bonus=settings.rotation_margin)
+        if settings.free_rotation:
+            kept = [refine_turn(turned, c, settings.turn_steps_deg, settings.min_turn_gain) for c in kept]
+        out.extend(kept)
     return out
+
+
+def refine_turn(search: Callable[[float, list[Box]], list[Candidate]], cand: Candidate,
+                steps: tuple[float, ...], min_gain: float) -> Candidate:
+    """``cand`` with its model's turn refined by a local coarse-to-fine search.
+
+    At each step size of ``steps`` (e.g. 10, 5, 2, 1 degrees) the model turned one step
+    either way is correlated around the candidate's centre (``search(angle, [place])``,
+    with every plausibility check); the search moves while that raises rho_D. The turn
+    found is kept if it raises rho_D, by more than ``min_gain`` for a candidate upright or
+    at a quarter turn (objects are usually mounted so). A small object turned by a few degrees still correlates well upright,
+    and its blurred relief tells no turn: this finds it.
+    """
+    best = cand
+    place = [box_at(cand.centre, 1, 1)]
+
+    def at(a: float) -> Candidate | None:
+        found = search(round(a % 360.0, 3), place)
+        return max(found, key=lambda c: c.score) if found else None
+
+    for step in steps:
+        for _ in range(6):
+            tries = [c for c in (at(float(best.rotation_deg) + step), at(float(best.rotation_deg) - step))
+                     if c is not None and c.score > best.score]
+            if not tries:
+                break
+            best = max(tries, key=lambda c: c.score)
+    quarter = abs(float(cand.rotation_deg) / 90.0 - round(float(cand.rotation_deg) / 90.0)) < 1e-9
+    if best.score <= cand.score + (min_gain if quarter else 0.0):  # mounted upright unless clearly not
+        return cand
+    best.roi = cand.roi
+    return best
+
+
+def roi_turns(relief: np.ndarray, rois: list[Box], threshold_m: float, settings: DepthRecognitionSettings
+              ) -> list[tuple[Box, float]]:
+    """(RoI, turn) of the RoIs whose relief above ``threshold_m`` is turned by at least
+    ``min_turn_deg`` from the image axes (:func:`~sbsc_core.matching.estimate_turn`)."""
+    out = []
+    for roi in rois:
+        turn = estimate_turn(np.abs(relief[roi.r0:roi.r1, roi.c0:roi.c1]) >= threshold_m)
+        if turn is not None and abs(turn) >= settings.min_turn_deg:
+            out.append((roi, turn))
+    return out
+
+
+def search_turned(search: Callable[[float, list[Box]], list[Candidate]], roi: Box, turn: float,
+                  refine: tuple[float, ...]) -> list[Candidate]:
+    """Coarse to fine: ``search(angle, [roi])`` at ``turn`` + k x 90, then at the best angle
+    found plus each of ``refine`` degrees. Returns every candidate found."""
+    coarse = [c for a in turn_angles(turn) for c in search(a, [roi])]
+    if not coarse or not refine:
+        return coarse
+    best = float(max(coarse, key=lambda c: c.score).rotation_deg)
+    return coarse + [c for d in refine for c in search(round((best + d) % 360.0, 3), [roi])]

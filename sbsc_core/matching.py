@@ -119,28 +119,38 @@ def padded_template(template: np.ndarray, pad_px: int, sigma_px: float = 0.0) ->
 
 
 def rotated_size(h: int, w: int, deg: float) -> tuple[int, int]:
-    """(h, w) of the axis-aligned box holding an ``h`` x ``w`` rectangle turned by ``deg``."""
+    """(h, w) of the axis-aligned box holding an ``h`` x ``w`` rectangle turned by ``deg``
+    (:func:`rotate_template` may add a pixel to keep the parity of ``h`` and ``w``)."""
     a = np.deg2rad(float(deg) % 180.0)
     ca, sa = abs(np.cos(a)), abs(np.sin(a))
     return max(1, int(round(h * ca + w * sa))), max(1, int(round(w * ca + h * sa)))
 
 
-def rotate_template(image: np.ndarray, deg: float, *, interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:
+def rotate_template(image: np.ndarray, deg: float, *, supersample: int = 4) -> np.ndarray:
     """``image`` turned counter-clockwise by ``deg`` about its centre, on a canvas that holds it.
 
-    Multiples of 90 degrees are exact (``np.rot90``); other angles are resampled with
-    ``interpolation`` and the uncovered canvas is 0 (the wall). Works on (H, W) and (H, W, C).
+    Multiples of 90 degrees are exact (``np.rot90``). Other angles are rendered like a scan
+    samples the turned object: each pixel is the mean over ``supersample`` x
+    ``supersample`` points of the pixelated model (no extra blur, whatever the angle, so
+    correlations at nearby angles compare fairly). The uncovered canvas is 0 (the wall).
+    Works on (H, W) and (H, W, C).
     """
     deg = float(deg) % 360.0
     if abs(deg - round(deg / 90.0) * 90.0) < 1e-9:
         return np.ascontiguousarray(np.rot90(image, int(round(deg / 90.0)) % 4))
     h, w = image.shape[:2]
     nh, nw = rotated_size(h, w, deg)
+    nh, nw = nh + (nh - h) % 2, nw + (nw - w) % 2  # same parity: the centre stays on the pixel grid
     m = cv2.getRotationMatrix2D(((w - 1) / 2.0, (h - 1) / 2.0), deg, 1.0)
     m[0, 2] += (nw - w) / 2.0
     m[1, 2] += (nh - h) / 2.0
+    k = max(1, int(supersample))
+    m4 = m * k
+    m4[:, 2] += (k - 1) / 2.0  # pixel centres of the k-times finer canvas
     src = np.ascontiguousarray(image, dtype=np.float32)
-    out = cv2.warpAffine(src, m, (nw, nh), flags=interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    fine = cv2.warpAffine(src, m4, (nw * k, nh * k), flags=cv2.INTER_NEAREST,
+                          borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    out = cv2.resize(fine, (nw, nh), interpolation=cv2.INTER_AREA)
     return out.reshape((nh, nw) + image.shape[2:])
 
 
@@ -474,3 +484,35 @@ def _correlate_around(image: np.ndarray, tp: np.ndarray, size: tuple[int, int], 
             masked = partial & (mres > res)
             res = np.where(masked, mres, res)
     return _RoiCorrelation(region, res, ys, xs, valid, kreg, share, masked, {})
+
+
+# --------------------------------------------------------------------------- orientation
+
+
+def estimate_turn(mask: np.ndarray, *, min_pixels: int = 30, min_fill: float = 0.8) -> float | None:
+    """The in-plane turn (degrees, counter-clockwise, in (-45, 45]) of the largest region of ``mask``.
+
+    The turn of its minimum-area rectangle (``cv2.minAreaRect``), defined modulo 90 degrees.
+    None when the region has fewer than ``min_pixels`` pixels or fills less than
+    ``min_fill`` of that rectangle (a round or irregular shape has no defined turn).
+    """
+    m = np.ascontiguousarray(mask, dtype=np.uint8)
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
+    if n < 2:
+        return None
+    k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    area = int(stats[k, cv2.CC_STAT_AREA])
+    if area < min_pixels:
+        return None
+    ys, xs = np.nonzero(lab == k)
+    (_, _), (rw, rh), angle = cv2.minAreaRect(np.column_stack([xs, ys]).astype(np.float32))
+    if rw * rh <= 0 or area / ((rw + 1.0) * (rh + 1.0)) < min_fill:
+        return None
+    turn = (-float(angle)) % 90.0  # OpenCV's angle is clockwise in image coordinates
+    return turn - 90.0 if turn > 45.0 else turn
+
+
+def turn_angles(turn: float, *, refine: tuple[float, ...] = ()) -> list[float]:
+    """The four model rotations (``turn`` + k x 90) that may fit a region turned by ``turn``,
+    each followed by its refinements ``turn + k x 90 + d`` for d in ``refine``."""
+    return [round((turn + 90.0 * k + d) % 360.0, 3) for k in range(4) for d in (0.0, *refine)]

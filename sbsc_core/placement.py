@@ -3,7 +3,9 @@
 A hit's centre (row, col) in its wall's orthoimage becomes (u, v) metres in the wall frame
 (``Orthoimage.pixel_to_uv``) and the world point ``frame.to_world(u, v, 0)``: the centre of
 the object's footprint on the wall plane (contract 4). The footprint size is the model's;
-a model matched rotated by 90 or 270 degrees has its width and height exchanged.
+a model matched turned nearer to 90 or 270 than to 0 or 180 degrees has its width and
+height exchanged (the sides nearest to horizontal and vertical); ``rotation_deg`` is the
+model's full turn, counter-clockwise seen from the room, in (-180, 180].
 Detections are numbered "D0001", ... by wall id, then top to bottom (v descending), then
 left to right (u ascending), so the same result always gets the same ids.
 """
@@ -32,11 +34,14 @@ def place_hits(hits: list[ConsensusHit], orthos: dict[str, Orthoimage],
     out = []
     for k, (wid, _, _, cid, h, u, v) in enumerate(rows, start=1):
         t = templates[cid]
-        w_m, h_m = (t.height_m, t.width_m) if h.rotation_deg % 180 else (t.width_m, t.height_m)
+        quarter = int(round(float(h.rotation_deg) / 90.0)) % 2  # nearer to 90 or 270 than to 0 or 180
+        w_m, h_m = (t.height_m, t.width_m) if quarter else (t.width_m, t.height_m)
+        turn = float(h.rotation_deg) % 360.0
         out.append(Detection(
             id=f"D{k:04d}", class_id=cid, wall_id=wid, u=u, v=v,
             position=orthos[wid].frame.to_world(u, v, 0.0),
             width_m=w_m, height_m=h_m, alpha=h.alpha,
             rho_depth=h.rho_depth, rho_colour=h.rho_colour, source=h.source,
+            rotation_deg=turn - 360.0 if turn > 180.0 else turn,
         ))
     return out

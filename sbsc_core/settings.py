@@ -152,8 +152,13 @@ class DepthRecognitionSettings:
     match_sigma_px: float = 1.0  # J_D and the models are both smoothed by this before correlating
     min_template_relief_m: float = 0.002  # models flatter than this are not matched in depth
     gain_range: tuple[float, float] = (0.5, 2.0)  # accepted scene / model relief amplitude ratio
-    rotations: tuple[int, ...] = (0, 90, 180, 270)  # in-plane model rotations tried (degrees)
+    rotations: tuple[float, ...] = (0, 90, 180, 270)  # in-plane model rotations always tried (degrees)
     rotation_margin: float = 0.05  # a rotated match must correlate this much better than upright
+    free_rotation: bool = True  # RoIs whose relief is turned are also searched with turned models
+    min_turn_deg: float = 3.0  # ... when turned by at least this from the image axes
+    turn_refine_deg: tuple[float, ...] = (-2.0, -1.0, 1.0, 2.0)  # ... refined around the best turn
+    turn_steps_deg: tuple[float, ...] = (10.0, 5.0, 2.0, 1.0)  # every match's turn: local search steps
+    min_turn_gain: float = 0.005  # ... a turn is taken when it raises rho_D by more than this
     max_peaks_per_roi: int = 4  # instances of one class one RoI may hold
     isolation_gap_px: int = 2  # side strips checked for relief start this far outside a match
     isolation_width_px: int = 3  # ... and are this wide
@@ -213,8 +218,11 @@ class ColourRecognitionSettings:
     prototype_colour_step: float = 4.0  # walls whose colours round alike share learnt prototypes
     refine_position: bool = True  # place the footprint by colour cross-correlation in the RoI
     search_margin_px: int = 6  # a match's centre may lie this far outside its RoI
-    rotations: tuple[int, ...] = (0, 90, 180, 270)  # in-plane rotations tried when placing
+    rotations: tuple[float, ...] = (0, 90, 180, 270)  # in-plane rotations always tried when placing
     rotation_margin: float = 0.05  # a rotated placement must correlate this much better
+    free_rotation: bool = True  # a RoI whose foreground is turned is also placed with turned views
+    min_turn_deg: float = 3.0  # ... when turned by at least this from the image axes
+    turn_refine_deg: tuple[float, ...] = (-2.0, -1.0, 1.0, 2.0)  # ... refined around the best turn
 
 
 @dataclass

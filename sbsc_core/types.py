@@ -237,7 +237,7 @@ class Candidate:
     centre: tuple[float, float]
     score: float
     roi: Box | None = None  # the RoI the match came from
-    rotation_deg: int = 0  # the model's in-plane rotation at the match (0, 90, 180, 270; counter-clockwise)
+    rotation_deg: float = 0  # the model's in-plane rotation at the match (degrees, counter-clockwise)
 
 
 @dataclass
@@ -256,9 +256,11 @@ class Detection:
     rho_depth: float | None
     rho_colour: float | None
     source: str  # "both" | "depth" | "colour"
+    rotation_deg: float = 0.0  # the model's in-plane turn at the match, counter-clockwise seen from the room
+    confidence: float | None = None  # calibrated probability that class and place are right
 
     def to_dict(self) -> dict:
-        return {
+        out = {
             "id": self.id,
             "class": self.class_id,
             "wall": self.wall_id,
@@ -271,7 +273,11 @@ class Detection:
             "rho_depth": None if self.rho_depth is None else round(float(self.rho_depth), 4),
             "rho_colour": None if self.rho_colour is None else round(float(self.rho_colour), 4),
             "source": self.source,
+            "rotation_deg": round(float(self.rotation_deg), 2),
         }
+        if self.confidence is not None:
+            out["confidence"] = round(float(self.confidence), 4)
+        return out
 
 
 @dataclass

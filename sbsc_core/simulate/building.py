@@ -47,6 +47,7 @@ class PlacedObject:
     normal: np.ndarray  # (3,) wall normal, into the room
     width_m: float
     height_m: float
+    rotation_deg: float = 0.0  # in-plane turn seen from the room, counter-clockwise
 
     def to_truth(self) -> dict:
         return {
@@ -58,6 +59,7 @@ class PlacedObject:
             "wall": self.wall,
             "u": round(self.u, 5),
             "v": round(self.v, 5),
+            "rotation_deg": round(float(self.rotation_deg), 3),
         }
 
 
@@ -108,9 +110,10 @@ def build_building(scene: SceneDescription, object_builder: ObjectBuilder | None
         wall = layout.walls[p.wall]
         spec = CATALOGUE[p.class_id]
         local = object_builder(p.class_id)
-        parts.append(local.transformed(_rotation(wall.frame), wall.frame.to_world(p.u, p.v)).labelled(p.index))
+        turn = _rotation(wall.frame) @ _in_plane(p.rotation_deg)
+        parts.append(local.transformed(turn, wall.frame.to_world(p.u, p.v)).labelled(p.index))
         objects.append(PlacedObject(p.index, p.class_id, p.wall, p.u, p.v, wall.frame.to_world(p.u, p.v),
-                                    wall.frame.normal.copy(), spec.width_m, spec.height_m))
+                                    wall.frame.normal.copy(), spec.width_m, spec.height_m, p.rotation_deg))
     return Building(scene, layout, M.merge(parts), objects, station_positions(scene))
 
 
@@ -173,6 +176,12 @@ def wall_face_mesh(wall: WallFace, holes: list[OpeningPlacement]) -> ColouredMes
                 continue
             quads.append(M.quad(fr.to_world(u0, v0), (u1 - u0) * fr.axis_u, (v1 - v0) * fr.axis_v, wall.paint))
     return M.merge(quads)
+
+
+def _in_plane(deg: float) -> np.ndarray:
+    """Object-local turn by ``deg`` about the wall normal (counter-clockwise seen from the room)."""
+    a = np.deg2rad(float(deg))
+    return np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
 
 
 def _rotation(fr: WallFrame) -> np.ndarray:

@@ -38,8 +38,8 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -90,6 +90,45 @@ class ObjectPlacement:
     wall: str
     u: float  # footprint centre along the wall
     v: float  # footprint centre above the floor
+    rotation_deg: float = 0.0  # in-plane turn seen from the room, counter-clockwise
+
+
+# classes hung by gravity or round: never turned by ``object_rotation``
+UNROTATABLE = frozenset({"fire_extinguisher", "radiator", "smoke_detector"})
+
+
+def turn_objects(objects: list[ObjectPlacement], fraction: float, seed: int,
+                 rotatable: Callable[[str], bool] = lambda c: c not in UNROTATABLE) -> list[ObjectPlacement]:
+    """``round(fraction x n)`` of the ``n`` rotatable, unturned objects turned by random angles
+    (uniform in +-180 degrees, at least 5 degrees from a multiple of 90), chosen with ``seed``."""
+    rng = np.random.default_rng(seed)
+    idx = [k for k, o in enumerate(objects) if rotatable(o.class_id) and o.rotation_deg == 0.0]
+    pick = rng.permutation(idx)[: int(round(fraction * len(idx)))] if idx else []
+    out = list(objects)
+    for k in sorted(int(i) for i in pick):
+        while True:
+            deg = float(rng.uniform(-180.0, 180.0))
+            if abs(deg - 90.0 * round(deg / 90.0)) >= 5.0:
+                break
+        out[k] = replace(out[k], rotation_deg=round(deg, 2))
+    return out
+
+
+def _fitting_turns(scene: SceneDescription, upright: list[ObjectPlacement]) -> list[ObjectPlacement]:
+    """``scene.objects`` with each turn kept only if the scene with that turn alone validates."""
+    turned = scene.objects
+    out = list(upright)
+    for k, (a, b) in enumerate(zip(upright, turned, strict=True)):
+        if a == b:
+            continue
+        scene.objects = [*out[:k], b, *out[k + 1:]]
+        try:
+            validate_scene(scene)
+        except InputError:
+            continue
+        out[k] = b
+    scene.objects = turned
+    return out
 
 
 @dataclass(frozen=True)
@@ -188,7 +227,7 @@ def parse_scene(data: Any, source: str = "scene") -> SceneDescription:
         raise InputError(source, "expected a mapping at the top level")
     r.known_keys(data, "", {"schema", "name", "ceiling_height_m", "exterior_wall_thickness_m",
                             "door_frame_width_m", "colours", "rooms", "openings", "objects",
-                            "stations", "scanner"})
+                            "stations", "scanner", "object_rotation"})
     schema = data.get("schema", SCHEMA)
     if schema != SCHEMA:
         raise InputError(f"{source}: schema", f"unsupported schema {schema!r} (expected {SCHEMA!r})")
@@ -207,9 +246,15 @@ def parse_scene(data: Any, source: str = "scene") -> SceneDescription:
         raise InputError(f"{source}: rooms", "at least one room is required")
     openings = [r.opening(item, i) for i, item in enumerate(r.seq(data, "openings"))]
     objects = [r.placement(item, i) for i, item in enumerate(r.seq(data, "objects"))]
+    turn = data.get("object_rotation")
+    upright = objects
+    if turn is not None:  # {fraction, seed}: a share of the rotatable objects turned at random
+        r.known_keys(r.mapping(turn, "object_rotation"), "object_rotation", {"fraction", "seed"})
+        objects = turn_objects(objects, r.number(turn, "fraction", "object_rotation", lo=0.0, hi=1.0),
+                               int(r.number(turn, "seed", "object_rotation", default=0.0, lo=0.0, hi=2.0**31)))
     stations = [r.station(item, i, height) for i, item in enumerate(r.seq(data, "stations"))]
     scanner = r.scanner(data.get("scanner", {}) or {})
-    return SceneDescription(
+    scene = SceneDescription(
         name=str(data.get("name", source)), source=source, ceiling_height_m=height,
         exterior_wall_thickness_m=r.number(data, "exterior_wall_thickness_m", "", default=0.25,
                                            lo=0.02, hi=2.0),
@@ -217,6 +262,9 @@ def parse_scene(data: Any, source: str = "scene") -> SceneDescription:
         colours=colours, rooms=rooms, openings=openings, objects=objects, stations=stations,
         scanner=scanner,
     )
+    if objects is not upright:  # a turned object that no longer fits its wall stays upright
+        scene.objects = _fitting_turns(scene, upright)
+    return scene
 
 
 def validate_scene(scene: SceneDescription) -> Layout:
@@ -317,9 +365,12 @@ def build_layout(scene: SceneDescription) -> Layout:
 
 
 def footprint(p: ObjectPlacement) -> tuple[float, float, float, float]:
-    """(u_min, u_max, v_min, v_max) of an object's footprint on its wall."""
+    """(u_min, u_max, v_min, v_max) of an object's footprint on its wall (of its turned outline)."""
     spec = CATALOGUE[p.class_id]
-    return (p.u - spec.width_m / 2, p.u + spec.width_m / 2, p.v - spec.height_m / 2, p.v + spec.height_m / 2)
+    a = np.deg2rad(p.rotation_deg)
+    ca, sa = abs(np.cos(a)), abs(np.sin(a))
+    w, h = spec.width_m * ca + spec.height_m * sa, spec.height_m * ca + spec.width_m * sa
+    return (p.u - w / 2, p.u + w / 2, p.v - h / 2, p.v + h / 2)
 
 
 # --------------------------------------------------------------------------- checks
@@ -525,13 +576,14 @@ class _Reader:
     def placement(self, item: Any, i: int) -> ObjectPlacement:
         where = f"objects[{i}]"
         d = self.mapping(item, where)
-        self.known_keys(d, where, {"class", "wall", "u", "v"})
+        self.known_keys(d, where, {"class", "wall", "u", "v", "rotation_deg"})
         cls = self.string(d, "class", where)
         if cls not in CATALOGUE:
             raise self.fail(f"{where}.class", f"unknown class {cls!r} (known: {', '.join(sorted(CATALOGUE))})")
         wall = self.string(d, "wall", where)
         v = self.number(d, "v", where, default=CATALOGUE[cls].mount_height_m)
-        return ObjectPlacement(i, cls, wall, self.number(d, "u", where), v)
+        rot = self.number(d, "rotation_deg", where, default=0.0, lo=-360.0, hi=360.0)
+        return ObjectPlacement(i, cls, wall, self.number(d, "u", where), v, rot)
 
     def station(self, item: Any, i: int, ceiling: float) -> StationSpec:
         where = f"stations[{i}]"
