@@ -21,6 +21,12 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
     builder = design_builder(args.designs)
     library = design_builder(args.library_designs) if args.library_designs else builder
+    if args.scenario == "building":
+        from .simulate.building_scenario import simulate_building
+
+        simulate_building(Path(args.out), args.storeys, scene=args.scene, fmt=args.format, seed=args.seed,
+                          angular_step_deg=args.step, log=_log(args), object_builder=builder)
+        return 0
     simulate_scenario(args.scenario, Path(args.out), seed=args.seed, angular_step_deg=args.step,
                       log=_log(args), object_builder=builder, library_builder=library)
     return 0
@@ -90,7 +96,12 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("simulate", help="scan a virtual floor (Scenario I or II) with ground truth")
-    s.add_argument("--scenario", required=True, choices=["I", "II"])
+    s.add_argument("--scenario", required=True, choices=["I", "II", "building"])
+    s.add_argument("--storeys", type=int, default=2, help="building: number of storeys (default 2)")
+    s.add_argument("--scene", choices=["scenario", "one_room"], default="scenario",
+                   help="building: floors in the style of Scenario I/II, or the small one-room scene")
+    s.add_argument("--format", choices=["ply", "e57", "las"], default="ply",
+                   help="building: file format, one file per station (default ply)")
     s.add_argument("--out", required=True)
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--step", type=float, default=None, help="scanner angular step in degrees")
