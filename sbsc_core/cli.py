@@ -110,11 +110,16 @@ def json_option(p: argparse.ArgumentParser) -> None:
 def _add_simulate(cmds: Commands) -> None:
     s = cmds.add("simulate", func=_cmd_simulate,
                  help="scan a virtual floor (a bundled scene or a description) with ground truth")
-    which = s.add_mutually_exclusive_group(required=True)
-    which.add_argument("--scenario", choices=["I", "II"],
-                       help="the paper's floor: I (neutral walls) or II (walls close to the objects' colours)")
-    which.add_argument("--scene", metavar="NAME|FILE",
-                       help="a bundled scene (one_room, scenario_I, scenario_II) or a scene description .yaml")
+    s.add_argument("--scenario", choices=["I", "II", "building"],
+                   help="the paper's floor: I (neutral walls) or II (walls close to the objects' colours); "
+                        "building: several storeys, one file per station")
+    s.add_argument("--scene", metavar="NAME|FILE",
+                   help="a bundled scene (one_room, scenario_I, scenario_II) or a scene description .yaml; "
+                        "with --scenario building the style of its floors: scenario (default) or one_room")
+    s.add_argument("--storeys", type=int, default=2, metavar="N",
+                   help="--scenario building: number of storeys (default: 2)")
+    s.add_argument("--format", choices=["ply", "e57", "las"], default="ply",
+                   help="--scenario building: file format, one file per station (default: ply)")
     output_option(s, "dir")
     s.add_argument("--seed", type=int, default=0, help="random seed of the scanner noise and the design changes (default: 0)")
     s.add_argument("--step", type=float, default=None, metavar="DEG",
@@ -360,11 +365,19 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from .simulate.designs import design_builder
     from .simulate.scenarios import simulate_scenario, simulate_scene
 
+    if (args.scenario is None) == (args.scene is None) and args.scenario != "building":
+        raise InputError("--scenario", "give either --scenario or --scene")
     con = console()
     out = output_parent(args.out)
     builder = design_builder(args.designs)
     library = design_builder(args.library_designs) if args.library_designs else builder
-    if args.scene:
+    if args.scenario == "building":
+        from .simulate.building_scenario import simulate_building
+
+        summary = simulate_building(out, args.storeys, scene=args.scene or "scenario", fmt=args.format,
+                                    seed=args.seed, angular_step_deg=args.step, log=con.info,
+                                    object_builder=builder)
+    elif args.scene:
         summary = simulate_scene(scene_path(args.scene), out, seed=args.seed, angular_step_deg=args.step,
                                  log=con.info, object_builder=builder, library_builder=library)
     else:
