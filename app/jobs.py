@@ -51,7 +51,7 @@ STAGE_SPANS: dict[str, tuple[float, float]] = {
     "walls": (0.25, 0.85), "consensus": (0.85, 0.92), "writing": (0.92, 0.96),
     "done": (0.96, 0.96), "importing": (0.96, 1.0),
 }
-TERMINAL = ("succeeded", "failed")
+TERMINAL = ("succeeded", "failed", "cancelled")
 
 
 class JobAbandoned(Exception):
@@ -190,6 +190,9 @@ def _finish_succeeded(db: Database, settings: AppSettings, job_id: int, owner: s
         job.status, job.stage, job.progress = "succeeded", "done", 1.0
         job.finished_at = job.updated_at = utcnow()
         s.flush()
+        from .review_service import carry_over
+
+        carry_over(s, project.current_job_id, job)  # decisions on what is found again carry over
         project.current_job_id = job.id
 
 
@@ -271,6 +274,7 @@ class JobManager:
             self._spawn(jid)
 
     def _reap(self) -> None:
+        self._stop_cancelled()
         for jid, proc in list(self.procs.items()):
             if proc.is_alive():
                 if time.monotonic() - self.started[jid] > self.settings.job_timeout_s:
@@ -282,6 +286,24 @@ class JobManager:
                 continue
             proc.join(1)
             self._fail(jid, describe_exit(proc.exitcode) + " during stage '{stage}'")
+            self._forget(jid)
+
+    def _stop_cancelled(self) -> None:
+        """Stop the workers of jobs cancelled meanwhile (``DELETE /api/jobs/{jid}``)."""
+        if not self.procs:
+            return
+        with self.db.read() as s:
+            gone = set(s.scalars(select(Job.id).where(Job.id.in_(list(self.procs)),
+                                                      Job.status == "cancelled")))
+        for jid in gone:
+            proc = self.procs[jid]
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(5)
+                if proc.is_alive():
+                    proc.kill()
+                    proc.join(5)
+            log.info("job %d cancelled: worker stopped", jid)
             self._forget(jid)
 
     def _forget(self, jid: int) -> None:
