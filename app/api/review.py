@@ -264,6 +264,24 @@ def detection_thumbnail(did: int, kind: Literal["colour", "depth"], _: Reviewer,
                     headers={"Cache-Control": "private, max-age=86400"})
 
 
+@router.get("/projects/{pid}/walls/{wall}/image/{kind}", response_class=Response,
+            responses={200: {"content": {"image/png": {}}}})
+def wall_image(pid: int, wall: str, kind: Literal["colour", "depth"], _: Reviewer, s: ReadSession,
+               settings: Settings) -> Response:
+    """A wall's whole colour (or depth) orthoimage as PNG: where a reviewer clicks to add an object."""
+    p = get_project(s, pid)
+    row = s.scalars(select(WallRow).where(WallRow.job_id == p.current_job_id, WallRow.key == wall)).first() \
+        if p.current_job_id is not None else None
+    meta = (row.images or {}).get("colour" if kind == "colour" else "depth_png") if row else None
+    if meta is None:
+        raise HTTPException(404, f"no {kind} orthoimage for wall {wall} in project {pid}")
+    try:
+        data = (settings.data_dir / Path(meta["path"])).read_bytes()
+    except OSError:
+        raise HTTPException(404, f"{kind} orthoimage of wall {wall} is missing on disk") from None
+    return Response(data, media_type="image/png", headers={"Cache-Control": "private, max-age=86400"})
+
+
 @router.get("/projects/{pid}/signoff")
 def get_signoff(pid: int, _: Reviewer, s: ReadSession) -> dict:
     p = get_project(s, pid)

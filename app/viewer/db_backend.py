@@ -119,6 +119,16 @@ class DbReviewBackend:
                 dets = [detection_dict(r) for r in rows]
             return Changes(now, dets, locked, signoff)
 
+    def resolve_user(self, user_id: int) -> Reviewer | None:
+        """The user behind a viewer ticket (None when disabled or gone since)."""
+        from ..models import User
+
+        with self.db.read() as s:
+            u = s.get(User, int(user_id))
+            if u is None or u.disabled:
+                return None
+            return Reviewer(name=u.name, role=u.role, ref=Principal(id=u.id, name=u.name, role=u.role))
+
     def resolve_token(self, token: str) -> Reviewer | None:
         token = (token or "").strip()
         if not token:
