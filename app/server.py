@@ -133,7 +133,8 @@ def _viewer_manager(settings: AppSettings, db: Database):  # noqa: ANN202
     from .viewer.gate import ViewerGate
 
     return ViewerManager(DbReviewBackend(db, settings), host=settings.viewer_host, gate=ViewerGate(),
-                         idle_s=settings.viewer_idle_s)
+                         idle_s=settings.viewer_idle_s,
+                         idle_check_s=max(1.0, min(30.0, settings.viewer_idle_s / 4)))
 
 
 def _viewer_of(request: Request):  # noqa: ANN202
