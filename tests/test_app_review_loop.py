@@ -270,3 +270,35 @@ def test_signoff_then_admin_reopens_with_a_reason(c, srv):
     assert [e["kind"] for e in events] == ["signoff", "reopen", "signoff"]
     assert events[1]["by"] == "ada" and events[1]["comment"] == "socket behind the radiator"
     assert events[1]["data"]["signoff"]["comment"] == "first"
+
+
+def test_learn_exemplars_from_decisions(c, srv, tmp_path):
+    import io
+    import zipfile
+
+    from sbsc_core.io.models import load_model_library
+
+    pid, doc = project(c, srv, "learn")
+    rita, boss = auth(srv.tokens["rita"]), auth(srv.tokens["max"])
+    assert c.post(f"/api/projects/{pid}/exemplars", headers=boss).status_code == 409  # nothing accepted
+    switches = [d for d in doc["detections"] if d["class"] == "switch"]
+    for d in switches:
+        assert c.patch(f"/api/detections/{d['id']}", json={"status": "accepted", "version": 1},
+                       headers=rita).status_code == 200
+    assert c.post(f"/api/projects/{pid}/exemplars", headers=rita).status_code == 403
+    r = c.post(f"/api/projects/{pid}/exemplars", headers=boss)
+    assert r.status_code == 201, r.text
+    assert r.json()["views_added"] == {"switch": len(switches)}
+    z = c.get(f"/api/projects/{pid}/exemplars.zip", headers=rita)
+    assert z.status_code == 200
+    with zipfile.ZipFile(io.BytesIO(z.content)) as zf:
+        zf.extractall(tmp_path)
+    lib = load_model_library(tmp_path / "models")
+    views = lib.models["switch"].colour_views
+    crop = views[-1]
+    assert len(views) >= 1 + len(switches) and crop.shape[:2] == (16, 16)  # 0.08 m at 5 mm
+    assert np.allclose(crop[4:12, 4:12, :3].reshape(-1, 3).mean(axis=0), (30, 30, 30), atol=3)
+    relief = np.load(tmp_path / "models" / "switch" / "depth_exemplar_1.npy")
+    assert np.nanmedian(relief) == pytest.approx(0.012, abs=1e-3)
+    # the next job uses the learnt library
+    assert c.get(f"/api/projects/{pid}", headers=rita).json()["models"]["id"] == r.json()["library"]

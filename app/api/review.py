@@ -10,6 +10,7 @@ and nothing is changed after sign-off.
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
@@ -20,7 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy import select
 
 from .. import review_service as svc
-from ..models import DetectionRow, ReviewDecision, WallRow, iso
+from ..models import DetectionRow, Job, ReviewDecision, WallRow, iso
 from ..results import detection_dict, project_document, review_counts
 from ..thumbnails import thumbnail
 from .deps import (
@@ -280,6 +281,63 @@ def wall_image(pid: int, wall: str, kind: Literal["colour", "depth"], _: Reviewe
     except OSError:
         raise HTTPException(404, f"{kind} orthoimage of wall {wall} is missing on disk") from None
     return Response(data, media_type="image/png", headers={"Cache-Control": "private, max-age=86400"})
+
+
+@router.post("/projects/{pid}/exemplars", status_code=201, responses=ERRORS)
+def learn_exemplars(pid: int, user: Manager, db: DB, settings: Settings) -> dict:
+    """Learn from decisions (manager): the accepted objects' crops become a model library.
+
+    The library (contract 2: the project's classes with the crops as extra front views) is
+    stored and made the project's library, so the next job uses it; download it with
+    ``GET /api/projects/{pid}/exemplars.zip`` to run another floor of the building with it.
+    """
+    import uuid
+
+    from sbsc_core.io.models import load_model_library
+
+    from ..exemplars import build_exemplar_library
+    from ..models import ModelLibraryRow
+    from ..storage import library_summary
+
+    with db.write() as s:
+        p = get_project(s, pid, for_update=True)
+        if p.status != "open":
+            raise HTTPException(423, f"project {pid} is signed off; it can no longer be changed")
+        if p.current_job_id is None:
+            raise HTTPException(409, f"project {pid} has no reviewed results yet")
+        job = s.get(Job, p.current_job_id)
+        source = svc.models_dir(s, job.models_id, settings.data_dir)
+        rel = Path("projects", str(pid), "models", f"exemplars_{uuid.uuid4().hex[:12]}")
+        dest = settings.data_dir / rel
+        added = build_exemplar_library(s, p, settings.data_dir, source, dest)
+        if not added:
+            shutil.rmtree(dest, ignore_errors=True)
+            raise HTTPException(409, f"project {pid} has no accepted object to learn from")
+        row = ModelLibraryRow(project_id=pid, filename=f"exemplars of project {pid}", path=rel.as_posix(),
+                              size_bytes=0, sha256="", classes=library_summary(load_model_library(dest)),
+                              uploaded_by=user.name)
+        s.add(row)
+        s.flush()
+        p.models_id = row.id
+        return {"library": row.id, "views_added": added, "classes": sorted(row.classes)}
+
+
+@router.get("/projects/{pid}/exemplars.zip", response_class=Response,
+            responses={200: {"content": {"application/zip": {}}}})
+def exemplars_zip(pid: int, _: Reviewer, s: ReadSession, settings: Settings) -> Response:
+    """The project's current model library (its exemplars once learnt) as a zip (contract 2)."""
+    import io
+    import zipfile
+
+    p = get_project(s, pid)
+    root = svc.models_dir(s, p.models_id, settings.data_dir)
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        for f in sorted(root.rglob("*")):
+            if f.is_file():
+                zf.write(f, Path("models") / f.relative_to(root))
+    return Response(buf.getvalue(), media_type="application/zip",
+                    headers={"Content-Disposition": f'attachment; filename="models-{pid}.zip"'})
 
 
 @router.get("/projects/{pid}/signoff")
