@@ -67,6 +67,7 @@ class AppSettings(BaseSettings):
     # 3D review scenes (app.viewer, viser): one server per project on a free port of this host
     viewer: bool = True
     viewer_host: str = "127.0.0.1"
+    viewer_idle_s: float = 900.0  # a project scene no tab has been on for this long is stopped
 
     # first run
     create_admin_on_first_run: bool = True

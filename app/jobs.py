@@ -51,7 +51,7 @@ STAGE_SPANS: dict[str, tuple[float, float]] = {
     "walls": (0.25, 0.85), "consensus": (0.85, 0.92), "writing": (0.92, 0.96),
     "done": (0.96, 0.96), "importing": (0.96, 1.0),
 }
-TERMINAL = ("succeeded", "failed")
+TERMINAL = ("succeeded", "failed", "cancelled")
 
 
 class JobAbandoned(Exception):
@@ -144,6 +144,7 @@ def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
             if job.models_id else None
         expected = dict(job.expected) if job.expected else None
         out = settings.data_dir / job.out_dir
+        project_id = job.project_id
     out.parent.mkdir(parents=True, exist_ok=True)
     progress = ProgressWriter(db, job_id, owner, settings.progress_min_interval_s)
     with open(out.parent / "job.log", "a", encoding="utf-8") as logf:
@@ -163,6 +164,7 @@ def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
             summary = runner(scans, models, expected=expected, out=out, log=say, progress=progress)
             say(f"finished: {summary}")
             progress("importing", 0.0, force=True)
+            _prepare_viewer(settings, project_id, scans, say)
             _finish_succeeded(db, settings, job_id, owner, out)
             say("results stored")
         except JobAbandoned as exc:
@@ -173,6 +175,28 @@ def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
         except Exception as exc:  # noqa: BLE001 - the job must end failed with a reason
             say(traceback.format_exc())
             _finish_failed(db, job_id, owner, f"internal error: {type(exc).__name__}: {exc}")
+
+
+def _prepare_viewer(settings: AppSettings, project_id: int, scans: list[Path],
+                    say: Callable[[str], None]) -> None:
+    """Compute the 3D scene's scan level of detail now, so the first view opens in seconds."""
+    if not settings.viewer:
+        return
+    t = time.monotonic()
+    try:
+        from .viewer.lod import scan_lod
+        from .viewer.scene import SceneSettings
+
+        ss = SceneSettings()
+        scan_lod(scans, ss.max_points, settings.projects_dir / str(project_id) / "viewer",
+                 ss.overview_points)
+    except ImportError as exc:
+        say(f"3D view not prepared ({exc})")
+        return
+    except (SbscError, OSError, ValueError) as exc:  # the results matter more than the 3D view
+        say(f"3D view not prepared: {exc}")
+        return
+    say(f"3D view prepared in {time.monotonic() - t:.1f} s")
 
 
 def _finish_succeeded(db: Database, settings: AppSettings, job_id: int, owner: str, out: Path) -> None:
@@ -190,6 +214,9 @@ def _finish_succeeded(db: Database, settings: AppSettings, job_id: int, owner: s
         job.status, job.stage, job.progress = "succeeded", "done", 1.0
         job.finished_at = job.updated_at = utcnow()
         s.flush()
+        from .review_service import carry_over
+
+        carry_over(s, project.current_job_id, job)  # decisions on what is found again carry over
         project.current_job_id = job.id
 
 
@@ -271,6 +298,7 @@ class JobManager:
             self._spawn(jid)
 
     def _reap(self) -> None:
+        self._stop_cancelled()
         for jid, proc in list(self.procs.items()):
             if proc.is_alive():
                 if time.monotonic() - self.started[jid] > self.settings.job_timeout_s:
@@ -282,6 +310,24 @@ class JobManager:
                 continue
             proc.join(1)
             self._fail(jid, describe_exit(proc.exitcode) + " during stage '{stage}'")
+            self._forget(jid)
+
+    def _stop_cancelled(self) -> None:
+        """Stop the workers of jobs cancelled meanwhile (``DELETE /api/jobs/{jid}``)."""
+        if not self.procs:
+            return
+        with self.db.read() as s:
+            gone = set(s.scalars(select(Job.id).where(Job.id.in_(list(self.procs)),
+                                                      Job.status == "cancelled")))
+        for jid in gone:
+            proc = self.procs[jid]
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(5)
+                if proc.is_alive():
+                    proc.kill()
+                    proc.join(5)
+            log.info("job %d cancelled: worker stopped", jid)
             self._forget(jid)
 
     def _forget(self, jid: int) -> None:

@@ -27,7 +27,7 @@ from sqlalchemy import (
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 ROLES: tuple[str, ...] = ("reviewer", "manager", "admin")  # each role may do what the ones before may
-JOB_STATUSES: tuple[str, ...] = ("queued", "running", "succeeded", "failed")
+JOB_STATUSES: tuple[str, ...] = ("queued", "running", "succeeded", "failed", "cancelled")
 REVIEW_STATUSES: tuple[str, ...] = ("pending", "accepted", "rejected")
 
 NAMING = {
@@ -150,6 +150,7 @@ class Job(Base):
     owner: Mapped[str | None] = mapped_column(String(64))  # the server instance running it
     worker_pid: Mapped[int | None] = mapped_column(Integer)
     out_dir: Mapped[str | None] = mapped_column(String(500))  # relative to the data dir
+    cancelled_by: Mapped[str | None] = mapped_column(String(100))
 
 
 class WallRow(Base):
@@ -208,6 +209,10 @@ class DetectionRow(Base):
     version: Mapped[int] = mapped_column(Integer, default=1)
     reviewed_by: Mapped[str | None] = mapped_column(String(100))
     reviewed_at: Mapped[datetime | None] = mapped_column(Stamp)
+    confidence: Mapped[float | None] = mapped_column(Float)  # contract 4's calibrated confidence
+    extra: Mapped[dict[str, Any] | None] = mapped_column(JSON)  # other contract-4 fields (rotation_deg, ...)
+    note: Mapped[str | None] = mapped_column(Text)  # a reviewer's note on an added object
+    carried_from: Mapped[int | None] = mapped_column(Integer)  # the detection of an earlier job
 
 
 class ReviewDecision(Base):
@@ -227,13 +232,49 @@ class ReviewDecision(Base):
     before: Mapped[dict[str, Any]] = mapped_column(JSON)  # {"status", "class", "u", "v"}
     after: Mapped[dict[str, Any]] = mapped_column(JSON)
     comment: Mapped[str | None] = mapped_column(Text)
+    batch: Mapped[str | None] = mapped_column(String(40), index=True)  # one bulk decision
+
+
+class SuggestionRow(Base):
+    """A candidate recognition found but did not keep: offered to the reviewer as a possible miss."""
+
+    __tablename__ = "suggestions"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    project_id: Mapped[int] = mapped_column(ForeignKey("projects.id"), index=True)
+    job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id"), index=True)
+    class_id: Mapped[str] = mapped_column(String(100))
+    wall_key: Mapped[str] = mapped_column(String(50))
+    u: Mapped[float] = mapped_column(Float)
+    v: Mapped[float] = mapped_column(Float)
+    width_m: Mapped[float] = mapped_column(Float)
+    height_m: Mapped[float] = mapped_column(Float)
+    source: Mapped[str] = mapped_column(String(20))  # depth | colour
+    score: Mapped[float | None] = mapped_column(Float)  # rho_D (depth) or rho_C (colour)
+    reason: Mapped[str] = mapped_column(String(40))  # below_threshold | lost_in_consensus
+    promoted_id: Mapped[int | None] = mapped_column(Integer)  # the detection it became
+
+
+class ProjectEvent(Base):
+    """A project-level action (sign-off, reopen, job cancelled, decisions carried over). Append-only."""
+
+    __tablename__ = "project_events"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    project_id: Mapped[int] = mapped_column(ForeignKey("projects.id"), index=True)
+    user_id: Mapped[int | None] = mapped_column(ForeignKey("users.id"))
+    user_name: Mapped[str] = mapped_column(String(100))
+    at: Mapped[datetime] = mapped_column(Stamp, default=utcnow)
+    kind: Mapped[str] = mapped_column(String(40))
+    comment: Mapped[str | None] = mapped_column(Text)
+    data: Mapped[dict[str, Any] | None] = mapped_column(JSON)
 
 
 class SignOff(Base):
     __tablename__ = "signoffs"
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    project_id: Mapped[int] = mapped_column(ForeignKey("projects.id"), unique=True)
+    project_id: Mapped[int] = mapped_column(ForeignKey("projects.id"), index=True)  # newest = current
     job_id: Mapped[int | None] = mapped_column(ForeignKey("jobs.id"))
     user_id: Mapped[int | None] = mapped_column(ForeignKey("users.id"))
     user_name: Mapped[str] = mapped_column(String(100))
@@ -244,5 +285,7 @@ class SignOff(Base):
 
 @event.listens_for(ReviewDecision, "before_update")
 @event.listens_for(ReviewDecision, "before_delete")
-def _audit_is_append_only(mapper: Any, connection: Any, target: ReviewDecision) -> None:
-    raise PermissionError("review_decisions is an append-only audit trail")
+@event.listens_for(ProjectEvent, "before_update")
+@event.listens_for(ProjectEvent, "before_delete")
+def _audit_is_append_only(mapper: Any, connection: Any, target: Any) -> None:
+    raise PermissionError(f"{target.__tablename__} is an append-only audit trail")

@@ -7,6 +7,7 @@ export are rebuilt from the rows: contract 4 with a ``review`` object per detect
 
 from __future__ import annotations
 
+import json
 from collections import Counter
 from pathlib import Path
 
@@ -15,10 +16,13 @@ from sqlalchemy.orm import Session
 
 from sbsc_core.io.documents import read_detections
 
-from .models import DetectionRow, Job, OpeningRow, Project, WallRow, iso
+from .models import DetectionRow, Job, OpeningRow, Project, SuggestionRow, WallRow, iso
 from .storage import sha256_file
 
 DEFAULT_PIXEL_M = 0.005
+# contract-4 detection fields with columns of their own; any other field is kept in ``extra``
+DETECTION_COLUMNS = ("id", "class", "wall", "position", "u", "v", "width_m", "height_m", "alpha",
+                     "rho_depth", "rho_colour", "source", "confidence", "review")
 IMAGE_FILES = {"colour": "{w}_colour.png", "depth_png": "{w}_depth.png",
                "depth": "{w}_depth.npy", "overlay": "{w}_overlay.png"}
 
@@ -53,9 +57,45 @@ def import_results(session: Session, job: Job, out_dir: Path, data_dir: Path) ->
             detected_class=d["class"], wall_key=d["wall"], position=[float(x) for x in d["position"]],
             u=float(d["u"]), v=float(d["v"]), width_m=float(d["width_m"]),
             height_m=float(d["height_m"]), alpha=d.get("alpha"), rho_depth=d.get("rho_depth"),
-            rho_colour=d.get("rho_colour"), source=d["source"], status="pending", version=1))
+            rho_colour=d.get("rho_colour"), source=d["source"], status="pending", version=1,
+            confidence=_float_or_none(d.get("confidence")),
+            extra={k: v for k, v in d.items() if k not in DETECTION_COLUMNS} or None))
+    n_sugg = import_suggestions(session, job, out_dir)
     return {"walls": len(doc["walls"]), "openings": len(doc["openings"]),
-            "detections": len(doc["detections"])}
+            "detections": len(doc["detections"]), "suggestions": n_sugg}
+
+
+def _float_or_none(x: object) -> float | None:
+    try:
+        return None if x is None else float(x)
+    except (TypeError, ValueError):
+        return None
+
+
+def import_suggestions(session: Session, job: Job, out_dir: Path) -> int:
+    """Add the possible misses of ``suggestions.json`` (when the run wrote one)."""
+    path = out_dir / "suggestions.json"
+    if not path.is_file():
+        return 0
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        items = list(doc.get("suggestions", []))
+    except (OSError, ValueError, AttributeError, TypeError):
+        return 0  # suggestions are a help, never a reason to lose the results
+    n = 0
+    for sg in items:
+        try:
+            row = SuggestionRow(project_id=job.project_id, job_id=job.id, class_id=str(sg["class"]),
+                                wall_key=str(sg["wall"]), u=float(sg["u"]), v=float(sg["v"]),
+                                width_m=float(sg["width_m"]), height_m=float(sg["height_m"]),
+                                source=str(sg.get("source", "depth"))[:20],
+                                score=_float_or_none(sg.get("score")),
+                                reason=str(sg.get("reason", "not_kept"))[:40])
+        except (KeyError, TypeError, ValueError):
+            continue
+        session.add(row)
+        n += 1
+    return n
 
 
 def wall_dict(w: WallRow) -> dict:
@@ -69,13 +109,19 @@ def review_dict(d: DetectionRow) -> dict:
 
 def detection_dict(d: DetectionRow, *, id_is_ref: bool = False) -> dict:
     """One detection of contract 4 plus ``review``; ``id`` is the API's id unless ``id_is_ref``."""
-    return {
-        "id": d.ref if id_is_ref else str(d.id), "ref": d.ref, "class": d.class_id,
-        "detected_class": d.detected_class, "wall": d.wall_key, "position": d.position,
-        "u": d.u, "v": d.v, "width_m": d.width_m, "height_m": d.height_m, "alpha": d.alpha,
-        "rho_depth": d.rho_depth, "rho_colour": d.rho_colour, "source": d.source,
-        "review": review_dict(d),
-    }
+    out = {**(d.extra or {}),
+           "id": d.ref if id_is_ref else str(d.id), "ref": d.ref, "class": d.class_id,
+           "detected_class": d.detected_class, "wall": d.wall_key, "position": d.position,
+           "u": d.u, "v": d.v, "width_m": d.width_m, "height_m": d.height_m, "alpha": d.alpha,
+           "rho_depth": d.rho_depth, "rho_colour": d.rho_colour, "source": d.source,
+           "review": review_dict(d)}
+    if d.confidence is not None:
+        out["confidence"] = d.confidence
+    if d.note:
+        out["note"] = d.note
+    if d.carried_from is not None:
+        out["carried_from"] = str(d.carried_from)
+    return out
 
 
 def project_document(session: Session, project: Project, *, id_is_ref: bool = False) -> dict:

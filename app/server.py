@@ -130,7 +130,11 @@ def _viewer_manager(settings: AppSettings, db: Database):  # noqa: ANN202
     except ImportError as exc:  # viser missing: the REST app works without the 3D view
         log.warning("3D viewer unavailable: %s", exc)
         return None
-    return ViewerManager(DbReviewBackend(db, settings), host=settings.viewer_host)
+    from .viewer.gate import ViewerGate
+
+    return ViewerManager(DbReviewBackend(db, settings), host=settings.viewer_host, gate=ViewerGate(),
+                         idle_s=settings.viewer_idle_s,
+                         idle_check_s=max(1.0, min(30.0, settings.viewer_idle_s / 4)))
 
 
 def _viewer_of(request: Request):  # noqa: ANN202

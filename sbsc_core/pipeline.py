@@ -13,6 +13,9 @@ result; ``detect_to_dir`` reads the inputs, runs ``detect`` and writes the outpu
     the colour and depth orthoimages (row 0 = top of the wall, ``pixel_m`` pixels), the raw
     depth in metres (NaN = no data) and the RoIs (depth cyan, colour magenta, as the paper's
     figure 21) with the recognized objects as red spots.
+``suggestions.json``
+    candidates the consensus did not keep, offered to a reviewer as possible misses
+    (:mod:`sbsc_core.suggestions`).
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ from .orthoimage import build_orthoimage
 from .placement import place_hits
 from .segmentation import segment_floor_ceiling_walls
 from .settings import DetectionSettings, load_settings
+from .suggestions import suggestions_document
 from .templates import ModelTemplate, make_templates
 from .types import (
     Box,
@@ -364,3 +368,6 @@ def write_outputs(result: DetectionResult, out: Path, pixel_m: float) -> None:
     (out / "rois.json").write_text(
         json.dumps({"schema": "sbsc.rois/1", "pixel_m": pixel_m, "walls": rois}, indent=1) + "\n",
         encoding="utf-8")
+    cands = [c for w in result.walls.values() for c in (*w.depth_candidates, *w.colour_candidates)]
+    sugg = suggestions_document({k: w.ortho for k, w in result.walls.items()}, cands, result.detections)
+    (out / "suggestions.json").write_text(json.dumps(sugg, indent=1) + "\n", encoding="utf-8")

@@ -7,12 +7,12 @@ import tempfile
 
 from fastapi import APIRouter, HTTPException
 from fastapi.responses import JSONResponse, Response
-from sqlalchemy import select
 
 from sbsc_core.errors import SbscError
 
-from ..models import Job, ModelLibraryRow, SignOff
+from ..models import Job, ModelLibraryRow
 from ..results import project_document
+from ..review_service import current_signoff
 from .deps import ReadSession, Reviewer, Settings, get_project
 from .projects import signoff_dict
 
@@ -46,7 +46,7 @@ def export_ifc_file(pid: int, _: Reviewer, s: ReadSession, settings: Settings) -
                                  "(sbsc_core.bim.export is missing)") from None
     doc = project_document(s, p, id_is_ref=True)
     doc["project_name"] = p.name
-    so = s.scalars(select(SignOff).where(SignOff.project_id == pid)).first()
+    so = current_signoff(s, pid) if p.status != "open" else None
     library = _library(settings, s, s.get(Job, p.current_job_id).models_id)
     try:
         model = export_ifc(doc, library=library, schema="IFC4", accepted_only=True,
@@ -72,6 +72,6 @@ def export_json(pid: int, _: Reviewer, s: ReadSession) -> JSONResponse:
     """The detections document (contract 4, ids as the pipeline wrote them) as a download."""
     p = get_project(s, pid)
     doc = project_document(s, p, id_is_ref=True)
-    so = s.scalars(select(SignOff).where(SignOff.project_id == pid)).first()
+    so = current_signoff(s, pid) if p.status != "open" else None
     doc["signoff"] = signoff_dict(so)
     return JSONResponse(doc, headers={"Content-Disposition": f'attachment; filename="detections-{pid}.json"'})

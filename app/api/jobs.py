@@ -1,4 +1,9 @@
-"""Detection jobs: submit, look at, follow (server-sent events), retry, read the log."""
+"""Detection jobs: submit, look at, follow (server-sent events), retry, cancel, read the log.
+
+A project has at most one job queued (409 for a second one). A job on a project that has
+been reviewed needs a manager: the new results replace the reviewed ones (the decisions on
+the objects the new run finds again carry over, see ``app.review_service.carry_over``).
+"""
 
 from __future__ import annotations
 
@@ -14,10 +19,12 @@ from sqlalchemy import func, select
 
 from sbsc_core.errors import InputError
 
+from ..auth import Principal
 from ..jobs import TERMINAL, parse_expected
-from ..models import Job, Scan
+from ..models import Job, Project, ProjectEvent, Scan, utcnow
 from ..results import job_dict
-from .deps import DB, Jobs, ReadSession, Reviewer, Settings, open_project
+from ..review_service import is_reviewed
+from .deps import DB, Jobs, Manager, ReadSession, Reviewer, Settings, get_project, open_project
 
 router = APIRouter(prefix="/api", tags=["jobs"])
 
@@ -36,7 +43,23 @@ def _get_job(s, jid: int) -> Job:  # noqa: ANN001
     return job
 
 
-@router.post("/projects/{pid}/jobs", status_code=202)
+def check_new_job(s, project: Project, user: Principal) -> None:  # noqa: ANN001
+    """409 while the project has a job queued; 403 for a reviewer on a reviewed project."""
+    queued = s.scalar(select(func.count(Job.id)).where(Job.project_id == project.id,
+                                                       Job.status == "queued"))
+    if queued:
+        raise HTTPException(409, f"project {project.id} already has a job queued; wait for it or "
+                                 "cancel it")
+    if not user.may("manager") and is_reviewed(s, project):
+        raise HTTPException(403, f"project {project.id} has review decisions; a new job on it "
+                                 f"needs a manager (user '{user.name}' is {user.role})")
+
+
+JOB_ERRORS = {403: {"description": "reviewed project: needs a manager"},
+              409: {"description": "a job is already queued"}, 423: {"description": "signed off"}}
+
+
+@router.post("/projects/{pid}/jobs", status_code=202, responses=JOB_ERRORS)
 def submit_job(pid: int, user: Reviewer, db: DB, jobs: Jobs, body: NewJob | None = None) -> dict:
     """Queue a detection run over all the project's scans with its model library."""
     try:
@@ -47,6 +70,7 @@ def submit_job(pid: int, user: Reviewer, db: DB, jobs: Jobs, body: NewJob | None
         project = open_project(s, pid)
         if not s.scalar(select(func.count(Scan.id)).where(Scan.project_id == pid)):
             raise HTTPException(409, f"project {pid} has no scan yet; upload one first")
+        check_new_job(s, project, user)
         job = Job(project_id=pid, status="queued", stage="queued", progress=0.0, expected=expected,
                   models_id=project.models_id, created_by=user.name)
         s.add(job)
@@ -61,18 +85,44 @@ def get_job(jid: int, _: Reviewer, s: ReadSession) -> dict:
     return job_dict(_get_job(s, jid))
 
 
-@router.post("/jobs/{jid}/retry", status_code=202)
+@router.post("/jobs/{jid}/retry", status_code=202, responses=JOB_ERRORS)
 def retry_job(jid: int, user: Reviewer, db: DB, jobs: Jobs) -> dict:
     """Queue a new run with the same inputs as a failed job (answers the new job)."""
     with db.write() as s:
         old = _get_job(s, jid)
-        open_project(s, old.project_id)
-        if old.status != "failed":
-            raise HTTPException(409, f"job {jid} is {old.status}; only failed jobs can be retried")
+        project = open_project(s, old.project_id)
+        if old.status not in ("failed", "cancelled"):
+            raise HTTPException(409, f"job {jid} is {old.status}; only failed or cancelled jobs "
+                                     "can be retried")
+        check_new_job(s, project, user)
         job = Job(project_id=old.project_id, status="queued", stage="queued", progress=0.0,
                   expected=old.expected, models_id=old.models_id, retry_of=old.id,
                   created_by=user.name)
         s.add(job)
+        s.flush()
+        out = job_dict(job)
+    jobs.wake()
+    return out
+
+
+@router.delete("/jobs/{jid}", responses={403: {"description": "needs a manager"},
+                                         409: {"description": "the job has already ended"}})
+def cancel_job(jid: int, user: Manager, db: DB, jobs: Jobs) -> dict:
+    """Cancel a queued or running job (manager); its worker is stopped, its results never used."""
+    with db.write() as s:
+        job = s.get(Job, jid, with_for_update=True)
+        if job is None:
+            raise HTTPException(404, f"job {jid} not found")
+        get_project(s, job.project_id, for_update=True)
+        if job.status not in ("queued", "running"):
+            raise HTTPException(409, f"job {jid} is {job.status}; only a queued or running job "
+                                     "can be cancelled")
+        was = job.status
+        now = utcnow()
+        job.status, job.error, job.cancelled_by = "cancelled", f"cancelled by {user.name}", user.name
+        job.finished_at = job.updated_at = now
+        s.add(ProjectEvent(project_id=job.project_id, user_id=user.id, user_name=user.name, at=now,
+                           kind="job_cancelled", data={"job": jid, "was": was, "stage": job.stage}))
         s.flush()
         out = job_dict(job)
     jobs.wake()

@@ -9,6 +9,7 @@ from sqlalchemy import func, select
 from ..auth import create_user
 from ..models import DesignRow, Job, ModelLibraryRow, Project, Scan, SignOff, User, iso
 from ..results import job_dict, review_counts
+from ..review_service import current_signoff
 from .deps import DB, Admin, ReadSession, Reviewer, get_project, library_classes
 
 router = APIRouter(prefix="/api")
@@ -94,7 +95,7 @@ def get_project_detail(pid: int, _: Reviewer, s: ReadSession) -> dict:
              for sc in s.scalars(select(Scan).where(Scan.project_id == pid).order_by(Scan.id))]
     models = s.get(ModelLibraryRow, p.models_id) if p.models_id else None
     jobs = [job_dict(j) for j in s.scalars(select(Job).where(Job.project_id == pid).order_by(Job.id.desc()))]
-    so = s.scalars(select(SignOff).where(SignOff.project_id == pid)).first()
+    so = current_signoff(s, pid) if p.status != "open" else None
     design = s.scalars(select(DesignRow).where(DesignRow.project_id == pid)
                        .order_by(DesignRow.id.desc()).limit(1)).first()
     return {

@@ -7,8 +7,9 @@ The app mounts the router::
 
 ``manager`` is the :class:`ViewerManager`, or a function of the request that returns it
 (when the manager is made in the app's lifespan). ``auth_dependency`` is the app's FastAPI
-dependency that checks the bearer token: any role may look at a scene; deciding in the
-scene needs the reviewer role, checked there against the token entered in the scene.
+dependency that checks the bearer token and answers the caller. When the manager has a
+:class:`~app.viewer.gate.ViewerGate`, the answer also sets the viewer cookie (HttpOnly,
+SameSite=Strict): the scene then knows the caller without a second login.
 """
 
 from __future__ import annotations
@@ -16,9 +17,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from fastapi import APIRouter, Depends, HTTPException, Request
+from fastapi import APIRouter, Depends, HTTPException, Request, Response
 
 from .backend import ReviewError
+from .gate import COOKIE
 from .manager import ViewerManager
 
 ManagerSource = ViewerManager | Callable[[Request], ViewerManager]
@@ -33,9 +35,9 @@ def viewer_router(manager: ManagerSource, auth_dependency: Callable[..., Any]) -
 
     @router.get("/api/projects/{pid}/viewer", summary="Address of the project's 3D review scene",
                 responses={404: {"description": "no such project"},
-                           409: {"description": "no detections yet"}},
-                dependencies=[Depends(auth_dependency)])
-    def project_viewer(pid: int, request: Request) -> dict:
+                           409: {"description": "no detections yet"}})
+    def project_viewer(pid: int, request: Request, response: Response,
+                       user: Any = Depends(auth_dependency)) -> dict:  # noqa: B008 - a closure's dependency
         """Start the project's 3D scene if needed and answer its address.
 
         ``url`` opens as it is in a browser (or an ``<iframe>``); ``ready`` is false while
@@ -46,6 +48,10 @@ def viewer_router(manager: ManagerSource, auth_dependency: Callable[..., Any]) -
             url = m.url_for(pid, request_host=request.url.hostname)
         except ReviewError as exc:
             raise HTTPException(exc.status, str(exc)) from None
+        if m.gate is not None and hasattr(user, "id"):
+            response.set_cookie(COOKIE, m.gate.issue(user.id, user.name, user.role),
+                                max_age=int(m.gate.ttl_s), httponly=True, samesite="strict",
+                                secure=request.url.scheme == "https", path="/")
         return {"url": url, "ready": m.scene_for(pid).ready.is_set()}
 
     return router

@@ -232,6 +232,31 @@ class InMemoryBackend:
             p.changed_at[detection_id] = p.seq
             return copy.deepcopy(det)
 
+    def add_object(self, pid: ProjectId, class_id: str, wall: str, u: float, v: float,
+                   user: Reviewer, note: str | None = None) -> dict:
+        """An object recognition missed, accepted by ``user`` (``source: reviewer``)."""
+        if not user.may_decide:
+            raise Forbidden(f"{user.name}: role '{user.role}' may not review")
+        with self._lock:
+            p = self._project(pid)
+            if p.data.locked:
+                raise Locked("project is signed off")
+            w = next((x for x in p.data.detections.get("walls", []) if x["id"] == wall), None)
+            if w is None:
+                raise NotFound(f"wall {wall}: not found")
+            pos = [round(o + u * a + v * b, 5) for o, a, b in zip(w["origin"], w["axis_u"], w["axis_v"],
+                                                                  strict=True)]
+            did = f"A{len(p.by_id) + 1:04d}"
+            det = {"id": did, "ref": did, "class": class_id, "detected_class": class_id, "wall": wall,
+                   "position": pos, "u": u, "v": v, "width_m": 0.08, "height_m": 0.08, "alpha": None,
+                   "rho_depth": None, "rho_colour": None, "source": "reviewer", "note": note,
+                   "review": {"status": "accepted", "by": user.name, "at": now_iso(), "version": 1}}
+            p.data.detections["detections"].append(det)
+            p.by_id[did] = det
+            p.seq += 1
+            p.changed_at[did] = p.seq
+            return copy.deepcopy(det)
+
     def changes_since(self, pid: ProjectId, cursor: Any) -> Changes:
         with self._lock:
             p = self._project(pid)

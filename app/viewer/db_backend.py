@@ -2,10 +2,10 @@
 
 Reads go straight to the service's tables (``app.models``) and documents
 (``app.results.project_document``), so the scene shows exactly what
-``GET /api/projects/{pid}/detections`` answers. Decisions go through the service's own
-``PATCH /api/detections/{did}`` handler (``app.api.review.review_detection``), called as
-a function: one code path for the version check, the 423 after sign-off, the relabel
-rules and the append-only audit row, whichever side the decision comes from.
+``GET /api/projects/{pid}/detections`` answers. Decisions and added objects go through the
+review service (:mod:`app.review_service`), the functions the REST routes call: one code path
+for the version check, the 423 after sign-off, the relabel rules and the append-only audit
+row, whichever side the decision comes from.
 
 The change feed is the audit trail: every decision is a ``review_decisions`` row with an
 increasing id, so "what changed since cursor" is one indexed query; a new current job
@@ -16,19 +16,17 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
-from fastapi import HTTPException
-from fastapi.responses import JSONResponse
 from sqlalchemy import func, select
 
 from sbsc_core.paths import bundled_models_dir
 
+from .. import review_service as svc
 from ..auth import Principal, authenticate
 from ..config import AppSettings
 from ..db import Database
-from ..models import DetectionRow, Job, ModelLibraryRow, Project, ReviewDecision, Scan, SignOff
+from ..models import DetectionRow, Job, ModelLibraryRow, Project, ReviewDecision, Scan
 from ..results import detection_dict, project_document
 from .backend import (
     Changes,
@@ -49,7 +47,7 @@ from .backend import (
 CURSOR_OVERLAP = 20
 
 _ERRORS: dict[int, type[ReviewError]] = {403: Forbidden, 404: NotFound, 409: StaleVersion,
-                                         423: Locked}
+                                         423: Locked}  # other statuses: ReviewError
 
 
 class DbReviewBackend:
@@ -58,17 +56,11 @@ class DbReviewBackend:
     def __init__(self, db: Database, settings: AppSettings) -> None:
         self.db = db
         self.settings = settings
-        # what the PATCH handler reads from ``request.app.state`` (the bundled classes cache)
-        self._request = SimpleNamespace(app=SimpleNamespace(state=SimpleNamespace(bundled_classes=None)))
 
     def _signoff(self, s: Any, pid: int) -> dict | None:
-        from ..api.projects import signoff_dict
-
-        return signoff_dict(s.scalars(select(SignOff).where(SignOff.project_id == pid)).first())
+        return svc.signoff_dict(svc.current_signoff(s, pid))
 
     def project_data(self, pid: ProjectId) -> ProjectData:
-        from ..api.deps import bundled_classes
-
         data_dir = self.settings.data_dir
         with self.db.read() as s:
             p = s.get(Project, int(pid))
@@ -82,7 +74,7 @@ class DbReviewBackend:
             scans = [data_dir / path for path in s.scalars(
                 select(Scan.path).where(Scan.project_id == p.id).order_by(Scan.id))]
             lib = s.get(ModelLibraryRow, job.models_id) if job is not None and job.models_id else None
-            classes = dict(lib.classes) if lib is not None else bundled_classes()
+            classes = dict(lib.classes) if lib is not None else svc.bundled_classes()
             models_dir = data_dir / lib.path if lib is not None else bundled_models_dir()
             locked = p.status != "open"
             signoff = self._signoff(s, p.id) if locked else None
@@ -127,6 +119,16 @@ class DbReviewBackend:
                 dets = [detection_dict(r) for r in rows]
             return Changes(now, dets, locked, signoff)
 
+    def resolve_user(self, user_id: int) -> Reviewer | None:
+        """The user behind a viewer ticket (None when disabled or gone since)."""
+        from ..models import User
+
+        with self.db.read() as s:
+            u = s.get(User, int(user_id))
+            if u is None or u.disabled:
+                return None
+            return Reviewer(name=u.name, role=u.role, ref=Principal(id=u.id, name=u.name, role=u.role))
+
     def resolve_token(self, token: str) -> Reviewer | None:
         token = (token or "").strip()
         if not token:
@@ -137,30 +139,31 @@ class DbReviewBackend:
             return None
         return Reviewer(name=principal.name, role=principal.role, ref=principal)
 
-    def decide(self, pid: ProjectId, detection_id: str, status: str, new_class: str | None,
-               version: int, user: Reviewer) -> dict:
-        from ..api.review import Change, review_detection
-
+    def _principal(self, user: Reviewer) -> Principal:
         if not user.may_decide or not isinstance(user.ref, Principal):
             raise Forbidden(f"{user.name}: role '{user.role}' may not review")
+        return user.ref
+
+    def _call(self, op: Any) -> Any:
+        try:
+            with self.db.write() as s:
+                return op(s)
+        except svc.ServiceError as exc:
+            raise _ERRORS.get(exc.status, ReviewError)(str(exc), exc.current) from None
+
+    def decide(self, pid: ProjectId, detection_id: str, status: str, new_class: str | None,
+               version: int, user: Reviewer) -> dict:
+        principal = self._principal(user)
         try:
             did = int(detection_id)
         except ValueError:
             raise NotFound(f"detection {detection_id} not found") from None
-        with self.db.read() as s:
-            owner = s.scalar(select(DetectionRow.project_id).where(DetectionRow.id == did))
-        if owner != int(pid):
-            raise NotFound(f"detection {detection_id} is not in project {pid}")
-        change = {"version": int(version), "status": status}
-        if new_class is not None:
-            change["class"] = new_class
-        try:
-            result = review_detection(did, Change.model_validate(change), self._request, user.ref,
-                                      self.db)
-        except HTTPException as exc:
-            raise _ERRORS.get(exc.status_code, ReviewError)(str(exc.detail)) from None
-        if isinstance(result, JSONResponse):  # 409 with the current state
-            body = json.loads(result.body)
-            raise _ERRORS.get(result.status_code, ReviewError)(body.get("detail", ""),
-                                                               body.get("current"))
-        return result
+        change = svc.Change(version=int(version), status=status, class_=new_class)
+        return self._call(lambda s: svc.decide(s, did, change, principal, pid=int(pid)))
+
+    def add_object(self, pid: ProjectId, class_id: str, wall: str, u: float, v: float,
+                   user: Reviewer, note: str | None = None) -> dict:
+        """An object recognition missed, added where the reviewer clicked (snapped to the relief)."""
+        principal = self._principal(user)
+        return self._call(lambda s: svc.add_object(s, int(pid), class_id, wall, u, v, principal,
+                                                   self.settings.data_dir, note=note))

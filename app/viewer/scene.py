@@ -15,11 +15,14 @@ What the reviewer sees (paper, section 5 and figures 18, 19 and 21):
     the regions of interest of the depth and colour recognizers (figure 21 a).
 ``/spots/<D>``, ``/spot_labels/<D>``
     every recognized object as a spot at its ``position`` (the paper's red spots), coloured
-    by review state, labelled with class and alpha; clicking one selects it.
+    by review state; clicking one selects it. The labels of all objects are a layer that is
+    off at first: each tab labels only its selection and the objects near its camera.
 
-Every browser tab gets its own review panel (:class:`ReviewSession`): sign in with an API
-token, the selected object's values and crops, Accept / Reject / Relabel, Previous / Next
-pending; the camera flies to the selection. Decisions go through the :class:`ReviewBackend`;
+Every browser tab gets its own review panel (:class:`ReviewSession`): the reviewer signed in
+to the app (the viewer's cookie, see :mod:`app.viewer.gate`; an API token in the stand-alone
+viewer), the selected object's values and crops, Accept / Reject / Relabel, Previous / Next
+pending in order of confidence, least sure first; the camera flies to the selection.
+Shift-click on a wall adds an object recognition missed, of the class chosen in the panel. Decisions go through the :class:`ReviewBackend`;
 a background thread polls its change feed so that a decision made on the REST API shows in
 every tab within ``poll_s``. After sign-off the scene is read-only and says so.
 """
@@ -97,6 +100,9 @@ class SceneSettings:
     crop_context: float = 2.5  # crop side = this x the object's larger side ...
     crop_min_m: float = 0.25  # ... and at least this
     crop_px: int = 160
+    near_label_m: float = 3.0  # a tab labels the objects this close to its camera ...
+    near_label_max: int = 12  # ... at most this many
+    label_refresh_s: float = 0.3  # camera moves update the near labels at most this often
 
 
 def rect_segments(frame: WallFrame, u0: float, u1: float, v0: float, v1: float,
@@ -148,7 +154,35 @@ def _fmt(x: Any, nd: int = 2) -> str:
 
 
 def spot_label(det: dict) -> str:
+    if det.get("confidence") is not None:
+        return f"{det['class']} {_fmt(det['confidence'])}"
     return f"{det['class']} α {_fmt(det.get('alpha'))}"
+
+
+def review_score(det: dict) -> float:
+    """How sure recognition is (confidence, else alpha); objects without one sort last."""
+    c = det.get("confidence")
+    c = det.get("alpha") if c is None else c
+    return 2.0 if c is None else float(c)
+
+
+def wall_hit(frames: dict[str, WallFrame], origin: np.ndarray, direction: np.ndarray
+             ) -> tuple[str, float, float] | None:
+    """The first wall (id, u, v) a ray meets from its room side, or None."""
+    best = None
+    d = np.asarray(direction, float)
+    for wid, f in frames.items():
+        den = float(np.dot(d, f.normal))
+        if den >= -1e-9:  # parallel, or seen from behind
+            continue
+        t = float(np.dot(f.origin - origin, f.normal)) / den
+        if t <= 0 or (best is not None and t >= best[0]):
+            continue
+        p = origin + t * d - f.origin
+        u, v = float(np.dot(p, f.axis_u)), float(np.dot(p, f.axis_v))
+        if 0.0 <= u <= f.width_m and 0.0 <= v <= f.height_m:
+            best = (t, wid, u, v)
+    return None if best is None else best[1:]
 
 
 class ProjectScene:
@@ -179,6 +213,8 @@ class ProjectScene:
         self.revision: Any = None
         self.scan_tiles: dict[str, list[ScanTile]] = {}  # layer -> tiles, sent per tab
         self._cursor: Any = None
+        self.identify: Any = None  # client -> Reviewer | None (the app's login), set by the manager
+        self.last_active = time.monotonic()  # last tab connected or left
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self._poller: threading.Thread | None = None
@@ -199,7 +235,8 @@ class ProjectScene:
             self.ui_depth_rois = gui.add_checkbox("Depth RoIs (cyan)", True)
             self.ui_colour_rois = gui.add_checkbox("Colour RoIs (magenta)", True)
             self.ui_spots = gui.add_checkbox("Objects (spots)", True)
-            self.ui_labels = gui.add_checkbox("Object labels", True)
+            self.ui_labels = gui.add_checkbox("All object labels", False,
+                                              hint="off: only the selection and what is near the camera")
         for box, layers in ((self.ui_walls, ("walls",)), (self.ui_openings, ("openings",)),
                             (self.ui_depth_rois, ("rois_depth",)),
                             (self.ui_colour_rois, ("rois_colour",)),
@@ -261,7 +298,10 @@ class ProjectScene:
                 data = self.backend.project_data(self.pid)
             lod = None
             if data.scans:
+                self._status.content = (f"Loading the scene of **{data.name}**: reading the scan "
+                                        f"({len(data.scans)} file(s))…")
                 lod = self._scan_lod(data)
+                self._status.content = "Loading the scene: walls, images and objects…"
             with self._lock:
                 self._build_from(data, lod)
                 self._cursor = cursor
@@ -291,7 +331,7 @@ class ProjectScene:
         self.frames = {w["id"]: WallFrame.from_dict(w) for w in doc.get("walls", [])}
         dets = doc.get("detections", [])
         self.detections = {d["id"]: d for d in dets}
-        self.order = sorted(self.detections)
+        self.order = self.review_order()
         self.images = WallImages(data.ortho_dir, float(doc.get("pixel_m") or
                                                       (data.rois or {}).get("pixel_m") or 0.005))
         self.centre = lod.centre.copy() if lod is not None else self._walls_centre()
@@ -318,6 +358,20 @@ class ProjectScene:
         self._status = self.server.gui.add_markdown(self.status_text(), order=0)
         for session in self.sessions.values():
             session.reset()
+
+    def review_order(self) -> list[str]:
+        """Detection ids, least sure first (confidence, else alpha), then by id."""
+        return sorted(self.detections, key=lambda did: (review_score(self.detections[did]), did))
+
+    def add_detection(self, det: dict) -> None:
+        """Show a detection that was added (an object recognition missed); idempotent."""
+        with self._lock:
+            if det["id"] in self.detections:
+                return
+            self.detections[det["id"]] = det
+            self.order = self.review_order()
+            self._add_spot(det)
+            self._refresh_status()
 
     def _walls_centre(self) -> np.ndarray:
         if not self.frames:
@@ -496,6 +550,8 @@ class ProjectScene:
             self.rebuild()
             return
         for d in ch.detections:
+            if d.get("id") not in self.detections:
+                self.add_detection(d)
             self.apply_detection(d)
         self.apply_lock(ch.locked, ch.signoff)
         self._cursor = ch.cursor
@@ -548,12 +604,24 @@ class ProjectScene:
     # ------------------------------------------------------------------ clients
     def _on_connect(self, client: viser.ClientHandle) -> None:
         with self._lock:
+            self.last_active = time.monotonic()
             if client.client_id not in self.sessions:
-                self.sessions[client.client_id] = ReviewSession(self, client)
+                self.sessions[client.client_id] = ReviewSession(self, client, self.user_of(client))
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         with self._lock:
+            self.last_active = time.monotonic()
             self.sessions.pop(client.client_id, None)
+
+    def user_of(self, client: viser.ClientHandle) -> Reviewer | None:
+        """The reviewer the app signed in for this tab (its viewer cookie), if any."""
+        if self.identify is None:
+            return None
+        try:
+            return self.identify(client)
+        except Exception:  # an unknown user: the tab can look, not decide
+            log.exception("viewer: cannot tell who client %s is", client.client_id)
+            return None
 
     def _on_spot_click(self, event: Any, did: str) -> None:
         session = self.sessions.get(event.client_id)
@@ -567,10 +635,13 @@ class ProjectScene:
 class ReviewSession:
     """The review panel of one browser tab: its reviewer, its selection, its camera."""
 
-    def __init__(self, scene: ProjectScene, client: viser.ClientHandle) -> None:
+    def __init__(self, scene: ProjectScene, client: viser.ClientHandle,
+                 user: Reviewer | None = None) -> None:
         self.scene = scene
         self.client = client
-        self.user: Reviewer | None = None
+        self.user: Reviewer | None = user
+        self.labels: dict[str, Any] = {}  # this tab's labels: its selection, what is near its camera
+        self._labels_at = 0.0
         self.selected: str | None = None
         self._highlight: Any = None
         self._scan_lock = threading.RLock()
@@ -581,9 +652,12 @@ class ReviewSession:
         blank = np.zeros((scene.s.crop_px, scene.s.crop_px, 3), np.uint8)
         self.f_user = gui.add_folder("Reviewer", order=10)
         with self.f_user:
-            self.ui_token = gui.add_text("API token", "", hint="paste your API token to review")
-            self.ui_sign_in = gui.add_button("Sign in")
-            self.ui_who = gui.add_markdown("Not signed in: you can look, not decide.")
+            signed = user is not None
+            self.ui_token = gui.add_text("API token", "", hint="paste your API token to review",
+                                         visible=not signed)
+            self.ui_sign_in = gui.add_button("Sign in", visible=not signed)
+            self.ui_who = gui.add_markdown(f"Signed in as **{user.name}** ({user.role})." if signed
+                                           else "Not signed in: you can look, not decide.")
         self.f_sel = gui.add_folder("Selected object", order=20)
         with self.f_sel:
             self.ui_info = gui.add_markdown("Click a spot to select an object.")
@@ -598,7 +672,14 @@ class ReviewSession:
             self.ui_relabel = gui.add_button("Relabel (accept as class)", disabled=True)
             self.ui_auto = gui.add_checkbox("Go to next pending after a decision", True)
             self.ui_prev = gui.add_button("◀ Previous pending")
-            self.ui_next = gui.add_button("Next pending ▶")
+            self.ui_next = gui.add_button("Next pending ▶",
+                                          hint="least sure first (confidence, else alpha)")
+        self.f_add = gui.add_folder("Add a missed object", order=22)
+        with self.f_add:
+            classes = self._classes() or ["-"]
+            self.ui_add_class = gui.add_dropdown("Class to add", classes, initial_value=classes[0])
+            self.ui_add_help = gui.add_markdown("**Shift-click on a wall** to add an object of this "
+                                                "class there (accepted, source *reviewer*).")
         self.f_scan = gui.add_folder("Scan (this tab)", order=25)
         with self.f_scan:
             self.ui_scan = gui.add_dropdown(
@@ -614,6 +695,8 @@ class ReviewSession:
         self.ui_relabel.on_click(lambda ev: self.decide("accepted", self.ui_class.value))
         self.ui_prev.on_click(lambda ev: self.step(-1))
         self.ui_next.on_click(lambda ev: self.step(+1))
+        client.scene.on_click(modifier="shift")(self._on_shift_click)
+        client.camera.on_update(lambda cam: self.update_labels())
         self.show()
         self.stream_scan_later()
 
@@ -639,6 +722,10 @@ class ReviewSession:
         classes = self._classes()
         if classes:
             self.ui_class.options = classes
+            self.ui_add_class.options = classes
+        for node in self.labels.values():
+            node.remove()
+        self.labels.clear()
         with self._scan_lock:
             for g in self.scan_groups.values():
                 g.remove()
@@ -725,6 +812,7 @@ class ReviewSession:
         self.show()
         if fly:
             self.fly_to(det)
+        self.update_labels(force=True)
 
     def step(self, direction: int) -> str | None:
         did = self.scene.pending_after(self.selected, direction)
@@ -755,6 +843,88 @@ class ReviewSession:
                 cam.look_at = l0 + (target - l0) * t
             if i < n:
                 time.sleep(self.scene.s.fly_s / n)
+
+    # -- labels: the selection and what is near the camera ------------------------------
+    def wanted_labels(self) -> list[str]:
+        sc = self.scene
+        want = [self.selected] if self.selected in sc.detections else []
+        try:
+            cam = np.array(self.client.camera.position, float)
+        except (AssertionError, AttributeError):
+            return want
+        near = []
+        for did, spot in list(sc.spots.items()):
+            dist = float(np.linalg.norm(np.asarray(spot.position, float) - cam))
+            if dist <= sc.s.near_label_m and did != self.selected:
+                near.append((dist, did))
+        return want + [did for _, did in sorted(near)[:sc.s.near_label_max]]
+
+    def update_labels(self, force: bool = False) -> None:
+        """Label this tab's selection and the objects near its camera (throttled)."""
+        now = time.monotonic()
+        if not force and now - self._labels_at < self.scene.s.label_refresh_s:
+            return
+        self._labels_at = now
+        sc = self.scene
+        want = self.wanted_labels()
+        for did in list(self.labels):
+            if did not in want:
+                self.labels.pop(did).remove()
+        for did in want:
+            det = sc.detection(did)
+            spot = sc.spots.get(did)
+            if det is None or spot is None:
+                continue
+            text = spot_label(det) + (f" · {det['review']['status']}" if did == self.selected else "")
+            node = self.labels.get(did)
+            if node is not None:
+                node.text = text
+                continue
+            f = sc.frames.get(det.get("wall"))
+            lift = np.array([0.0, 0.0, sc.s.label_lift_m])
+            if f is not None:
+                lift = lift + f.normal * sc.s.spot_radius_m
+            self.labels[did] = self.client.scene.add_label(
+                f"/tab_labels/{did}", text, position=np.asarray(spot.position, float) + lift,
+                anchor="bottom-center", font_screen_scale=0.9, depth_test=False)
+
+    # -- adding a missed object ------------------------------------------------------------
+    def _on_shift_click(self, event: Any) -> None:
+        if event.ray_origin is None or event.ray_direction is None:
+            return
+        self.add_at_ray(np.asarray(event.ray_origin, float), np.asarray(event.ray_direction, float))
+
+    def add_at_ray(self, origin: np.ndarray, direction: np.ndarray) -> dict | None:
+        """Add an object of the chosen class where a ray (scene coordinates) meets a wall."""
+        sc = self.scene
+        hit = wall_hit(sc.frames, origin + sc.centre, direction)
+        if hit is None:
+            self.notify("Not on a wall", "Shift-click on a wall to add an object there.", "yellow")
+            return None
+        wid, u, v = hit
+        return self.add_object(wid, u, v, self.ui_add_class.value)
+
+    def add_object(self, wall: str, u: float, v: float, class_id: str) -> dict | None:
+        if self.user is None:
+            self.notify("Not signed in", "Sign in to the review app to add objects.", "red")
+            return None
+        add = getattr(self.scene.backend, "add_object", None)
+        if add is None:
+            self.notify("Not available", "This viewer cannot add objects.", "red")
+            return None
+        try:
+            det = add(self.scene.pid, class_id, wall, round(u, 4), round(v, 4), self.user)
+        except Locked:
+            self.notify("Signed off", "The project is signed off: read-only.", "red")
+            return None
+        except ReviewError as exc:
+            self.notify("Not added", str(exc), "red")
+            return None
+        self.scene.add_detection(det)
+        self.notify(f"Added {det['class']}", f"on {wall} at u {det['u']:.3f}, v {det['v']:.3f} m",
+                    "green")
+        self.select(det["id"], fly=False)
+        return det
 
     # -- decisions ----------------------------------------------------------------------
     def decide(self, status: str, new_class: str | None = None) -> dict | None:

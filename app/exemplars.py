@@ -1,0 +1,111 @@
+"""Learn from decisions: the reviewed objects of a project as a model library (contract 2).
+
+Every accepted object (recognized, relabelled or added by a reviewer) is cut out of its
+wall's colour and depth orthoimages over exactly its footprint. Each class of the project's
+library is copied with its own views and ``model.json``, and gets those crops as extra front
+views (``colour_<k>.png``, which the library reader loads like any other view) and as depth
+samples (``depth_exemplar_<k>.npy``, relief from the wall level around the object; the
+reader keeps using ``depth.npy``). The result is a library a re-run of the project, or a run
+on another floor of the same building, can use like any uploaded library.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from .models import DetectionRow, Project, WallRow
+
+MIN_SEEN = 0.6  # a crop with less of its footprint scanned is left out
+MAX_VIEWS = 12  # extra views per class at most (the surest first)
+EXEMPLAR_BASE = 100  # exemplar views are colour_101.png, colour_102.png, ...
+
+
+def footprint(shape: tuple[int, ...], wall_height_m: float, pixel_m: float, u: float, v: float,
+              width_m: float, height_m: float) -> tuple[int, int, int, int] | None:
+    """(r0, c0, r1, c1) of an object's footprint in an orthoimage; None when it leaves the image."""
+    c0 = int(round((u - width_m / 2) / pixel_m))
+    c1 = int(round((u + width_m / 2) / pixel_m))
+    r0 = int(round((wall_height_m - v - height_m / 2) / pixel_m))
+    r1 = int(round((wall_height_m - v + height_m / 2) / pixel_m))
+    if r0 < 0 or c0 < 0 or r1 > shape[0] or c1 > shape[1] or r1 - r0 < 2 or c1 - c0 < 2:
+        return None
+    return r0, c0, r1, c1
+
+
+def _relief(depth: np.ndarray, win: tuple[int, int, int, int], ring_px: int) -> np.ndarray | None:
+    r0, c0, r1, c1 = win
+    crop = depth[r0:r1, c0:c1].astype(np.float32)
+    if np.isfinite(crop).mean() < MIN_SEEN:
+        return None
+    R0, C0 = max(0, r0 - ring_px), max(0, c0 - ring_px)
+    R1, C1 = min(depth.shape[0], r1 + ring_px), min(depth.shape[1], c1 + ring_px)
+    ring = depth[R0:R1, C0:C1].copy()
+    ring[r0 - R0:r1 - R0, c0 - C0:c1 - C0] = np.nan
+    level = float(np.nanmedian(ring)) if np.isfinite(ring).any() else 0.0
+    return crop - level
+
+
+def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_library: Path,
+                           dest: Path) -> dict[str, int]:
+    """Write the exemplar library of ``project``'s current results into ``dest``.
+
+    Returns class id -> number of exemplar views added. Classes without accepted objects
+    are copied unchanged, so the library stays complete.
+    """
+    if project.current_job_id is None:
+        return {}
+    dets = list(s.scalars(select(DetectionRow).where(DetectionRow.job_id == project.current_job_id,
+                                                     DetectionRow.status == "accepted")))
+    walls = {w.key: w for w in s.scalars(select(WallRow).where(WallRow.job_id == project.current_job_id))}
+    dest.mkdir(parents=True, exist_ok=True)
+    for class_dir in sorted(Path(source_library).iterdir()):
+        if class_dir.is_dir() and (class_dir / "model.json").is_file():
+            shutil.copytree(class_dir, dest / class_dir.name, dirs_exist_ok=True)
+    images: dict[tuple[str, str], np.ndarray | None] = {}
+
+    def image(wall: WallRow, kind: str) -> np.ndarray | None:
+        key = (wall.key, kind)
+        if key not in images:
+            meta = (wall.images or {}).get(kind)
+            img = None
+            if meta:
+                path = data_dir / meta["path"]
+                img = np.load(path) if kind == "depth" else cv2.imread(str(path), cv2.IMREAD_COLOR)
+            images[key] = img
+        return images[key]
+
+    added: dict[str, int] = {}
+    # the surest first: reviewer-added objects, then by confidence / alpha
+    dets.sort(key=lambda d: -(2.0 if d.source == "reviewer" else
+                              (d.confidence if d.confidence is not None else (d.alpha or 0.0))))
+    for d in dets:
+        cdir = dest / d.class_id
+        wall = walls.get(d.wall_key)
+        if wall is None or not (cdir / "model.json").is_file() or added.get(d.class_id, 0) >= MAX_VIEWS:
+            continue
+        meta = json.loads((cdir / "model.json").read_text(encoding="utf-8"))
+        colour, depth = image(wall, "colour"), image(wall, "depth")
+        if colour is None:
+            continue
+        win = footprint(colour.shape, wall.height_m, wall.pixel_m, d.u, d.v,
+                        float(meta["width_m"]), float(meta["height_m"]))
+        if win is None:
+            continue
+        r0, c0, r1, c1 = win
+        relief = _relief(depth, win, ring_px=max(2, (r1 - r0) // 4)) if depth is not None else None
+        if depth is not None and relief is None:
+            continue  # mostly unseen
+        k = added.get(d.class_id, 0) + 1
+        # numbered after the library's own views: colour_101.png, colour_102.png, ...
+        cv2.imwrite(str(cdir / f"colour_{EXEMPLAR_BASE + k}.png"), colour[r0:r1, c0:c1])
+        if relief is not None:
+            np.save(cdir / f"depth_exemplar_{k}.npy", relief.astype(np.float32))
+        added[d.class_id] = k
+    return added

@@ -1,0 +1,141 @@
+"""The 3D scene's door: the app's login, carried by a cookie; the scene's own origin only.
+
+The review pages hold the API token; asking ``GET /api/projects/{pid}/viewer`` with it sets
+a short-lived, HttpOnly, ``SameSite=Strict`` cookie holding a signed ticket (user id, role,
+expiry; HMAC-SHA256 with a secret that lives only in this server process). Cookies are
+per host, not per port, so the browser sends it to the project's viser server too: the
+scene signs the reviewer in with no second token.
+
+viser has no hook for this, so each viser server is started with a request filter in front
+of its own (``websockets``' ``process_request``): every request without a valid ticket is
+refused with 403, and so is a websocket whose ``Origin`` is not the scene's own page. The
+user of each accepted websocket is remembered for the scene (:meth:`ViewerGate.user_of`).
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import hmac
+import json
+import secrets
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from http.cookies import CookieError, SimpleCookie
+from typing import Any
+
+import viser
+
+COOKIE = "sbsc_viewer"
+TICKET_TTL_S = 12 * 3600.0
+_SERVE_LOCK = threading.Lock()  # the request filter is put in place while one viser server starts
+
+
+@dataclass(frozen=True)
+class Ticket:
+    user_id: int
+    name: str
+    role: str
+    expires: float
+
+
+class ViewerGate:
+    """Issues and checks viewer tickets; filters the requests of the viser servers."""
+
+    def __init__(self, ttl_s: float = TICKET_TTL_S, secret: bytes | None = None) -> None:
+        self.ttl_s = ttl_s
+        self._secret = secret or secrets.token_bytes(32)
+        self._users: dict[int, Ticket] = {}  # id(websocket connection) -> who opened it
+        self._lock = threading.Lock()
+
+    # -- tickets -------------------------------------------------------------------------
+    def issue(self, user_id: int, name: str, role: str, now: float | None = None) -> str:
+        body = json.dumps({"u": user_id, "n": name, "r": role,
+                           "e": round((now or time.time()) + self.ttl_s)}, separators=(",", ":"))
+        b = base64.urlsafe_b64encode(body.encode()).decode().rstrip("=")
+        return f"{b}.{self._sign(b)}"
+
+    def _sign(self, b: str) -> str:
+        return hmac.new(self._secret, b.encode(), hashlib.sha256).hexdigest()
+
+    def verify(self, ticket: str | None, now: float | None = None) -> Ticket | None:
+        if not ticket or "." not in ticket or len(ticket) > 2000:
+            return None
+        b, _, sig = ticket.rpartition(".")
+        if not hmac.compare_digest(sig, self._sign(b)):
+            return None
+        try:
+            d = json.loads(base64.urlsafe_b64decode(b + "=" * (-len(b) % 4)))
+            t = Ticket(int(d["u"]), str(d["n"]), str(d["r"]), float(d["e"]))
+        except (ValueError, KeyError, TypeError):
+            return None
+        return t if t.expires > (now or time.time()) else None
+
+    def ticket_of(self, cookie_header: str | None) -> Ticket | None:
+        if not cookie_header:
+            return None
+        try:
+            jar = SimpleCookie(cookie_header)
+        except CookieError:
+            return None
+        morsel = jar.get(COOKIE)
+        return self.verify(morsel.value if morsel else None)
+
+    # -- requests ------------------------------------------------------------------------
+    def check(self, connection: Any, request: Any) -> Any:
+        """``process_request`` of a viser server: None lets the request through, else a 403."""
+        headers = request.headers
+        ticket = self.ticket_of(headers.get("Cookie"))
+        if ticket is None:
+            return connection.respond(403, "Sign in to the sbsc review app and open the 3D view "
+                                           "from the project's page.\n")
+        if headers.get("Upgrade", "").lower() == "websocket":
+            origin = headers.get("Origin")
+            host = headers.get("Host", "")
+            if origin is not None and origin not in (f"http://{host}", f"https://{host}"):
+                return connection.respond(403, "websocket refused: foreign origin\n")
+            with self._lock:
+                self._users[id(connection)] = ticket
+        return None
+
+    def user_of(self, connection: Any) -> Ticket | None:
+        """Who opened an accepted websocket connection (None when unknown)."""
+        with self._lock:
+            return self._users.get(id(connection))
+
+    def forget(self, connection: Any) -> None:
+        with self._lock:
+            self._users.pop(id(connection), None)
+
+    # -- servers -------------------------------------------------------------------------
+    def server(self, **kwargs: Any) -> viser.ViserServer:
+        """A ``viser.ViserServer(**kwargs)`` whose every request goes through :meth:`check`."""
+        import websockets.asyncio.server as wss
+
+        original = wss.serve
+        check = self.check
+
+        def serve(handler: Callable, *args: Any, process_request: Callable | None = None, **kw: Any):
+            def gated(connection: Any, request: Any) -> Any:
+                refused = check(connection, request)
+                if refused is not None:
+                    return refused
+                return process_request(connection, request) if process_request else None
+
+            return original(handler, *args, process_request=gated, **kw)
+
+        with _SERVE_LOCK:
+            wss.serve = serve
+            try:
+                server = viser.ViserServer(**kwargs)
+            finally:
+                wss.serve = original
+        return server
+
+
+def connection_of(server: viser.ViserServer, client_id: int) -> Any:
+    """The websocket connection of a viser client (viser keeps it in a private table)."""
+    ws = getattr(server, "_websock_server", None)
+    return getattr(ws, "_live_connections", {}).get(client_id)

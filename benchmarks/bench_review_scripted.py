@@ -1,0 +1,96 @@
+"""A scripted reviewer: uncertain-first review with a bulk accept at or above a threshold.
+
+Imports a finished ``sbsc detect`` output (with its scan and ground truth) into a fresh
+review service, then reviews it through the REST API the way issue 14 asks:
+
+1. a dry run of ``POST /api/projects/{pid}/decisions`` with
+   ``{"status": "accepted", "filter": {"min_confidence": T, "review": "pending"}}`` states
+   the count; the reviewer confirms it (``expect``) and the objects are accepted in bulk;
+2. the rest are decided one by one, least sure first (``?order=uncertain``): accepted when
+   the ground truth has an object of that class there (contract 5, 0.10 m), else rejected.
+
+Prints the single decisions without and with the bulk step, their fall in percent, and how
+many wrong objects (no truth object there) were accepted in bulk. ``T`` applies to the
+detections' calibrated ``confidence`` when they have one, else to ``alpha``.
+
+    .venv/bin/python benchmarks/bench_review_scripted.py DETECT_OUT SCAN TRUTH [--threshold 0.9]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from fastapi.testclient import TestClient  # noqa: E402
+
+from app.config import AppSettings  # noqa: E402
+from app.sample import ensure_sample_project  # noqa: E402
+from app.server import create_app  # noqa: E402
+from app.users import add_user  # noqa: E402
+from sbsc_core.evaluate import evaluate  # noqa: E402
+from sbsc_core.io.documents import read_truth  # noqa: E402
+
+
+def review(out_dir: Path, scan: Path, truth_path: Path, threshold: float) -> dict:
+    with tempfile.TemporaryDirectory(prefix="sbsc-review-") as tmp:
+        settings = AppSettings(data_dir=Path(tmp) / "data", viewer=False)
+        pid = ensure_sample_project(scan, out_dir, settings=settings, name="scripted", points=1,
+                                    models=out_dir.parent / "models" if (out_dir.parent / "models").is_dir()
+                                    else None)
+        token = add_user(settings, "bot", "reviewer")
+        h = {"Authorization": f"Bearer {token}"}
+        with TestClient(create_app(settings, start_jobs=False)) as c:
+            doc = c.get(f"/api/projects/{pid}/detections", headers=h).json()
+            ref_doc = {**doc, "detections": [{**d, "id": d["id"]} for d in doc["detections"]]}
+            table = evaluate(ref_doc, read_truth(truth_path))
+            correct = {m.detection_id for m in table.matches}
+            n = len(doc["detections"])
+            score_kind = "confidence" if any(d.get("confidence") is not None for d in doc["detections"]) \
+                else "alpha"
+            t0 = time.perf_counter()
+            body = {"status": "accepted", "filter": {"min_confidence": threshold, "review": "pending"}}
+            dry = c.post(f"/api/projects/{pid}/decisions", headers=h, json={**body, "dry_run": True}).json()
+            bulk = c.post(f"/api/projects/{pid}/decisions", headers=h,
+                          json={**body, "expect": dry["matched"]}).json()
+            bulk_ids = set(bulk["ids"])
+            singles = 0
+            rest = c.get(f"/api/projects/{pid}/detections?status=pending&order=uncertain",
+                         headers=h).json()["detections"]
+            for d in rest:
+                status = "accepted" if d["id"] in correct else "rejected"
+                r = c.patch(f"/api/detections/{d['id']}", headers=h,
+                            json={"status": status, "version": d["review"]["version"]})
+                r.raise_for_status()
+                singles += 1
+            elapsed = time.perf_counter() - t0
+            summary = c.get(f"/api/projects/{pid}/summary", headers=h).json()
+    wrong_bulk = sorted(bulk_ids - correct)
+    return {"detections": n, "true_positives": len(correct), "score": score_kind,
+            "threshold": threshold, "bulk_accepted": len(bulk_ids), "wrong_in_bulk": len(wrong_bulk),
+            "single_without_bulk": n, "single_with_bulk": singles,
+            "single_fall_pct": round(100.0 * (n - singles) / n, 1) if n else None,
+            "review_s": round(elapsed, 2), "summary_bulk": summary["bulk"],
+            "summary_single": summary["single"]}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("detect_out", type=Path)
+    ap.add_argument("scan", type=Path)
+    ap.add_argument("truth", type=Path)
+    ap.add_argument("--threshold", type=float, default=0.9)
+    args = ap.parse_args()
+    res = review(args.detect_out, args.scan, args.truth, args.threshold)
+    print(json.dumps(res, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
