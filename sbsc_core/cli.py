@@ -33,7 +33,7 @@ def _cmd_detect(args: argparse.Namespace) -> int:
         [Path(s) for s in args.scans], Path(args.models),
         expected=Path(args.expected) if args.expected else None,
         out=Path(args.out), settings_file=Path(args.settings) if args.settings else None,
-        log=_log(args),
+        log=_log(args), scheduler=args.scheduler,
     )
     return 0
 
@@ -106,6 +106,10 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--expected", help="expected.json (contract 3); default: search every class")
     d.add_argument("--out", required=True)
     d.add_argument("--settings", help="JSON/YAML file overriding DetectionSettings")
+    d.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run the per-wall work on an existing Dask cluster (e.g. tcp://10.0.0.5:8786); its "
+                        "workers must see the scans and the output's folder at the same paths; default: "
+                        "a local process pool")
     d.set_defaults(func=_cmd_detect)
 
     e = sub.add_parser("evaluate", help="compare detections with ground truth (paper's Table 1)")
