@@ -2,7 +2,7 @@
 
 No stage holds the whole cloud (paper, Figure 2, run on a building instead of a floor):
 
-1. :func:`plan_parts` cuts the scan files into parts (a memory-mapped file into ranges of
+1. :func:`plan_parts` cuts the scan files into parts (a seekable (binary PLY / PCD) file into ranges of
    ``part_points``, any other file whole) that workers read side by side.
 2. :func:`sample_part` streams one part (:func:`~sbsc_core.io.scans.iter_scan`) and keeps
    a regular sample - the points whose index over all files is a multiple of ``step`` -
@@ -44,7 +44,7 @@ from .types import Orthoimage, PointCloud, Wall, WallFrame
 __all__ = ["ScanPart", "WallIndex", "plan_parts", "sample_part", "partition_part", "assign_chunk",
            "wall_orthoimage", "scratch_dir", "RECORD"]
 
-PART_POINTS = 1 << 24  # points of a memory-mapped file read by one task
+PART_POINTS = 1 << 24  # points of a seekable (binary PLY / PCD) file read by one task
 RECORD = np.dtype([("pixel", "<i4"), ("depth", "<f4"), ("rgb", "u1", (3,))])  # 11 bytes, packed
 _TEXT_BYTES_PER_POINT = 30  # to estimate the point count of a text file from its size
 
@@ -90,18 +90,21 @@ def scratch_folder(out: Path, scratch: Path | str | None = None) -> Iterator[Pat
 # --------------------------------------------------------------------------- pass 1
 
 
-def plan_parts(paths: Sequence[Path | str], part_points: int = PART_POINTS) -> tuple[list[ScanPart], int]:
+def plan_parts(paths: Sequence[Path | str], part_points: int | None = None) -> tuple[list[ScanPart], int]:
     """Parts of the scan files for the workers, and the (estimated) total point count.
 
-    Every header is read here, so a file that cannot be opened is refused before any work.
+    A seekable (binary PLY / PCD) file is cut into ranges of about ``part_points`` (default
+    ``PART_POINTS``). Every header is read here, so a file that cannot be opened is refused
+    before any work.
     """
+    part_points = part_points or PART_POINTS
     parts: list[ScanPart] = []
     first = 0
     for k, p in enumerate(paths):
         src = open_scan(p)
         path = str(Path(p).resolve())
         n = src.count if src.count is not None else max(1, src.path.stat().st_size // _TEXT_BYTES_PER_POINT)
-        if src.mapped and src.count is not None and n > part_points:
+        if src.seekable and src.count is not None and n > part_points:
             pieces = math.ceil(n / part_points)
             cuts = [n * j // pieces for j in range(pieces + 1)]
             parts += [ScanPart(path, cuts[j], cuts[j + 1], first + cuts[j], f"f{k}-{j}") for j in range(pieces)]
@@ -128,8 +131,8 @@ def _spill_paths(scratch: Path, part: ScanPart) -> tuple[Path, Path]:
 
 def sample_part(part: ScanPart, origin: np.ndarray, step: int, scratch: str | None) -> PartSample:
     """Stream one part: its regular sample (every ``step``-th point over all files), and
-    a spill of its points into ``scratch`` unless the file is memory-mapped."""
-    spill = scratch is not None and not open_scan(part.path).mapped
+    a spill of its points into ``scratch`` unless the file is seekable (binary PLY / PCD)."""
+    spill = scratch is not None and not open_scan(part.path).seekable
     xs, cs = [], []
     n = 0
     files = None

@@ -330,7 +330,7 @@ def wall_executor(settings: DetectionSettings, scheduler: str | None = None) -> 
         except ImportError:  # pragma: no cover - a declared dependency
             raise InputError("--scheduler", "dask distributed is not installed") from None
         try:
-            client = Client(scheduler, set_as_default=False, timeout="20s")
+            client = Client(scheduler, set_as_default=False, timeout="10s")
         except (OSError, TimeoutError, ValueError) as exc:
             raise InputError("--scheduler", f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
         try:

@@ -46,9 +46,9 @@ class ScanSource:
 
     ``count`` is the number of points the header announces (E57: before invalid points are
     dropped, so an upper bound), None for text files. ``blocks()`` yields the raw blocks
-    from the start of the file each time it is called; a ``mapped`` source (binary PLY and
-    PCD, memory-mapped) also takes ``blocks(start, stop)``: the points ``start:stop`` only,
-    so a file can be split between workers. ``rgb_wide`` says the colours are
+    from the start of the file each time it is called; a ``seekable`` source (binary PLY and
+    PCD: fixed-size records) also takes ``blocks(start, stop)``: the points ``start:stop``
+    only, so a file can be split between workers. ``rgb_wide`` says the colours are
     stored in more than 8 bits: they are 8-bit values in wider integers, or use the full
     16-bit range when the first block holds a value above 255 (decided once per file).
     """
@@ -57,7 +57,7 @@ class ScanSource:
     count: int | None
     blocks: Callable[..., Iterator[RawBlock]]
     rgb_wide: bool = False
-    mapped: bool = False
+    seekable: bool = False
 
 
 @dataclass
@@ -134,7 +134,7 @@ def iter_scan(path: Path | str | ScanSource, origin: np.ndarray | None = None,
               chunk_points: int = CHUNK_POINTS, start: int = 0, stop: int | None = None) -> Iterator[ScanChunk]:
     """The points of one scan file as chunks of at most ``chunk_points`` points.
 
-    ``start`` / ``stop`` select a range of points of a ``mapped`` source (see :class:`ScanSource`).
+    ``start`` / ``stop`` select a range of points of a ``seekable`` source (see :class:`ScanSource`).
 
     ``origin`` fixes the recentring origin (several files sharing one); without it the
     origin is the rounded median of the first points of the file (a few stray points do not
@@ -145,8 +145,8 @@ def iter_scan(path: Path | str | ScanSource, origin: np.ndarray | None = None,
     path = src.path
     origin = None if origin is None else np.asarray(origin, np.float64)
     ranged = start != 0 or stop is not None
-    if ranged and not src.mapped:
-        raise ValueError(f"{path}: a range of points can only be read from a memory-mapped format")
+    if ranged and not src.seekable:
+        raise ValueError(f"{path}: a range of points can only be read from a format of fixed-size records")
     done = start
     with _guard(path):
         xyz = rgb = None
@@ -285,6 +285,19 @@ def _float_colours_to_8(rgb: np.ndarray) -> np.ndarray:
         return np.clip(np.rint(np.nan_to_num(np.asarray(rgb, np.float32)) * 255.0), 0, 255).astype(np.uint8)
 
 
+def _records(path: Path, dtype: np.dtype, offset: int, n: int, start: int, stop: int | None
+             ) -> Iterator[np.ndarray]:
+    """Blocks of fixed-size binary records ``start:stop`` of ``n`` read into small buffers
+    (not memory-mapped: no file pages stay mapped in the reading process)."""
+    with open(path, "rb") as fh:
+        for a, b in _blocks_of(n, start, stop):
+            fh.seek(offset + a * dtype.itemsize)
+            rec = np.fromfile(fh, dtype=dtype, count=b - a)
+            if len(rec) < b - a:
+                raise InputError(path, f"truncated: {n} points announced, file ends at point {a + len(rec)}")
+            yield rec
+
+
 def _blocks_of(n: int, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, int]]:
     """(a, b) ranges of at most BLOCK_POINTS covering ``start:stop`` of ``n`` points."""
     stop = n if stop is None else min(n, stop)
@@ -395,7 +408,7 @@ def _read_ply(path: Path) -> ScanSource:
         blocks = _ply_ascii_blocks(path, elements, vi, header_len, xyz_names, rgb_names, rgb_kind)
     else:
         blocks = _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names, rgb_kind)
-    return ScanSource(path, vertex.count, blocks, wide, mapped=fmt != "ascii")
+    return ScanSource(path, vertex.count, blocks, wide, seekable=fmt != "ascii")
 
 
 def _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names, rgb_kind
@@ -414,12 +427,9 @@ def _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names
         raise InputError(path, f"truncated: {vertex.count} vertices need {need} bytes, file has {size}")
 
     def blocks(start: int = 0, stop: int | None = None) -> Iterator[RawBlock]:
-        data = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=(vertex.count,))
-        for a, b in _blocks_of(vertex.count, start, stop):
-            rec = data[a:b]
+        for rec in _records(path, dtype, offset, vertex.count, start, stop):
             rgb = np.stack([rec[c] for c in rgb_names], axis=1)
             yield rec[xyz_names[0]], rec[xyz_names[1]], rec[xyz_names[2]], _ply_rgb(path, rgb, rgb_kind)
-        del data
 
     return blocks
 
@@ -814,13 +824,10 @@ def _read_pcd(path: Path) -> ScanSource:
         raise InputError(path, f"truncated: {n} points need {need} bytes, file has {size}")
 
     def blocks(start: int = 0, stop: int | None = None) -> Iterator[RawBlock]:
-        rec_all = np.memmap(path, dtype=dtype, mode="r", offset=pos, shape=(n,))
-        for a, b in _blocks_of(n, start, stop):
-            rec = rec_all[a:b]
+        for rec in _records(path, dtype, pos, n, start, stop):
             yield rec["x"], rec["y"], rec["z"], _pcd_rgb(rec[colour])
-        del rec_all
 
-    return ScanSource(path, n, blocks, False, mapped=True)
+    return ScanSource(path, n, blocks, False, seekable=True)
 
 
 def _pcd_rgb(packed: np.ndarray) -> np.ndarray:
