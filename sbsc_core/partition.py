@@ -257,16 +257,29 @@ def assign_chunk(xyz: np.ndarray, index: WallIndex) -> Iterator[tuple[int, np.nd
     """
     if len(xyz) == 0 or not index.frames:
         return
+    # grid cells; points beyond the grid are clamped to its border cells, which no wall's
+    # slab reaches: the exact test below rejects them
     cell = np.float32(1.0 / index.cell_m)
-    ix = np.floor((xyz[:, 0] - np.float32(index.lo[0])) * cell).astype(np.int32)
-    iy = np.floor((xyz[:, 1] - np.float32(index.lo[1])) * cell).astype(np.int32)
-    iz = np.searchsorted(index.z_edges.astype(np.float32), xyz[:, 2], side="right").astype(np.int32)
-    inside = (ix >= 0) & (ix < index.nx) & (iy >= 0) & (iy < index.ny)
-    key = (iz * np.int32(index.ny) + iy) * np.int32(index.nx) + ix
-    del ix, iy, iz
-    combo = np.zeros(len(xyz), index.lut.dtype)
-    combo[inside] = index.lut[key[inside]]
-    del key, inside
+    t = xyz[:, 0] - np.float32(index.lo[0])
+    t *= cell
+    np.clip(t, 0, index.nx - 1, out=t)
+    key = t.astype(np.int32)
+    t = xyz[:, 1] - np.float32(index.lo[1])
+    t *= cell
+    np.clip(t, 0, index.ny - 1, out=t)
+    iy = t.astype(np.int32)
+    del t
+    z = xyz[:, 2]
+    band = np.zeros(len(xyz), np.int32)
+    for e in index.z_edges.astype(np.float32).tolist():  # a few edges: one comparison each
+        band += z >= np.float32(e)
+    band *= np.int32(index.ny)
+    band += iy
+    band *= np.int32(index.nx)
+    key += band
+    del band, iy
+    combo = index.lut[key]
+    del key
     sel = np.flatnonzero(combo)
     if len(sel) == 0:
         return

@@ -256,8 +256,9 @@ def _recentre(out: np.ndarray, columns: tuple[np.ndarray, ...], origin: np.ndarr
     with np.errstate(all="ignore"):
         for j, col in enumerate(columns):
             np.subtract(col, origin[j], out=out[:, j], casting="unsafe")
-    finite = np.isfinite(out).all(axis=1)
-    return None if finite.all() else int(np.argmin(finite))
+    if np.isfinite(out.reshape(-1)).all():  # one flat pass; the row only when needed
+        return None
+    return int(np.argmin(np.isfinite(out).all(axis=1)))
 
 
 def _to_8_bit(rgb: np.ndarray, wide: bool) -> np.ndarray:
