@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .io.scans import BLOCK_POINTS, CHUNK_POINTS, ScanChunk, iter_scan, open_scan
+from .io.scans import BLOCK_POINTS, CHUNK_POINTS, ScanChunk, iter_scan, open_scan, sample_scan
 from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
 from .settings import DetectionSettings, OrthoimageSettings, SegmentationSettings
 from .types import Orthoimage, PointCloud, Wall, WallFrame
@@ -132,7 +132,11 @@ def _spill_paths(scratch: Path, part: ScanPart) -> tuple[Path, Path]:
 def sample_part(part: ScanPart, origin: np.ndarray, step: int, scratch: str | None) -> PartSample:
     """Stream one part: its regular sample (every ``step``-th point over all files), and
     a spill of its points into ``scratch`` unless the file is seekable (binary PLY / PCD)."""
-    spill = scratch is not None and not open_scan(part.path).seekable
+    src = open_scan(part.path)
+    if src.seekable:  # fixed-size records: only the sampled points are converted
+        xyz, rgb, n = sample_scan(src, origin, step, part.first, part.start, part.stop)
+        return PartSample(xyz, rgb, n, False)
+    spill = scratch is not None
     xs, cs = [], []
     n = 0
     files = None

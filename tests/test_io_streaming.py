@@ -152,3 +152,17 @@ def test_reading_costs_at_most_20_bytes_a_point_beyond_the_chunk(tmp_path, monke
     own = c.xyz.nbytes + c.rgb.nbytes
     assert len(c) == chunk
     assert peak - own <= 20 * chunk, f"{(peak - own) / chunk:.1f} bytes a point beyond the chunk"
+
+
+def test_sample_of_a_binary_file_converts_every_kth_point(tmp_path, monkeypatch):
+    from sbsc_core.io.scans import sample_scan
+
+    xyz, rgb = _cloud()
+    write_ply(tmp_path / "a.ply", xyz, rgb)
+    monkeypatch.setattr(scans, "BLOCK_POINTS", 333)
+    whole = read_scan(tmp_path / "a.ply")
+    got_xyz, got_rgb, n = sample_scan(open_scan(tmp_path / "a.ply"), whole.origin, 7, first=3, start=100, stop=4000)
+    pick = np.flatnonzero((3 + np.arange(3900)) % 7 == 0) + 100
+    assert n == 3900
+    np.testing.assert_array_equal(got_xyz, whole.xyz[pick])
+    np.testing.assert_array_equal(got_rgb, whole.rgb[pick])

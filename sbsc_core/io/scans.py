@@ -185,6 +185,39 @@ def iter_scan(path: Path | str | ScanSource, origin: np.ndarray | None = None,
         raise InputError(path, "no points")
 
 
+def sample_scan(src: ScanSource, origin: np.ndarray, every: int, first: int = 0, start: int = 0,
+                stop: int | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+    """A regular sample of points ``start:stop`` of a ``seekable`` source, and the points read.
+
+    Keeps the points whose index plus ``first - start`` is a multiple of ``every`` (so
+    ``first`` is the index of point ``start`` among several files) and converts only those:
+    float32 ``xyz`` relative to ``origin`` and uint8 ``rgb``. The other points are not
+    checked here (the pass that reads them all is).
+    """
+    if not src.seekable:
+        raise ValueError(f"{src.path}: a sample without reading every point needs a format of fixed-size records")
+    origin = np.asarray(origin, np.float64)
+    xs, cs = [], []
+    pos = start
+    wide: bool | None = None
+    with _guard(src.path):
+        for x, y, z, colours in src.blocks(start, stop):
+            n = len(x)
+            if wide is None:
+                wide = bool(src.rgb_wide and colours.size and int(colours.max()) > 255)
+            i0 = (-(first + pos - start)) % every
+            out = np.empty((len(range(i0, n, every)), 3), np.float32)
+            bad = _recentre(out, (x[i0::every], y[i0::every], z[i0::every]), origin)
+            if bad is not None:
+                raise InputError(src.path, f"non-finite coordinates (point {pos + i0 + bad * every})")
+            xs.append(out)
+            cs.append(_to_8_bit(colours[i0::every], wide))
+            pos += n
+    xyz = np.concatenate(xs) if xs else np.zeros((0, 3), np.float32)
+    rgb = np.concatenate(cs) if cs else np.zeros((0, 3), np.uint8)
+    return xyz, rgb, pos - start
+
+
 def read_scan(path: Path | str, origin: np.ndarray | None = None) -> PointCloud:
     """Read one scan file whole (see :func:`iter_scan`); ``origin`` forces the recentring origin.
 
