@@ -94,9 +94,9 @@ class TreeRssSampler(threading.Thread):
 
 
 def tile_scans(scan: Path, tiles: int, out_dir: Path) -> list[Path]:
-    """``scan`` and ``tiles - 1`` copies shifted in plan by the scan's extent plus 5 m (binary PLY)."""
-    from sbsc_core.io.ply import write_ply
-    from sbsc_core.io.scans import iter_scan
+    """``scan`` and ``tiles - 1`` copies shifted in plan by the scan's extent plus 5 m (binary
+    PLY, float32 world coordinates: a floor in local coordinates), written chunk by chunk."""
+    from sbsc_core.io.scans import iter_scan, scan_point_count
 
     paths = [scan]
     if tiles <= 1:
@@ -114,21 +114,21 @@ def tile_scans(scan: Path, tiles: int, out_dir: Path) -> list[Path]:
         if path.exists():
             continue
         shift = np.array([(k % cols) * size[0], (k // cols) * size[1], 0.0])
-        parts = out_dir / f"tile_{k}.parts"
-        parts.mkdir(exist_ok=True)
-        n = 0
-        with open(parts / "xyz", "wb") as fx, open(parts / "rgb", "wb") as fc:
+        n = scan_point_count(scan)
+        header = ("ply\nformat binary_little_endian 1.0\ncomment a shifted copy of a scan (bench_detect.py)\n"
+                  f"element vertex {n}\nproperty float x\nproperty float y\nproperty float z\n"
+                  "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n")
+        record = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("r", "u1"), ("g", "u1"), ("b", "u1")])
+        tmp = path.with_name(path.name + ".tmp")
+        with open(tmp, "wb") as fh:
+            fh.write(header.encode("ascii"))
             for c in iter_scan(scan):
-                (c.xyz.astype(np.float64) + c.origin + shift).tofile(fx)
-                c.rgb.tofile(fc)
-                n += len(c)
-        xyz = np.memmap(parts / "xyz", np.float64, "r", shape=(n, 3))
-        rgb = np.memmap(parts / "rgb", np.uint8, "r", shape=(n, 3))
-        write_ply(path, xyz, rgb, double=True)
-        del xyz, rgb
-        for f in parts.iterdir():
-            f.unlink()
-        parts.rmdir()
+                w = c.xyz.astype(np.float64) + c.origin + shift
+                rec = np.empty(len(c), record)
+                rec["x"], rec["y"], rec["z"] = w.T
+                rec["r"], rec["g"], rec["b"] = c.rgb.T
+                rec.tofile(fh)
+        tmp.rename(path)
     return paths
 
 
