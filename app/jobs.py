@@ -161,7 +161,9 @@ def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
             models = settings.data_dir / models_rel if models_rel else bundled_models_dir()
             say(f"job {job_id}: {len(scans)} scan(s), models {models}, pid {os.getpid()}")
             runner = load_runner(settings.job_runner)
-            summary = runner(scans, models, expected=expected, out=out, log=say, progress=progress)
+            cluster = os.environ.get("SBSC_DASK_SCHEDULER")  # run on a Dask cluster (sbsc detect --scheduler)
+            summary = runner(scans, models, expected=expected, out=out, log=say, progress=progress,
+                             **({"scheduler": cluster} if cluster else {}))
             say(f"finished: {summary}")
             progress("importing", 0.0, force=True)
             _prepare_viewer(settings, project_id, scans, say)

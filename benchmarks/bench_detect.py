@@ -1,10 +1,18 @@
-"""Benchmark ``sbsc detect`` on a simulated floor: points per second per stage, peak memory.
+"""Benchmark ``sbsc detect``: the whole command and each stage, and the peak memory of its process tree.
 
-    .venv/bin/python benchmarks/bench_detect.py [--scenario I] [--run-dir runs/bench_I]
+    flock /tmp/sbsc-heavy.lock .venv/bin/python benchmarks/bench_detect.py [--scenario I]
+        [--run-dir runs/bench_I] [--tiles 4] [--tree OLD_CHECKOUT] [--tree .]
 
-Simulates the scenario once (kept in the run dir), then runs the detection in this process
-and prints, per stage, seconds and points per second, the total, and the peak resident
-memory as a multiple of the scan's size in memory (float32 xyz + uint8 rgb).
+Simulates the scenario once (kept in the run dir). ``--tiles N`` makes a building of N
+copies of the scan side by side (files only, written once: the same floor shifted in plan,
+so that every copy is found as its own rooms). Each ``--tree`` (a checkout of the project;
+default this one) runs the detection in a fresh process, ``python -c`` with that tree first
+on the path, one after the other in this run: that is how an old and a new commit are
+compared on the same machine at the same time. For each tree it prints the wall-clock time
+and points per second of the whole command, the seconds per stage that the detection
+reports, and the peak resident memory of the whole process tree (the command and its
+workers, sampled every 0.1 s from /proc): all resident pages, and the anonymous ones
+(without file pages the kernel may drop).
 """
 
 from __future__ import annotations
@@ -12,95 +20,169 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import threading
 import time
 from pathlib import Path
 
+import numpy as np
+
+RUNNER = """
+import json, sys
+from pathlib import Path
 from sbsc_core.pipeline import detect_to_dir
-
-
-def peak_rss_bytes() -> int:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+args = json.loads(sys.argv[1])
+s = detect_to_dir([Path(p) for p in args["scans"]], Path(args["models"]), expected=args["expected"] and Path(args["expected"]),
+                  out=Path(args["out"]))
+print("SUMMARY " + json.dumps({k: s[k] for k in ("points", "walls", "detections", "timings")}))
+"""
 
 
 class TreeRssSampler(threading.Thread):
-    """Samples the resident memory of this process and its children (the per-wall workers)
-    every 0.1 s from /proc and keeps the largest sum: the job's real peak footprint."""
+    """Peak resident memory (all pages, and anonymous pages) of a process and its descendants."""
 
-    def __init__(self) -> None:
+    def __init__(self, pid: int) -> None:
         super().__init__(daemon=True)
+        self.pid = pid
         self.peak = 0
+        self.peak_anon = 0
         self._halt = threading.Event()
 
     @staticmethod
-    def _rss(pid: int) -> int:
+    def _mem(pid: int) -> tuple[int, int]:
+        rss = anon = 0
         try:
-            with open(f"/proc/{pid}/statm") as fh:
-                return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+            with open(f"/proc/{pid}/status") as fh:
+                for line in fh:
+                    if line.startswith("VmRSS:"):
+                        rss = int(line.split()[1]) * 1024
+                    elif line.startswith("RssAnon:"):
+                        anon = int(line.split()[1]) * 1024
         except (OSError, ValueError, IndexError):
-            return 0
+            pass
+        return rss, anon
 
-    def _children(self) -> list[int]:
-        me, out = os.getpid(), []
+    @staticmethod
+    def _tree(root: int) -> list[int]:
+        parent: dict[int, int] = {}
         for entry in os.listdir("/proc"):
             if entry.isdigit():
                 try:
                     with open(f"/proc/{entry}/stat") as fh:
-                        if int(fh.read().rsplit(")", 1)[1].split()[1]) == me:
-                            out.append(int(entry))
+                        parent[int(entry)] = int(fh.read().rsplit(")", 1)[1].split()[1])
                 except (OSError, ValueError, IndexError):
                     continue
+        out, todo = [root], [root]
+        while todo:
+            p = todo.pop()
+            kids = [c for c, pp in parent.items() if pp == p]
+            out += kids
+            todo += kids
         return out
 
     def run(self) -> None:
         while not self._halt.wait(0.1):
-            total = self._rss(os.getpid()) + sum(self._rss(p) for p in self._children())
-            self.peak = max(self.peak, total)
+            mems = [self._mem(p) for p in self._tree(self.pid)]
+            self.peak = max(self.peak, sum(m[0] for m in mems))
+            self.peak_anon = max(self.peak_anon, sum(m[1] for m in mems))
 
-    def stop(self) -> int:
+    def stop(self) -> tuple[int, int]:
         self._halt.set()
         self.join()
-        return self.peak
+        return self.peak, self.peak_anon
+
+
+def tile_scans(scan: Path, tiles: int, out_dir: Path) -> list[Path]:
+    """``scan`` and ``tiles - 1`` copies shifted in plan by the scan's extent plus 5 m (binary
+    PLY, float32 world coordinates: a floor in local coordinates), written chunk by chunk."""
+    from sbsc_core.io.scans import iter_scan, scan_point_count
+
+    paths = [scan]
+    if tiles <= 1:
+        return paths
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for c in iter_scan(scan):
+        w = c.xyz.astype(np.float64) + c.origin
+        lo, hi = np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0))
+    size = hi - lo + 5.0
+    cols = int(np.ceil(np.sqrt(tiles)))
+    for k in range(1, tiles):
+        path = out_dir / f"tile_{k}.ply"
+        paths.append(path)
+        if path.exists():
+            continue
+        shift = np.array([(k % cols) * size[0], (k // cols) * size[1], 0.0])
+        n = scan_point_count(scan)
+        header = ("ply\nformat binary_little_endian 1.0\ncomment a shifted copy of a scan (bench_detect.py)\n"
+                  f"element vertex {n}\nproperty float x\nproperty float y\nproperty float z\n"
+                  "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n")
+        record = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("r", "u1"), ("g", "u1"), ("b", "u1")])
+        tmp = path.with_name(path.name + ".tmp")
+        with open(tmp, "wb") as fh:
+            fh.write(header.encode("ascii"))
+            for c in iter_scan(scan):
+                w = c.xyz.astype(np.float64) + c.origin + shift
+                rec = np.empty(len(c), record)
+                rec["x"], rec["y"], rec["z"] = w.T
+                rec["r"], rec["g"], rec["b"] = c.rgb.T
+                rec.tofile(fh)
+        tmp.rename(path)
+    return paths
+
+
+def run_tree(tree: Path, scans: list[Path], models: Path, expected: Path | None, out: Path) -> dict:
+    env = {**os.environ, "PYTHONPATH": str(tree.resolve())}
+    args = json.dumps({"scans": [str(p) for p in scans], "models": str(models),
+                       "expected": str(expected) if expected else None, "out": str(out)})
+    t = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-c", RUNNER, args], env=env, cwd=tree, stdout=subprocess.PIPE, text=True)
+    sampler = TreeRssSampler(proc.pid)
+    sampler.start()
+    stdout, _ = proc.communicate()
+    wall = time.perf_counter() - t
+    peak, anon = sampler.stop()
+    if proc.returncode != 0:
+        raise SystemExit(f"{tree}: detect failed ({proc.returncode})")
+    summary = json.loads(next(line for line in stdout.splitlines() if line.startswith("SUMMARY "))[8:])
+    return {"tree": str(tree), "wall_s": wall, "peak_tree_rss_bytes": peak, "peak_tree_anon_bytes": anon, **summary}
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="I", choices=["I", "II"])
     ap.add_argument("--run-dir", default=None)
+    ap.add_argument("--tiles", type=int, default=1, help="copies of the floor side by side (a bigger building)")
+    ap.add_argument("--tree", action="append", default=None, help="checkout to run (repeatable; default: this one)")
     args = ap.parse_args()
     run = Path(args.run_dir or f"runs/bench_{args.scenario}")
     scan = run / "scan"
     if not (scan / "scan.ply").exists():
         subprocess.run([sys.executable, "-m", "sbsc_core", "simulate", "--scenario", args.scenario,
                         "--out", str(scan)], check=True)
-    base_rss = peak_rss_bytes()
-    sampler = TreeRssSampler()
-    sampler.start()
-    t = time.perf_counter()
-    summary = detect_to_dir([scan / "scan.ply"], scan / "models", expected=scan / "expected.json",
-                            out=run / "detect")
-    wall = time.perf_counter() - t
-    n = summary["points"]
-    scan_bytes = n * (3 * 4 + 3)
-    print(f"scenario {args.scenario}: {n:,} points, {summary['walls']} walls, "
-          f"{summary['detections']} detections")
-    print(f"{'stage':<14}{'seconds':>10}{'Mpoints/s':>12}")
-    for stage, sec in summary["timings"].items():
-        rate = n / sec / 1e6 if sec > 0 else float("inf")
-        print(f"{stage:<14}{sec:>10.2f}{rate:>12.2f}")
-    tree = sampler.stop()
-    peak = peak_rss_bytes()
-    print(f"wall-clock total {wall:.1f} s = {n / wall / 1e6:.2f} Mpoints/s")
-    print(f"peak RSS main process {peak / 2**30:.2f} GiB (before detection {base_rss / 2**30:.2f} GiB); "
-          f"peak of main + workers together {tree / 2**30:.2f} GiB; scan in memory "
-          f"{scan_bytes / 2**30:.2f} GiB; peak/scan = {tree / scan_bytes:.2f}")
-    (run / "bench.json").write_text(json.dumps({
-        "points": n, "timings": summary["timings"], "wall_s": wall,
-        "peak_rss_bytes": peak, "peak_tree_rss_bytes": tree, "scan_bytes": scan_bytes},
-        indent=2))
+    scans = tile_scans(scan / "scan.ply", args.tiles, run)
+    expected = scan / "expected.json" if args.tiles == 1 else None
+    trees = [Path(t) for t in (args.tree or [Path(__file__).resolve().parents[1]])]
+    results = []
+    for k, tree in enumerate(trees):
+        r = run_tree(tree, scans, scan / "models", expected, run / f"detect_{k}")
+        results.append(r)
+        n = r["points"]
+        print(f"{tree}: {n:,} points in {len(scans)} file(s), {r['walls']} walls, {r['detections']} detections")
+        print(f"  whole command {r['wall_s']:.1f} s = {n / r['wall_s'] / 1e6:.2f} Mpoints/s; peak of the process "
+              f"tree {r['peak_tree_rss_bytes'] / 2**30:.2f} GiB resident, "
+              f"{r['peak_tree_anon_bytes'] / 2**30:.2f} GiB anonymous")
+        print(f"  {'stage':<14}{'seconds':>10}{'Mpoints/s':>12}")
+        for stage, sec in r["timings"].items():
+            rate = n / sec / 1e6 if sec > 0 else float("inf")
+            print(f"  {stage:<14}{sec:>10.2f}{rate:>12.2f}")
+    if len(results) > 1:
+        base = results[0]
+        for r in results[1:]:
+            print(f"throughput {r['tree']} / {base['tree']}: "
+                  f"{(r['points'] / r['wall_s']) / (base['points'] / base['wall_s']):.2f}x")
+    (run / "bench.json").write_text(json.dumps(results, indent=2))
     return 0
 
 

@@ -139,6 +139,10 @@ def _add_detect(cmds: Commands) -> None:
     d.add_argument("--expected", metavar="FILE", help="expected.json (contract 3); default: search every class")
     output_option(d, "dir")
     d.add_argument("--settings", metavar="FILE", help="JSON/YAML file overriding DetectionSettings")
+    d.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run the per-wall work on an existing Dask cluster (e.g. tcp://10.0.0.5:8786); its "
+                        "workers must see the scans and the output's folder at the same paths; default: "
+                        "a local process pool")
     json_option(d)
 
 
@@ -397,7 +401,7 @@ def _cmd_detect(args: argparse.Namespace) -> int:
         [Path(s) for s in args.scans], Path(args.models),
         expected=Path(args.expected) if args.expected else None,
         out=out, settings_file=Path(args.settings) if args.settings else None,
-        log=con.info, progress=con.progress,
+        log=con.info, progress=con.progress, scheduler=args.scheduler,
     )
     con.close()
     con.info(f"wrote {out / 'detections.json'}")

@@ -25,33 +25,59 @@ import numpy as np
 from .settings import OrthoimageSettings
 from .types import Orthoimage, PointCloud, Wall, WallFrame
 
-__all__ = ["build_orthoimage", "wall_coordinates", "rasterize_median", "fill_sampling_gaps"]
+__all__ = ["build_orthoimage", "ortho_shape", "ortho_pixels", "orthoimage_from_pixels", "wall_coordinates",
+           "rasterize_median", "fill_sampling_gaps"]
 
 
 def build_orthoimage(cloud: PointCloud, wall: Wall, settings: OrthoimageSettings | None = None) -> Orthoimage:
     """Orthoimage J_CD of ``wall`` from its points ``wall.point_index`` of ``cloud``."""
     s = settings or OrthoimageSettings()
-    fr = wall.frame
-    px = float(s.pixel_m)
-    h = max(1, math.ceil(fr.height_m / px - 1e-9))
-    w = max(1, math.ceil(fr.width_m / px - 1e-9))
     idx = np.asarray(wall.point_index)
-    uvd = wall_coordinates(cloud.xyz[idx], fr, np.asarray(cloud.origin, np.float64))
+    uvd = wall_coordinates(cloud.xyz[idx], wall.frame, np.asarray(cloud.origin, np.float64))
+    keep, pixel = ortho_pixels(uvd, wall.frame, s)
+    return orthoimage_from_pixels(wall.id, wall.frame, pixel, uvd[keep, 2], cloud.rgb[idx[keep]], s)
+
+
+def ortho_shape(frame: WallFrame, pixel_m: float) -> tuple[int, int]:
+    """(rows, columns) of the orthoimage of a wall frame."""
+    px = float(pixel_m)
+    return (max(1, math.ceil(frame.height_m / px - 1e-9)), max(1, math.ceil(frame.width_m / px - 1e-9)))
+
+
+def ortho_pixels(uvd: np.ndarray, frame: WallFrame, settings: OrthoimageSettings | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Which points (``uvd`` from :func:`wall_coordinates`) fall into the orthoimage, and their pixels.
+
+    Returns the keep mask and the flat pixel numbers (row * width + col, int64) of the kept
+    points: inside the frame and within ``depth_range_m`` of the plane.
+    """
+    s = settings or OrthoimageSettings()
+    px = float(s.pixel_m)
+    h, w = ortho_shape(frame, px)
     d0, d1 = s.depth_range_m
     col = np.floor(uvd[:, 0] * np.float32(1.0 / px)).astype(np.int32)
-    row = np.floor((np.float32(fr.height_m) - uvd[:, 1]) * np.float32(1.0 / px)).astype(np.int32)
+    row = np.floor((np.float32(frame.height_m) - uvd[:, 1]) * np.float32(1.0 / px)).astype(np.int32)
     keep = (col >= 0) & (col < w) & (row >= 0) & (row < h) & (uvd[:, 2] >= d0) & (uvd[:, 2] <= d1)
     pixel = row[keep].astype(np.int64)
     pixel *= w
     pixel += col[keep]
-    del col, row
-    depth_pts = uvd[keep, 2]
-    del uvd
-    depth, colour, mask = rasterize_median(pixel, depth_pts, cloud.rgb[idx[keep]], (h, w), (d0, d1),
-                                           s.depth_quantum_m)
+    return keep, pixel
+
+
+def orthoimage_from_pixels(wall_id: str, frame: WallFrame, pixel: np.ndarray, depth: np.ndarray,
+                           rgb: np.ndarray, settings: OrthoimageSettings | None = None) -> Orthoimage:
+    """Orthoimage J_CD from points already binned: flat pixel numbers, depths and colours.
+
+    This is all the orthoimage stage does on a wall's partition (see :mod:`sbsc_core.partition`):
+    the per-pixel medians and the filling of sampling gaps.
+    """
+    s = settings or OrthoimageSettings()
+    px = float(s.pixel_m)
+    d0, d1 = s.depth_range_m
+    depth, colour, mask = rasterize_median(pixel, depth, rgb, ortho_shape(frame, px), (d0, d1), s.depth_quantum_m)
     if s.fill_gaps_px > 0:
         depth, colour, mask = fill_sampling_gaps(depth, colour, mask, s.fill_gaps_px, s.fill_min_fraction)
-    return Orthoimage(wall_id=wall.id, frame=fr, pixel_m=px, colour=colour, depth=depth, mask=mask)
+    return Orthoimage(wall_id=wall_id, frame=frame, pixel_m=px, colour=colour, depth=depth, mask=mask)
 
 
 def wall_coordinates(xyz: np.ndarray, frame: WallFrame, cloud_origin: np.ndarray | None = None) -> np.ndarray:

@@ -1,8 +1,9 @@
 """The whole method, scan in, positioned objects out (paper, Figure 2).
 
 ``detect`` runs the stages in order on an in-memory cloud and returns every intermediate
-result; ``detect_to_dir`` reads the inputs, runs ``detect`` and writes the outputs of
-``sbsc detect`` atomically:
+result; ``detect_scans`` does the same on scan files out of core (a bounded sample for
+segmentation, one partition file per wall, tasks on a local pool or a Dask cluster);
+``detect_to_dir`` runs ``detect_scans`` and writes the outputs of ``sbsc detect`` atomically:
 
 ``detections.json``
     contract 4, plus a top-level ``pixel_m``.
@@ -20,14 +21,15 @@ result; ``detect_to_dir`` reads the inputs, runs ``detect`` and writes the outpu
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import multiprocessing
 import os
 import time
 from collections import deque
-from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -48,8 +50,18 @@ from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
 from .io.documents import detections_document, read_expected
 from .io.models import load_model_library
-from .io.scans import read_scans
 from .orthoimage import build_orthoimage
+from .partition import (
+    WallIndex,
+    partition_part,
+    plan_parts,
+    sample_cloud,
+    sample_part,
+    sample_step,
+    scan_origin,
+    scratch_folder,
+    wall_orthoimage,
+)
 from .placement import place_hits
 from .segmentation import segment_floor_ceiling_walls
 from .settings import DetectionSettings, load_settings
@@ -65,6 +77,7 @@ from .types import (
     Segmentation,
     Wall,
     WallArea,
+    WallFrame,
 )
 from .wall_area import find_wall_area
 
@@ -107,10 +120,16 @@ def process_wall(cloud: PointCloud, wall: Wall, templates: dict[str, ModelTempla
                  prototypes: ColourPrototypes, s: DetectionSettings) -> tuple[WallResult, dict[str, float]]:
     """Sections 3.2-4.3 on one wall: orthoimage, colour preparation, wall area and openings,
     RoIs and candidates in depth and in colour. Returns the result and seconds per stage."""
-    t_stage: dict[str, float] = {}
     t = time.perf_counter()
     ortho = build_orthoimage(cloud, wall, s.orthoimage)
-    t_stage["orthoimage"] = time.perf_counter() - t
+    return process_orthoimage(ortho, templates, prototypes, s, {"orthoimage": time.perf_counter() - t})
+
+
+def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], prototypes: ColourPrototypes,
+                       s: DetectionSettings, t_stage: dict[str, float] | None = None
+                       ) -> tuple[WallResult, dict[str, float]]:
+    """Sections 3.2 (colour) to 4.3 on one wall's orthoimage; seconds per stage added to ``t_stage``."""
+    t_stage = dict(t_stage or {})
     t = time.perf_counter()
     ortho = prepare_colour(ortho, s.colour_prep)
     t_stage["colour_prep"] = time.perf_counter() - t
@@ -128,6 +147,16 @@ def process_wall(cloud: PointCloud, wall: Wall, templates: dict[str, ModelTempla
     c_cands = match_colour(ortho, area, c_rois, prototypes, s.colour, c_img)
     t_stage["colour"] = time.perf_counter() - t
     return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
+
+
+def _partition_wall_job(scratch: str, w: int, wall_id: str, frame: WallFrame, templates: dict[str, ModelTemplate],
+                        prototypes: ColourPrototypes, s: DetectionSettings
+                        ) -> tuple[str, WallResult, dict[str, float]]:
+    """One wall's work from its partition file (what a worker, local or on a cluster, runs)."""
+    t = time.perf_counter()
+    ortho = wall_orthoimage(scratch, w, wall_id, frame, s.orthoimage)
+    res, t_stage = process_orthoimage(ortho, templates, prototypes, s, {"orthoimage": time.perf_counter() - t})
+    return wall_id, res, t_stage
 
 
 def _wall_cloud(cloud: PointCloud, wall: Wall) -> tuple[PointCloud, Wall]:
@@ -201,6 +230,45 @@ def _walls_results(cloud: PointCloud, seg: Segmentation, templates: dict[str, Mo
             pool.shutdown(wait=True, cancel_futures=True)
 
 
+def _search_classes(library: ModelLibrary, expected: dict[str, int] | None) -> list[str]:
+    if expected is not None:
+        unknown = sorted(set(expected) - set(library.models))
+        if unknown:
+            raise InputError("expected", f"class '{unknown[0]}' is not in the model library")
+        return sorted(c for c, n in expected.items() if n > 0)
+    return library.class_ids
+
+
+def _collect_walls(results: Iterator[tuple[str, WallResult, dict[str, float]]], n_walls: int, progress: Progress,
+                   timings: dict[str, float]) -> dict[str, WallResult]:
+    t = time.perf_counter()
+    walls: dict[str, WallResult] = {}
+    stage_t = dict.fromkeys(WALL_STAGES, 0.0)
+    for i, (wid, res, t_wall) in enumerate(results):
+        progress("walls", (i + 1) / max(1, n_walls))
+        walls[wid] = res
+        for k, v in t_wall.items():
+            stage_t[k] += v
+    timings.update(stage_t)
+    timings["walls_elapsed"] = time.perf_counter() - t
+    return walls
+
+
+def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[str, ModelTemplate],
+               classes: list[str], expected: dict[str, int] | None, s: DetectionSettings, progress: Progress,
+               timings: dict[str, float]) -> DetectionResult:
+    progress("consensus", 0.0)
+    t = time.perf_counter()
+    depth_c = [c for w in walls.values() for c in w.depth_candidates]
+    colour_c = [c for w in walls.values() for c in w.colour_candidates]
+    hits = consensus_all(depth_c, colour_c, expected, s.consensus, classes)
+    orthos = {k: w.ortho for k, w in walls.items()}
+    detections = place_hits([h for cls in classes for h in hits.get(cls, [])], orthos, templates)
+    timings["consensus"] = time.perf_counter() - t
+    progress("consensus", 1.0)
+    return DetectionResult(seg, walls, detections, timings, classes)
+
+
 def detect(
     cloud: PointCloud,
     library: ModelLibrary,
@@ -209,22 +277,17 @@ def detect(
     progress: Progress | None = None,
     pool: ProcessPoolExecutor | None = None,
 ) -> DetectionResult:
-    """Run sections 3 and 4 of the paper on a registered coloured cloud of one floor.
+    """Run sections 3 and 4 of the paper on a registered coloured cloud in memory.
 
     ``expected`` maps class ids to instance counts (contract 3); classes not named are not
     searched. Without it every class of the library is searched with no count limit.
     ``pool`` (see :func:`wall_pool`) runs the per-wall stages; by default one is made.
+    :func:`detect_scans` does the same on scan files without holding the cloud.
     """
     s = settings or DetectionSettings()
     progress = progress or _noop_progress
     timings: dict[str, float] = {}
-    if expected is not None:
-        unknown = sorted(set(expected) - set(library.models))
-        if unknown:
-            raise InputError("expected", f"class '{unknown[0]}' is not in the model library")
-        classes = sorted(c for c, n in expected.items() if n > 0)
-    else:
-        classes = library.class_ids
+    classes = _search_classes(library, expected)
 
     t0 = time.perf_counter()
     progress("segmentation", 0.0)
@@ -235,29 +298,154 @@ def detect(
     templates = make_templates(library, s.orthoimage.pixel_m, classes)
     prototypes = learn_prototypes(templates, s.colour)
     timings["templates"] = time.perf_counter() - t
-    t = time.perf_counter()
-
-    walls: dict[str, WallResult] = {}
-    stage_t = dict.fromkeys(WALL_STAGES, 0.0)
-    for i, (wid, res, t_wall) in enumerate(_walls_results(cloud, seg, templates, prototypes, s, pool)):
-        progress("walls", (i + 1) / max(1, len(seg.walls)))
-        walls[wid] = res
-        for k, v in t_wall.items():
-            stage_t[k] += v
-    timings.update(stage_t)
-    timings["walls_elapsed"] = time.perf_counter() - t
-
-    progress("consensus", 0.0)
-    t = time.perf_counter()
-    depth_c = [c for w in walls.values() for c in w.depth_candidates]
-    colour_c = [c for w in walls.values() for c in w.colour_candidates]
-    hits = consensus_all(depth_c, colour_c, expected, s.consensus, classes)
-    orthos = {k: w.ortho for k, w in walls.items()}
-    detections = place_hits([h for cls in classes for h in hits.get(cls, [])], orthos, templates)
-    timings["consensus"] = time.perf_counter() - t
+    walls = _collect_walls(_walls_results(cloud, seg, templates, prototypes, s, pool), len(seg.walls),
+                           progress, timings)
+    result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
     timings["total"] = time.perf_counter() - t0
-    progress("consensus", 1.0)
-    return DetectionResult(seg, walls, detections, timings, classes)
+    return result
+
+
+# --------------------------------------------------------------------------- out of core
+
+
+class InlineExecutor(Executor):
+    """Runs each task at once in this process (one worker, or a single wall)."""
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:  # type: ignore[override]
+        fut: Future = Future()
+        try:
+            fut.set_result(fn(*args, **kwargs))
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller through the future
+            fut.set_exception(exc)
+        return fut
+
+
+@contextlib.contextmanager
+def wall_executor(settings: DetectionSettings, scheduler: str | None = None) -> Iterator[Executor]:
+    """Where the per-part and per-wall tasks run.
+
+    With ``scheduler`` (``tcp://HOST:PORT``) they run on that Dask distributed cluster, whose
+    workers must reach the scan files and the scratch folder at the same paths; otherwise in
+    a local pool of ``settings.workers`` spawned processes (in this process for one worker).
+    """
+    if scheduler:
+        try:
+            from distributed import Client
+        except ImportError:  # pragma: no cover - a declared dependency
+            raise InputError("--scheduler", "dask distributed is not installed") from None
+        try:
+            client = Client(scheduler, set_as_default=False, timeout="10s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise InputError("--scheduler", f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
+        try:
+            yield client.get_executor(pure=False)
+        finally:
+            client.close()
+        return
+    pool = wall_pool(settings)
+    if pool is None:
+        yield InlineExecutor()
+        return
+    try:
+        yield pool
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _in_order(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int) -> Iterator:
+    """Results of ``fn(*job)`` for each job, in order, with at most ``in_flight`` submitted at once."""
+    pending: deque = deque()
+    todo = iter(jobs)
+    try:
+        for job in itertools.islice(todo, in_flight):
+            pending.append(ex.submit(fn, *job))
+        while pending:
+            res = pending.popleft().result()
+            nxt = next(todo, None)
+            if nxt is not None:
+                pending.append(ex.submit(fn, *nxt))
+            yield res
+    finally:
+        for f in pending:
+            f.cancel()
+
+
+def detect_scans(
+    scans: Sequence[Path],
+    library: ModelLibrary,
+    expected: dict[str, int] | None = None,
+    settings: DetectionSettings | None = None,
+    progress: Progress | None = None,
+    *,
+    executor: Executor,
+    scratch: Path,
+    log: Callable[[str], None] | None = None,
+) -> tuple[DetectionResult, int]:
+    """:func:`detect` on scan files, out of core (see :mod:`sbsc_core.partition`).
+
+    Every part of the files is read by a task of ``executor``: once for a bounded regular
+    sample that segmentation runs on, once more (or from its spill) to write each wall's
+    binned points to its partition in ``scratch``; each wall's stages then run as a task on
+    its partition. Returns the result and the number of points read.
+    """
+    s = settings or DetectionSettings()
+    progress = progress or _noop_progress
+    log = log or (lambda msg: None)
+    timings: dict[str, float] = {}
+    classes = _search_classes(library, expected)
+    workers = max(1, _worker_count(s))
+    t0 = time.perf_counter()
+
+    progress("reading", 0.0)
+    parts, estimate = plan_parts([Path(p) for p in scans])
+    origin = scan_origin(scans[0])
+    step = sample_step(estimate, s)
+    sample_jobs = [(part, origin, step, str(scratch)) for part in parts]
+    samples = []
+    for i, smp in enumerate(_in_order(executor, sample_jobs, sample_part, 2 * workers)):
+        samples.append(smp)
+        progress("reading", (i + 1) / len(parts))
+    points = sum(smp.points for smp in samples)
+    cloud = sample_cloud(samples, origin, [str(p) for p in scans], 2 * s.segmentation.fit_max_points)
+    sample_meta = [(smp.points, smp.spilled) for smp in samples]
+    samples.clear()
+    timings["reading"] = time.perf_counter() - t0
+    log(f"read {points:,} points from {len(scans)} file(s) in {timings['reading']:.1f} s "
+        f"(sample of {len(cloud):,} for segmentation)")
+
+    t = time.perf_counter()
+    progress("segmentation", 0.0)
+    seg = segment_floor_ceiling_walls(cloud, s.segmentation)
+    if seg.stray_points:  # counted in the sample: scaled to the whole scan
+        seg.stray_points = int(round(seg.stray_points * points / max(len(cloud), 1)))
+    del cloud
+    for wall in seg.walls:  # indices into the sample: the walls' points come from their partitions
+        wall.point_index = np.zeros(0, np.int64)
+    timings["segmentation"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    progress("partition", 0.0)
+    index = WallIndex.build(seg.walls, origin, s.segmentation)
+    part_jobs = [(part, origin, index, str(scratch), n, spilled, s.orthoimage)
+                 for part, (n, spilled) in zip(parts, sample_meta, strict=True)]
+    kept = np.zeros(len(seg.walls), np.int64)
+    for i, written in enumerate(_in_order(executor, part_jobs, partition_part, 2 * workers)):
+        kept += np.asarray(written, np.int64)
+        progress("partition", (i + 1) / len(parts))
+    timings["partition"] = time.perf_counter() - t
+    log(f"{len(seg.walls)} walls: {int(kept.sum()):,} points binned into their partitions "
+        f"in {timings['partition']:.1f} s")
+
+    t = time.perf_counter()
+    templates = make_templates(library, s.orthoimage.pixel_m, classes)
+    prototypes = learn_prototypes(templates, s.colour)
+    timings["templates"] = time.perf_counter() - t
+    wall_jobs = [(str(scratch), w, wall.id, wall.frame, templates, prototypes, s) for w, wall in enumerate(seg.walls)]
+    walls = _collect_walls(_in_order(executor, wall_jobs, _partition_wall_job, 2 * workers), len(seg.walls),
+                           progress, timings)
+    result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
+    timings["total"] = time.perf_counter() - t0
+    return result, points
 
 
 def detect_to_dir(
@@ -270,28 +458,29 @@ def detect_to_dir(
     settings: DetectionSettings | None = None,
     log: Callable[[str], None] | None = None,
     progress: Progress | None = None,
+    scheduler: str | None = None,
+    scratch: Path | None = None,
 ) -> dict:
-    """``sbsc detect``: read, detect, write every output atomically; return a summary dict."""
+    """``sbsc detect``: read, detect, write every output atomically; return a summary dict.
+
+    The scans are streamed (:func:`detect_scans`); ``scheduler`` runs the work on a Dask
+    cluster (:func:`wall_executor`); ``scratch`` (default ``$SBSC_SCRATCH_DIR``, else the
+    output's parent folder) holds the partitions while the command runs.
+    """
     log = log or (lambda msg: None)
     progress = progress or _noop_progress
     s = settings or load_settings(settings_file)
     progress("reading", 0.0)
     library = load_model_library(Path(models))
     counts = read_expected(expected) if isinstance(expected, (str, Path)) else expected
-    pool = wall_pool(s)  # the workers start while the scan is read
-    try:
-        t = time.perf_counter()
-        cloud = read_scans([Path(p) for p in scans])
-        read_s = time.perf_counter() - t
-        log(f"read {len(cloud):,} points from {len(scans)} file(s) in {read_s:.1f} s")
-        result = detect(cloud, library, counts, s, progress, pool)
-    finally:
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
-    result.timings["reading"] = read_s
+    paths = [Path(p) for p in scans]
+    if not paths:
+        raise InputError("scans", "no scan files given")
+    with wall_executor(s, scheduler) as ex, scratch_folder(Path(out), scratch) as tmp:
+        result, points = detect_scans(paths, library, counts, s, progress, executor=ex, scratch=tmp, log=log)
     seg = result.segmentation
     if seg.stray_points:
-        log(f"ignored {seg.stray_points:,} stray points outside the dense part of the scan")
+        log(f"ignored about {seg.stray_points:,} stray points outside the dense part of the scan")
     for st in seg.storeys:
         walls = [w for w in seg.walls if w.storey == st.id]
         found = sum(1 for d in result.detections if d.wall_id in {w.id for w in walls})
@@ -304,7 +493,7 @@ def detect_to_dir(
         write_outputs(result, tmp, s.orthoimage.pixel_m)
     progress("done", 1.0)
     return {
-        "points": len(cloud),
+        "points": points,
         "walls": len(result.segmentation.walls),
         "openings": len(result.openings),
         "detections": len(result.detections),

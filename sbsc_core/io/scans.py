@@ -1,19 +1,29 @@
-"""Read coloured scans (contract 1): PLY, E57, LAS/LAZ, PCD and text files.
+"""Read coloured scans (contract 1): PLY, E57, LAS/LAZ, PCD and text files, in chunks.
 
-Every reader streams its file in chunks into one :class:`~sbsc_core.types.PointCloud`:
-float32 coordinates relative to a float64 ``origin`` and uint8 colours, so that a big
-scan never sits in memory as more than one chunk of float64. A file that cannot be
-used raises :class:`~sbsc_core.errors.InputError` naming the file and the reason; the
-reader then returns nothing, so no half-read cloud is kept.
+Readers are kept in a registry by extension (as PDAL keeps its readers): each one opens
+its file, checks the header and describes it as a :class:`ScanSource` - the point count
+where the header has one, and a generator of raw blocks (world coordinates in whatever
+float type the file holds, colours as stored). :func:`iter_scan` turns the blocks into
+:class:`ScanChunk` s of at most ``chunk_points`` points: float32 coordinates relative to a
+float64 ``origin`` and uint8 colours. A block is at most ``BLOCK_POINTS`` points, so the
+float64 and parsing temporaries of a chunk in flight stay a few bytes per point of the
+chunk, whatever the file's size. :func:`read_scan` / :func:`read_scans` collect the
+chunks into one :class:`~sbsc_core.types.PointCloud` for callers that want the whole
+cloud; the detection pipeline streams instead (:mod:`sbsc_core.partition`).
+
+A file that cannot be used raises :class:`~sbsc_core.errors.InputError` naming the file
+and the reason, when it is opened or at the chunk where the problem is met; a caller that
+collects chunks then keeps nothing.
 """
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import re
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -22,127 +32,81 @@ from ..errors import InputError
 from ..types import PointCloud
 
 SCAN_EXTENSIONS: tuple[str, ...] = (".ply", ".e57", ".las", ".laz", ".pcd", ".xyz", ".pts", ".txt")
-CHUNK_POINTS = 1 << 21  # points converted per step (bounds the float64 working set)
-_ORIGIN_SAMPLE = 100_000  # points of the first chunk whose median sets the origin
-_READ_THREADS = 4  # at most this many threads convert chunks of a binary PLY
+CHUNK_POINTS = 1 << 21  # points per chunk handed to the caller
+BLOCK_POINTS = 1 << 16  # points a reader converts at once (bounds float64 / parsing temporaries)
+_ORIGIN_SAMPLE = 100_000  # points of the first block whose median sets the origin
+
+RawBlock = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+"""x, y, z (world coordinates, any float type) and (n, 3) colours (uint8, or uint16 when wide)."""
 
 
-# --------------------------------------------------------------------------- collector
+@dataclass
+class ScanSource:
+    """One scan file as its reader describes it.
 
-
-class _Collector:
-    """Turns chunks of world coordinates and colours into one compact cloud.
-
-    ``capacity`` (an upper bound of the point count) lets the output arrays be
-    allocated once; without it chunks are kept and joined at the end. ``origin``
-    fixes the recentring origin (several files sharing one); otherwise it is the
-    rounded median of the first chunk. Colours are kept as given (uint8, or uint16
-    until :meth:`finish` decides whether they use 16 bits).
+    ``count`` is the number of points the header announces (E57: before invalid points are
+    dropped, so an upper bound), None for text files. ``blocks()`` yields the raw blocks
+    from the start of the file each time it is called; a ``seekable`` source (binary PLY and
+    PCD: fixed-size records) also takes ``blocks(start, stop)``: the points ``start:stop``
+    only, so a file can be split between workers. ``rgb_wide`` says the colours are
+    stored in more than 8 bits: they are 8-bit values in wider integers, or use the full
+    16-bit range when the first block holds a value above 255 (decided once per file).
     """
 
-    def __init__(self, path: Path, capacity: int | None = None, origin: np.ndarray | None = None,
-                 rgb_dtype: type = np.uint8) -> None:
-        self.path = path
-        self.origin = None if origin is None else np.asarray(origin, np.float64)
-        self.rgb_dtype = rgb_dtype
-        self.count = 0
-        self._xyz: np.ndarray | None = None
-        self._rgb: np.ndarray | None = None
-        self._chunks: list[tuple[np.ndarray, np.ndarray]] = []
-        if capacity is not None:
-            self._xyz = np.empty((capacity, 3), np.float32)
-            self._rgb = np.empty((capacity, 3), rgb_dtype)
-
-    def set_origin(self, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> None:
-        """Fix the origin, unless given, as the rounded median of the first points of these columns."""
-        if self.origin is None:
-            k = min(len(x), _ORIGIN_SAMPLE)
-            with np.errstate(all="ignore"):
-                mean = np.array([np.nanmedian(np.asarray(c[:k], np.float64)) for c in (x, y, z)])  # stray-proof
-            self.origin = np.where(np.isfinite(mean), np.round(mean), 0.0) + 0.0
-
-    def add(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, rgb: np.ndarray) -> None:
-        """Append points given as three coordinate columns (any float type) and (n, 3) colours."""
-        n = len(x)
-        if n == 0:
-            return
-        self.set_origin(x, y, z)
-        if self._xyz is not None:
-            if self.count + n > len(self._xyz):
-                raise InputError(self.path, "holds more points than its header says")
-            bad = self.put(self.count, x, y, z, rgb)
-        else:
-            out = np.empty((n, 3), np.float32)
-            self._chunks.append((out, np.asarray(rgb, self.rgb_dtype)))
-            bad = _recentre(out, (x, y, z), self.origin)
-        if bad is not None:
-            raise InputError(self.path, f"non-finite coordinates (point {self.count + bad})")
-        self.count += n
-
-    def put(self, start: int, x: np.ndarray, y: np.ndarray, z: np.ndarray, rgb: np.ndarray) -> int | None:
-        """Write points at ``start`` of the preallocated arrays (the origin must be set).
-
-        Chunks that do not overlap may be put from several threads at once; ``count`` is
-        then set by the caller. Returns the chunk's first non-finite point, or None.
-        """
-        n = len(x)
-        self._rgb[start:start + n] = rgb
-        return _recentre(self._xyz[start:start + n], (x, y, z), self.origin)
-
-    def finish(self) -> PointCloud:
-        if self.count == 0:
-            raise InputError(self.path, "no points")
-        if self._xyz is not None:
-            xyz, rgb = self._xyz, self._rgb
-            if self.count < len(xyz):  # shrink in place (E57 invalid points dropped)
-                xyz.resize((self.count, 3), refcheck=False)
-                rgb.resize((self.count, 3), refcheck=False)
-        elif len(self._chunks) == 1:
-            xyz, rgb = self._chunks[0]
-        else:
-            xyz = np.concatenate([c[0] for c in self._chunks])
-            rgb = np.concatenate([c[1] for c in self._chunks])
-        self._chunks = []
-        if rgb.dtype != np.uint8:
-            rgb = colours_16_to_8(rgb)
-        return PointCloud(xyz=xyz, rgb=np.ascontiguousarray(rgb, np.uint8),
-                          origin=self.origin.copy(), sources=(str(self.path),))
+    path: Path
+    count: int | None
+    blocks: Callable[..., Iterator[RawBlock]]
+    rgb_wide: bool = False
+    seekable: bool = False
 
 
-def _recentre(out: np.ndarray, columns: tuple[np.ndarray, ...], origin: np.ndarray) -> int | None:
-    """``out[:, j] = columns[j] - origin[j]`` in float32; the first non-finite row or None."""
-    with np.errstate(all="ignore"):
-        for j, col in enumerate(columns):
-            np.subtract(col, origin[j], out=out[:, j], casting="unsafe")
-    finite = np.isfinite(out).all(axis=1)
-    return None if finite.all() else int(np.argmin(finite))
+@dataclass
+class ScanChunk:
+    """Consecutive points of one file: float32 ``xyz`` relative to ``origin``, uint8 ``rgb``."""
+
+    xyz: np.ndarray  # (n, 3) float32
+    rgb: np.ndarray  # (n, 3) uint8
+    origin: np.ndarray  # (3,) float64
+    start: int  # index of the first point in the file
+
+    def __len__(self) -> int:
+        return len(self.xyz)
 
 
-def colours_16_to_8(rgb: np.ndarray) -> np.ndarray:
-    """Integer colours that may use 16 bits to 8 bits.
-
-    If any value exceeds 255 the colours use the full 16-bit range and are scaled by
-    255/65535; otherwise they are 8-bit values stored in wider integers and kept.
-    """
-    rgb = np.asarray(rgb)
-    if rgb.size and int(rgb.max()) > 255:
-        return ((rgb.astype(np.uint32) * 255 + 32767) // 65535).astype(np.uint8)
-    return rgb.astype(np.uint8)
+ScanReader = Callable[[Path], ScanSource]
+_READERS: dict[str, ScanReader] = {}
 
 
-def _float_colours_to_8(rgb: np.ndarray) -> np.ndarray:
-    """Float colours in 0..1 to uint8 (clipped, rounded)."""
-    with np.errstate(invalid="ignore"):
-        return np.clip(np.rint(np.nan_to_num(np.asarray(rgb, np.float32)) * 255.0), 0, 255).astype(np.uint8)
+def register_reader(extension: str, reader: ScanReader) -> None:
+    """Make ``reader`` the reader of files ending in ``extension`` (e.g. ``".ply"``)."""
+    _READERS[extension.lower()] = reader
+
+
+def scan_readers() -> dict[str, ScanReader]:
+    """The registered readers by extension."""
+    return dict(_READERS)
 
 
 # --------------------------------------------------------------------------- public API
 
 
-def read_scan(path: Path | str, origin: np.ndarray | None = None) -> PointCloud:
-    """Read one scan file of any format of contract 1 (chosen by the extension).
+@contextlib.contextmanager
+def _guard(path: Path):
+    """Turn a reader's failure into one InputError naming the file."""
+    ext = path.suffix.lower()
+    try:
+        yield
+    except InputError:
+        raise
+    except MemoryError:
+        raise InputError(path, "too large to hold in memory") from None
+    except Exception as exc:  # laspy, libE57 and numpy raise their own types
+        raise InputError(path, f"cannot read {ext[1:].upper()} file ({_reason(exc)})") from None
 
-    ``origin`` forces the recentring origin (used by :func:`read_scans`).
+
+def open_scan(path: Path | str) -> ScanSource:
+    """Open one scan file of any format of contract 1 (chosen by the extension) and read its header.
+
     Raises :class:`InputError` when the file cannot be used.
     """
     path = Path(path)
@@ -157,36 +121,222 @@ def read_scan(path: Path | str, origin: np.ndarray | None = None) -> PointCloud:
         raise InputError(path, "not a file")
     if path.stat().st_size == 0:
         raise InputError(path, "empty file")
-    try:
-        return reader(path, origin)
-    except InputError:
-        raise
-    except MemoryError:
-        raise InputError(path, "too large to hold in memory") from None
-    except (OSError, ValueError, RuntimeError) as exc:
-        raise InputError(path, f"cannot read {ext[1:].upper()} file ({_reason(exc)})") from None
+    with _guard(path):
+        return reader(path)
 
 
-def read_scans(paths: Sequence[Path | str]) -> PointCloud:
+def scan_point_count(path: Path | str) -> int | None:
+    """The point count in the file's header (None for text files), without reading the points."""
+    return open_scan(path).count
+
+
+def iter_scan(path: Path | str | ScanSource, origin: np.ndarray | None = None,
+              chunk_points: int = CHUNK_POINTS, start: int = 0, stop: int | None = None) -> Iterator[ScanChunk]:
+    """The points of one scan file as chunks of at most ``chunk_points`` points.
+
+    ``start`` / ``stop`` select a range of points of a ``seekable`` source (see :class:`ScanSource`).
+
+    ``origin`` fixes the recentring origin (several files sharing one); without it the
+    origin is the rounded median of the first points of the file (a few stray points do not
+    move it). Raises :class:`InputError` naming the file when the file cannot be used, at
+    the chunk where the problem is met.
+    """
+    src = path if isinstance(path, ScanSource) else open_scan(path)
+    path = src.path
+    origin = None if origin is None else np.asarray(origin, np.float64)
+    ranged = start != 0 or stop is not None
+    if ranged and not src.seekable:
+        raise ValueError(f"{path}: a range of points can only be read from a format of fixed-size records")
+    done = start
+    with _guard(path):
+        xyz = rgb = None
+        fill = 0
+        wide: bool | None = None
+        for x, y, z, colours in (src.blocks(start, stop) if ranged else src.blocks()):
+            n = len(x)
+            if n == 0:
+                continue
+            if origin is None:
+                origin = _median_origin(x, y, z)
+            if wide is None:
+                wide = bool(src.rgb_wide and colours.size and int(colours.max()) > 255)
+            pos = 0
+            while pos < n:
+                if xyz is None:
+                    xyz = np.empty((chunk_points, 3), np.float32)
+                    rgb = np.empty((chunk_points, 3), np.uint8)
+                k = min(n - pos, chunk_points - fill)
+                part = slice(pos, pos + k)
+                bad = _recentre(xyz[fill:fill + k], (x[part], y[part], z[part]), origin)
+                if bad is not None:
+                    raise InputError(path, f"non-finite coordinates (point {done + fill + bad})")
+                rgb[fill:fill + k] = _to_8_bit(colours[part], wide)
+                fill += k
+                pos += k
+                if fill == chunk_points:
+                    yield ScanChunk(xyz, rgb, origin, done)
+                    done += fill
+                    xyz = rgb = None
+                    fill = 0
+        if fill:
+            yield ScanChunk(xyz[:fill], rgb[:fill], origin, done)
+            done += fill
+    if done == start and not ranged:
+        raise InputError(path, "no points")
+
+
+def sample_scan(src: ScanSource, origin: np.ndarray, every: int, first: int = 0, start: int = 0,
+                stop: int | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+    """A regular sample of points ``start:stop`` of a ``seekable`` source, and the points read.
+
+    Keeps the points whose index plus ``first - start`` is a multiple of ``every`` (so
+    ``first`` is the index of point ``start`` among several files) and converts only those:
+    float32 ``xyz`` relative to ``origin`` and uint8 ``rgb``. The other points are not
+    checked here (the pass that reads them all is).
+    """
+    if not src.seekable:
+        raise ValueError(f"{src.path}: a sample without reading every point needs a format of fixed-size records")
+    origin = np.asarray(origin, np.float64)
+    xs, cs = [], []
+    pos = start
+    wide: bool | None = None
+    with _guard(src.path):
+        for x, y, z, colours in src.blocks(start, stop):
+            n = len(x)
+            if wide is None:
+                wide = bool(src.rgb_wide and colours.size and int(colours.max()) > 255)
+            i0 = (-(first + pos - start)) % every
+            out = np.empty((len(range(i0, n, every)), 3), np.float32)
+            bad = _recentre(out, (x[i0::every], y[i0::every], z[i0::every]), origin)
+            if bad is not None:
+                raise InputError(src.path, f"non-finite coordinates (point {pos + i0 + bad * every})")
+            xs.append(out)
+            cs.append(_to_8_bit(colours[i0::every], wide))
+            pos += n
+    xyz = np.concatenate(xs) if xs else np.zeros((0, 3), np.float32)
+    rgb = np.concatenate(cs) if cs else np.zeros((0, 3), np.uint8)
+    return xyz, rgb, pos - start
+
+
+def read_scan(path: Path | str, origin: np.ndarray | None = None) -> PointCloud:
+    """Read one scan file whole (see :func:`iter_scan`); ``origin`` forces the recentring origin.
+
+    Raises :class:`InputError` when the file cannot be used.
+    """
+    return read_scans([path], origin)
+
+
+def read_scans(paths: Sequence[Path | str], origin: np.ndarray | None = None) -> PointCloud:
     """Read several scan files (already registered) into one cloud with one common origin.
 
-    The origin is the one chosen for the first file.
+    The origin is the one chosen for the first file. The output arrays are allocated once
+    when every header gives its point count.
     """
     if not paths:
         raise InputError("scans", "no scan files given")
-    clouds: list[PointCloud] = []
-    origin = None
-    for p in paths:
-        cloud = read_scan(p, origin)
-        origin = cloud.origin
-        clouds.append(cloud)
-    if len(clouds) == 1:
-        return clouds[0]
-    xyz = np.concatenate([c.xyz for c in clouds])
-    rgb = np.concatenate([c.rgb for c in clouds])
-    sources = tuple(s for c in clouds for s in c.sources)
-    clouds.clear()
-    return PointCloud(xyz=xyz, rgb=rgb, origin=origin, sources=sources)
+    sources = [open_scan(p) for p in paths]
+    counts = [s.count for s in sources]
+    known = all(c is not None for c in counts)
+    total = sum(counts) if known else 0  # type: ignore[arg-type]
+    xyz = np.empty((total, 3), np.float32) if known else None
+    rgb = np.empty((total, 3), np.uint8) if known else None
+    parts: list[ScanChunk] = []
+    n = 0
+    for src in sources:
+        for chunk in iter_scan(src, origin):
+            origin = chunk.origin
+            if xyz is not None:
+                if n + len(chunk) > total:
+                    raise InputError(src.path, "holds more points than its header says")
+                xyz[n:n + len(chunk)] = chunk.xyz
+                rgb[n:n + len(chunk)] = chunk.rgb
+            else:
+                parts.append(chunk)
+            n += len(chunk)
+    if xyz is None:
+        xyz = np.concatenate([c.xyz for c in parts]) if len(parts) > 1 else parts[0].xyz
+        rgb = np.concatenate([c.rgb for c in parts]) if len(parts) > 1 else parts[0].rgb
+        parts.clear()
+    elif n < total:  # E57 invalid points dropped: shrink in place
+        xyz.resize((n, 3), refcheck=False)
+        rgb.resize((n, 3), refcheck=False)
+    return PointCloud(xyz=xyz, rgb=rgb, origin=np.asarray(origin, np.float64).copy(),
+                      sources=tuple(str(s.path) for s in sources))
+
+
+def is_scan_file(path: str | os.PathLike[str]) -> bool:
+    """True when the file's extension is one of the scan formats of contract 1."""
+    return Path(path).suffix.lower() in SCAN_EXTENSIONS
+
+
+# --------------------------------------------------------------------------- conversions
+
+
+def _median_origin(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The rounded median of the first points (whole metres; 0 where not finite)."""
+    k = min(len(x), _ORIGIN_SAMPLE)
+    with np.errstate(all="ignore"):
+        med = np.array([np.nanmedian(np.asarray(c[:k], np.float64)) for c in (x, y, z)])
+    return np.where(np.isfinite(med), np.round(med), 0.0) + 0.0
+
+
+def _recentre(out: np.ndarray, columns: tuple[np.ndarray, ...], origin: np.ndarray) -> int | None:
+    """``out[:, j] = columns[j] - origin[j]`` in float32; the first non-finite row or None.
+
+    The subtraction runs in float64 through numpy's buffered casting: no float64 copy of
+    a column is made.
+    """
+    with np.errstate(all="ignore"):
+        for j, col in enumerate(columns):
+            np.subtract(col, origin[j], out=out[:, j], casting="unsafe")
+    if np.isfinite(out.reshape(-1)).all():  # one flat pass; the row only when needed
+        return None
+    return int(np.argmin(np.isfinite(out).all(axis=1)))
+
+
+def _to_8_bit(rgb: np.ndarray, wide: bool) -> np.ndarray:
+    """Colours of a block to uint8: full 16-bit range scaled down when ``wide``, else kept."""
+    if rgb.dtype == np.uint8:
+        return rgb
+    if wide:
+        return ((rgb.astype(np.uint32) * 255 + 32767) // 65535).astype(np.uint8)
+    return np.minimum(rgb, 255).astype(np.uint8)
+
+
+def colours_16_to_8(rgb: np.ndarray) -> np.ndarray:
+    """Integer colours that may use 16 bits to 8 bits.
+
+    If any value exceeds 255 the colours use the full 16-bit range and are scaled by
+    255/65535; otherwise they are 8-bit values stored in wider integers and kept.
+    """
+    rgb = np.asarray(rgb)
+    return _to_8_bit(rgb, bool(rgb.size and int(rgb.max()) > 255))
+
+
+def _float_colours_to_8(rgb: np.ndarray) -> np.ndarray:
+    """Float colours in 0..1 to uint8 (clipped, rounded)."""
+    with np.errstate(invalid="ignore"):
+        return np.clip(np.rint(np.nan_to_num(np.asarray(rgb, np.float32)) * 255.0), 0, 255).astype(np.uint8)
+
+
+def _records(path: Path, dtype: np.dtype, offset: int, n: int, start: int, stop: int | None
+             ) -> Iterator[np.ndarray]:
+    """Blocks of fixed-size binary records ``start:stop`` of ``n`` read into small buffers
+    (not memory-mapped: no file pages stay mapped in the reading process)."""
+    with open(path, "rb") as fh:
+        for a, b in _blocks_of(n, start, stop):
+            fh.seek(offset + a * dtype.itemsize)
+            rec = np.fromfile(fh, dtype=dtype, count=b - a)
+            if len(rec) < b - a:
+                raise InputError(path, f"truncated: {n} points announced, file ends at point {a + len(rec)}")
+            yield rec
+
+
+def _blocks_of(n: int, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, int]]:
+    """(a, b) ranges of at most BLOCK_POINTS covering ``start:stop`` of ``n`` points."""
+    stop = n if stop is None else min(n, stop)
+    for a in range(start, stop, BLOCK_POINTS):
+        yield a, min(stop, a + BLOCK_POINTS)
 
 
 # --------------------------------------------------------------------------- PLY
@@ -270,7 +420,9 @@ def _ply_rgb(path: Path, rgb: np.ndarray, kind: str) -> np.ndarray:
     raise InputError(path, f"unsupported PLY colour type '{kind}'")
 
 
-def _read_ply(path: Path, origin: np.ndarray | None) -> PointCloud:
+
+
+def _read_ply(path: Path) -> ScanSource:
     with open(path, "rb") as fh:
         fmt, elements, header_len = _parse_ply_header(path, fh)
     vi = next((i for i, e in enumerate(elements) if e.name == "vertex"), None)
@@ -279,19 +431,22 @@ def _read_ply(path: Path, origin: np.ndarray | None) -> PointCloud:
     vertex = elements[vi]
     if vertex.count == 0:
         raise InputError(path, "no points")
+    if vertex.has_list:
+        raise InputError(path, "PLY vertex element with list properties is not supported")
     xyz_names, rgb_names = _ply_columns(path, vertex)
-    kinds = dict(vertex.props)
-    rgb_kind = kinds[rgb_names[0]]
-    wide = rgb_kind not in ("u1",) and rgb_kind[0] != "f"
-    col = _Collector(path, capacity=vertex.count, origin=origin, rgb_dtype=np.uint16 if wide else np.uint8)
+    rgb_kind = dict(vertex.props)[rgb_names[0]]
+    if rgb_kind not in ("u1", "u2", "u4", "i2", "i4") and rgb_kind[0] != "f":
+        raise InputError(path, f"unsupported PLY colour type '{rgb_kind}'")
+    wide = rgb_kind != "u1" and rgb_kind[0] != "f"
     if fmt == "ascii":
-        _read_ply_ascii(path, elements, vi, header_len, xyz_names, rgb_names, rgb_kind, col)
+        blocks = _ply_ascii_blocks(path, elements, vi, header_len, xyz_names, rgb_names, rgb_kind)
     else:
-        _read_ply_binary(path, fmt, elements, vi, header_len, xyz_names, rgb_names, rgb_kind, col)
-    return col.finish()
+        blocks = _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names, rgb_kind)
+    return ScanSource(path, vertex.count, blocks, wide, seekable=fmt != "ascii")
 
 
-def _read_ply_binary(path, fmt, elements, vi, header_len, xyz_names, rgb_names, rgb_kind, col) -> None:
+def _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names, rgb_kind
+                       ) -> Callable[[], Iterator[RawBlock]]:
     endian = "<" if fmt == "binary_little_endian" else ">"
     offset = header_len
     for e in elements[:vi]:
@@ -299,54 +454,45 @@ def _read_ply_binary(path, fmt, elements, vi, header_len, xyz_names, rgb_names, 
             raise InputError(path, f"PLY element '{e.name}' with list properties before the vertices")
         offset += e.count * sum(np.dtype(t).itemsize for _, t in e.props)
     vertex = elements[vi]
-    if vertex.has_list:
-        raise InputError(path, "PLY vertex element with list properties is not supported")
     dtype = np.dtype([(n, endian + t) for n, t in vertex.props])
     need = offset + vertex.count * dtype.itemsize
     size = path.stat().st_size
     if size < need:
         raise InputError(path, f"truncated: {vertex.count} vertices need {need} bytes, file has {size}")
-    data = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=(vertex.count,))
 
-    def convert(start: int) -> int | None:
-        chunk = data[start:start + CHUNK_POINTS]
-        rgb = np.stack([chunk[c] for c in rgb_names], axis=1)
-        bad = col.put(start, chunk[xyz_names[0]], chunk[xyz_names[1]], chunk[xyz_names[2]],
-                      _ply_rgb(path, rgb, rgb_kind))
-        return None if bad is None else start + bad
+    def blocks(start: int = 0, stop: int | None = None) -> Iterator[RawBlock]:
+        for rec in _records(path, dtype, offset, vertex.count, start, stop):
+            rgb = np.stack([rec[c] for c in rgb_names], axis=1)
+            yield rec[xyz_names[0]], rec[xyz_names[1]], rec[xyz_names[2]], _ply_rgb(path, rgb, rgb_kind)
 
-    first = data[:CHUNK_POINTS]
-    col.set_origin(first[xyz_names[0]], first[xyz_names[1]], first[xyz_names[2]])
-    # numpy releases the GIL on these conversions: chunks go through a few threads at once
-    with ThreadPoolExecutor(max_workers=min(_READ_THREADS, os.cpu_count() or 1)) as pool:
-        bad = [b for b in pool.map(convert, range(0, vertex.count, CHUNK_POINTS)) if b is not None]
-    if bad:
-        raise InputError(path, f"non-finite coordinates (point {min(bad)})")
-    col.count = vertex.count
+    return blocks
 
 
-def _read_ply_ascii(path, elements, vi, header_len, xyz_names, rgb_names, rgb_kind, col) -> None:
+def _ply_ascii_blocks(path, elements, vi, header_len, xyz_names, rgb_names, rgb_kind
+                      ) -> Callable[[], Iterator[RawBlock]]:
     vertex = elements[vi]
-    if vertex.has_list:
-        raise InputError(path, "PLY vertex element with list properties is not supported")
     names = [p[0] for p in vertex.props]
     usecols = [names.index(n) for n in (*xyz_names, *rgb_names)]
-    with open(path, encoding="latin-1", newline=None) as fh:
-        fh.seek(header_len)
-        skip = sum(e.count for e in elements[:vi])
-        for _ in itertools.islice(fh, skip):
-            pass
-        remaining = vertex.count
-        first_line = 1 + skip
-        while remaining > 0:
-            n = min(remaining, CHUNK_POINTS)
-            block = _loadtxt(path, itertools.islice(fh, n), usecols, first_line)
-            if len(block) < n:
-                raise InputError(path, f"truncated: header says {vertex.count} vertices, "
-                                       f"file has {vertex.count - remaining + len(block)}")
-            col.add(block[:, 0], block[:, 1], block[:, 2], _ply_rgb(path, block[:, 3:6], rgb_kind))
-            remaining -= n
-            first_line += n
+
+    def blocks() -> Iterator[RawBlock]:
+        with open(path, encoding="latin-1", newline=None) as fh:
+            fh.seek(header_len)
+            skip = sum(e.count for e in elements[:vi])
+            for _ in itertools.islice(fh, skip):
+                pass
+            remaining = vertex.count
+            first_line = 1 + skip
+            while remaining > 0:
+                n = min(remaining, BLOCK_POINTS)
+                block = _loadtxt(path, itertools.islice(fh, n), usecols, first_line)
+                if len(block) < n:
+                    raise InputError(path, f"truncated: header says {vertex.count} vertices, "
+                                           f"file has {vertex.count - remaining + len(block)}")
+                yield block[:, 0], block[:, 1], block[:, 2], _ply_rgb(path, block[:, 3:6], rgb_kind)
+                remaining -= n
+                first_line += n
+
+    return blocks
 
 
 # --------------------------------------------------------------------------- text
@@ -419,69 +565,85 @@ def _text_layout(path: Path, sample: str, pts: bool) -> tuple[str | None, list[i
     return delimiter, [0, 1, 2, 3, 4, 5] if ncols == 6 else [0, 1, 2, ncols - 3, ncols - 2, ncols - 1]
 
 
-def _read_text_block(path: Path, lines: Iterator[str], usecols: list[int], delimiter: str | None,
-                     col: _Collector, first_line: int, limit: int | None) -> int:
-    """Parse up to ``limit`` (or all) of ``lines`` into ``col`` in chunks; returns lines read."""
+def _text_blocks(path: Path, lines: Iterator[str], usecols: list[int], delimiter: str | None,
+                 first_line: int, limit: int | None, counter: list[int]) -> Iterator[RawBlock]:
+    """Up to ``limit`` (or all) of ``lines`` parsed in blocks; ``counter[0]`` counts the lines read."""
     done = 0
     while limit is None or done < limit:
-        n = CHUNK_POINTS if limit is None else min(CHUNK_POINTS, limit - done)
+        n = BLOCK_POINTS if limit is None else min(BLOCK_POINTS, limit - done)
         chunk = list(itertools.islice(lines, n))
         if not chunk:
             break
         block = _loadtxt(path, chunk, usecols, first_line + done, delimiter)
-        if block.size:
-            col.add(block[:, 0], block[:, 1], block[:, 2], _text_colours(path, block[:, 3:6]))
         done += len(chunk)
-        if len(chunk) < n:
+        counter[0] = done
+        short = len(chunk) < n
+        del chunk
+        if block.size:
+            yield block[:, 0], block[:, 1], block[:, 2], _text_colours(path, block[:, 3:6])
+        if short:
             break
-    return done
 
 
-def _read_xyz(path: Path, origin: np.ndarray | None) -> PointCloud:
+def _read_xyz(path: Path) -> ScanSource:
     """Text ``x y z r g b`` per line (spaces, commas or semicolons; ``#`` comments)."""
-    col = _Collector(path, origin=origin, rgb_dtype=np.uint16)
     with open(path, encoding="latin-1") as fh:
-        first, skipped = _next_data_line(fh)
-        if first is None:
-            raise InputError(path, "no points")
-        delimiter, usecols = _text_layout(path, first, False)
-        _read_text_block(path, itertools.chain([first], fh), usecols, delimiter,
-                         col, skipped, None)
-    return col.finish()
+        first, _ = _next_data_line(fh)
+    if first is None:
+        raise InputError(path, "no points")
+    delimiter, usecols = _text_layout(path, first, False)
+
+    def blocks() -> Iterator[RawBlock]:
+        with open(path, encoding="latin-1") as fh:
+            first, skipped = _next_data_line(fh)
+            yield from _text_blocks(path, itertools.chain([first], fh), usecols, delimiter, skipped, None, [0])
+
+    return ScanSource(path, None, blocks, True)
 
 
-def _read_pts(path: Path, origin: np.ndarray | None) -> PointCloud:
+def _read_pts(path: Path) -> ScanSource:
     """Leica PTS: a point count line, then ``x y z intensity r g b`` lines; blocks may repeat."""
-    col = _Collector(path, origin=origin, rgb_dtype=np.uint16)
-    line_no = 0
     with open(path, encoding="latin-1") as fh:
-        while True:
-            head, read = _next_data_line(fh)
-            line_no += read
-            if head is None:
-                break
-            tok = head.split()
-            if len(tok) != 1 or not tok[0].isdigit():
-                raise InputError(path, f"line {line_no}: expected a point count, got '{_snippet(head)}'")
-            count = int(tok[0])
-            if count == 0:
-                continue
-            first, read = _next_data_line(fh)
-            if first is None:
-                raise InputError(path, f"truncated: line {line_no} announces {count} points, file has 0")
-            delimiter, usecols = _text_layout(path, first, True)
-            got = _read_text_block(path, itertools.chain([first], fh), usecols,
-                                   delimiter, col, line_no + read, count)
-            if got < count:
-                raise InputError(path, f"truncated: line {line_no} announces {count} points, file has {got}")
-            line_no += read - 1 + got
-    return col.finish()
+        head, _ = _next_data_line(fh)
+    if head is None:
+        raise InputError(path, "no points")
+    tok = head.split()
+    if len(tok) != 1 or not tok[0].isdigit():
+        raise InputError(path, f"line 1: expected a point count, got '{_snippet(head)}'")
+
+    def blocks() -> Iterator[RawBlock]:
+        line_no = 0
+        with open(path, encoding="latin-1") as fh:
+            while True:
+                head, read = _next_data_line(fh)
+                line_no += read
+                if head is None:
+                    break
+                tok = head.split()
+                if len(tok) != 1 or not tok[0].isdigit():
+                    raise InputError(path, f"line {line_no}: expected a point count, got '{_snippet(head)}'")
+                count = int(tok[0])
+                if count == 0:
+                    continue
+                first, read = _next_data_line(fh)
+                if first is None:
+                    raise InputError(path, f"truncated: line {line_no} announces {count} points, file has 0")
+                delimiter, usecols = _text_layout(path, first, True)
+                got = [0]
+                yield from _text_blocks(path, itertools.chain([first], fh), usecols, delimiter,
+                                        line_no + read, count, got)
+                if got[0] < count:
+                    raise InputError(path, f"truncated: line {line_no} announces {count} points, "
+                                           f"file has {got[0]}")
+                line_no += read - 1 + got[0]
+
+    return ScanSource(path, None, blocks, True)
 
 
 # --------------------------------------------------------------------------- LAS / LAZ
 
 
-def _read_las(path: Path, origin: np.ndarray | None) -> PointCloud:
+def _read_las(path: Path) -> ScanSource:
     import laspy
 
     try:
@@ -491,21 +653,25 @@ def _read_las(path: Path, origin: np.ndarray | None) -> PointCloud:
             if not {"red", "green", "blue"} <= dims:
                 raise InputError(path, f"no colour (LAS point format {header.point_format.id} has no RGB)")
             total = int(header.point_count)
-            if total == 0:
-                raise InputError(path, "no points")
-            # without a given origin the collector takes the median of the first points: the
-            # header's box may be sized by a stray point
-            col = _Collector(path, capacity=total, origin=origin, rgb_dtype=np.uint16)
-            for pts in reader.chunk_iterator(CHUNK_POINTS):
-                rgb = np.stack([np.asarray(pts.red), np.asarray(pts.green), np.asarray(pts.blue)], axis=1)
-                col.add(np.asarray(pts.x), np.asarray(pts.y), np.asarray(pts.z), rgb)
-    except InputError:
-        raise
     except laspy.errors.LaspyException as exc:
         raise InputError(path, f"cannot read LAS/LAZ file ({_reason(exc)})") from None
-    if col.count < total:
-        raise InputError(path, f"truncated: header says {total} points, file has {col.count}")
-    return col.finish()
+    if total == 0:
+        raise InputError(path, "no points")
+
+    def blocks() -> Iterator[RawBlock]:
+        got = 0
+        try:
+            with laspy.open(path) as reader:
+                for pts in reader.chunk_iterator(BLOCK_POINTS):
+                    got += len(pts)
+                    rgb = np.stack([np.asarray(pts.red), np.asarray(pts.green), np.asarray(pts.blue)], axis=1)
+                    yield np.asarray(pts.x), np.asarray(pts.y), np.asarray(pts.z), rgb
+        except laspy.errors.LaspyException as exc:
+            raise InputError(path, f"cannot read LAS/LAZ file ({_reason(exc)})") from None
+        if got < total:
+            raise InputError(path, f"truncated: header says {total} points, file has {got}")
+
+    return ScanSource(path, total, blocks, True)
 
 
 # --------------------------------------------------------------------------- E57
@@ -535,9 +701,8 @@ def _e57_colour_limits(header, proto, name: str) -> tuple[float, float]:
     return 0.0, 1.0 if isinstance(field, libe57.FloatNode) else 255.0
 
 
-def _read_e57(path: Path, origin: np.ndarray | None) -> PointCloud:
+def _read_e57(path: Path) -> ScanSource:
     import pye57
-    from pye57 import libe57
 
     try:
         e57 = pye57.E57(str(path))
@@ -547,24 +712,28 @@ def _read_e57(path: Path, origin: np.ndarray | None) -> PointCloud:
         n_scans = e57.scan_count
         if n_scans == 0:
             raise InputError(path, "no points (no scans in the file)")
-        headers = [e57.get_header(i) for i in range(n_scans)]
-        total = sum(int(h.point_count) for h in headers)
-        if total == 0:
-            raise InputError(path, "no points")
-        col = _Collector(path, capacity=total, origin=origin)
-        for i, h in enumerate(headers):
-            if h.point_count:
-                _read_e57_scan(path, e57, i, h, col, libe57)
-    except InputError:
-        raise
-    except Exception as exc:
-        raise InputError(path, f"cannot read E57 file ({_reason(exc)})") from None
+        total = sum(int(e57.get_header(i).point_count) for i in range(n_scans))
     finally:
         e57.close()
-    return col.finish()
+    if total == 0:
+        raise InputError(path, "no points")
+
+    def blocks() -> Iterator[RawBlock]:
+        from pye57 import libe57
+
+        e57 = pye57.E57(str(path))
+        try:
+            for i in range(e57.scan_count):
+                h = e57.get_header(i)
+                if h.point_count:
+                    yield from _e57_scan_blocks(path, e57, i, h, libe57)
+        finally:
+            e57.close()
+
+    return ScanSource(path, total, blocks, False)
 
 
-def _read_e57_scan(path: Path, e57, index: int, h, col: _Collector, libe57) -> None:
+def _e57_scan_blocks(path: Path, e57, index: int, h, libe57) -> Iterator[RawBlock]:
     fields = set(h.point_fields)
     colours = ("colorRed", "colorGreen", "colorBlue")
     if not set(colours) <= fields:
@@ -580,7 +749,7 @@ def _read_e57_scan(path: Path, e57, index: int, h, col: _Collector, libe57) -> N
     rotation = h.rotation_matrix if h.has_pose() else np.eye(3)
     translation = np.asarray(h.translation, np.float64) if h.has_pose() else np.zeros(3)
 
-    cap = int(min(CHUNK_POINTS, h.point_count))
+    cap = int(min(BLOCK_POINTS, h.point_count))
     arrays: dict[str, np.ndarray] = {}
     buffers = libe57.VectorSourceDestBuffer()
     wanted = [*coords, *colours] + ([invalid] if invalid in fields else [])
@@ -605,46 +774,134 @@ def _read_e57_scan(path: Path, e57, index: int, h, col: _Collector, libe57) -> N
             for j, (name, (lo, hi)) in enumerate(zip(colours, limits, strict=True)):
                 v = (arrays[name][keep] - lo) * (255.0 / (hi - lo))
                 rgb[:, j] = np.clip(np.rint(v), 0, 255)
-            col.add(world[:, 0], world[:, 1], world[:, 2], rgb)
+            yield world[:, 0], world[:, 1], world[:, 2], rgb
     finally:
         reader.close()
 
 
 # --------------------------------------------------------------------------- PCD
 
+_PCD_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8",
+              ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4", ("I", 8): "i8"}
 
-def _read_pcd(path: Path, origin: np.ndarray | None) -> PointCloud:
-    import open3d as o3d
 
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-        pcd = o3d.io.read_point_cloud(str(path), format="pcd", remove_nan_points=False,
-                                      remove_infinite_points=False)
-    if not pcd.has_points():
-        raise InputError(path, "no points (or not a readable PCD file)")
-    if not pcd.has_colors():
+def _read_pcd(path: Path) -> ScanSource:
+    """PCD (ascii, binary or binary_compressed) with x y z and a packed rgb / rgba field.
+
+    ascii and binary are parsed here block by block (Open3D would read the whole file as
+    float64 first, about 50 bytes a point). binary_compressed stores each field of all
+    points as one LZF-compressed column, so no block can be decoded alone: that layout is
+    read by Open3D whole.
+    """
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    header: dict[str, list[str]] = {}
+    pos = 0
+    for raw in head.split(b"\n"):
+        pos += len(raw) + 1
+        line = raw.decode("ascii", errors="replace").strip()
+        if not line or line.startswith("#"):
+            continue
+        tok = line.split()
+        header[tok[0].upper()] = tok[1:]
+        if tok[0].upper() == "DATA":
+            break
+    else:
+        raise InputError(path, "not a PCD file (no DATA line)")
+    fields = header.get("FIELDS", [])
+    sizes, types = header.get("SIZE", []), header.get("TYPE", [])
+    counts = header.get("COUNT", ["1"] * len(fields))
+    try:
+        n = int(header.get("POINTS", header.get("WIDTH", ["0"]))[0])
+        spec = [(f, _PCD_TYPES[(t.upper(), int(s))], int(c))
+                for f, s, t, c in zip(fields, sizes, types, counts, strict=True)]
+    except (KeyError, ValueError, IndexError):
+        raise InputError(path, "not a PCD file (bad FIELDS/SIZE/TYPE/COUNT header)") from None
+    names = [f for f, _, _ in spec]
+    if not {"x", "y", "z"} <= set(names):
+        raise InputError(path, "not a PCD file (no x y z fields)")
+    colour = next((c for c in ("rgb", "rgba") if c in names), None)
+    if colour is None:
         raise InputError(path, "no colour (PCD has no rgb/rgba field)")
-    pts = np.asarray(pcd.points)
-    cols = np.asarray(pcd.colors)
-    col = _Collector(path, capacity=len(pts), origin=origin)
-    for s in range(0, len(pts), CHUNK_POINTS):
-        p = pts[s:s + CHUNK_POINTS]
-        col.add(p[:, 0], p[:, 1], p[:, 2], _float_colours_to_8(cols[s:s + CHUNK_POINTS]))
-    del pcd, pts, cols
-    return col.finish()
+    if n <= 0:
+        raise InputError(path, "no points")
+    data = header["DATA"][0].lower() if header["DATA"] else ""
+    if data == "binary_compressed":
+        return _pcd_open3d(path, n)
+    if data == "ascii":
+        first = {}
+        k = 0
+        for f, _, c in spec:
+            first[f] = k
+            k += c
+        usecols = [first["x"], first["y"], first["z"], first[colour]]
+
+        def blocks() -> Iterator[RawBlock]:
+            with open(path, encoding="latin-1") as fh:
+                fh.seek(pos)
+                done = 0
+                while done < n:
+                    m = min(BLOCK_POINTS, n - done)
+                    block = _loadtxt(path, itertools.islice(fh, m), usecols, done + 1)
+                    if len(block) < m:
+                        raise InputError(path, f"truncated: header says {n} points, file has {done + len(block)}")
+                    yield block[:, 0], block[:, 1], block[:, 2], _pcd_rgb(block[:, 3])
+                    done += m
+
+        return ScanSource(path, n, blocks, False)
+    if data != "binary":
+        raise InputError(path, f"unknown PCD DATA '{data}'")
+    dtype = np.dtype([(f, "<" + t) if c == 1 else (f, "<" + t, (c,)) for f, t, c in spec])
+    need = pos + n * dtype.itemsize
+    size = path.stat().st_size
+    if size < need:
+        raise InputError(path, f"truncated: {n} points need {need} bytes, file has {size}")
+
+    def blocks(start: int = 0, stop: int | None = None) -> Iterator[RawBlock]:
+        for rec in _records(path, dtype, pos, n, start, stop):
+            yield rec["x"], rec["y"], rec["z"], _pcd_rgb(rec[colour])
+
+    return ScanSource(path, n, blocks, False, seekable=True)
 
 
-_READERS: dict[str, Callable[[Path, np.ndarray | None], PointCloud]] = {
-    ".ply": _read_ply,
-    ".e57": _read_e57,
-    ".las": _read_las,
-    ".laz": _read_las,
-    ".pcd": _read_pcd,
-    ".xyz": _read_xyz,
-    ".txt": _read_xyz,
-    ".pts": _read_pts,
-}
+def _pcd_rgb(packed: np.ndarray) -> np.ndarray:
+    """PCL's packed colour (float or integer field holding 0x00RRGGBB bits) to (n, 3) uint8."""
+    a = np.asarray(packed)
+    if a.dtype == np.float64:  # parsed from text: the integer or the float whose bits hold the colour
+        if np.all(a == np.round(a)) and (a >= 0).all() and (a < 2**32).all():
+            bits = a.astype(np.uint32)
+        else:
+            bits = a.astype(np.float32).view(np.uint32)
+    elif a.dtype.kind == "f":
+        bits = np.ascontiguousarray(a, np.float32).view(np.uint32)
+    else:
+        bits = a.astype(np.uint32)
+    out = np.empty((len(bits), 3), np.uint8)
+    out[:, 0] = (bits >> 16) & 255
+    out[:, 1] = (bits >> 8) & 255
+    out[:, 2] = bits & 255
+    return out
 
 
-def is_scan_file(path: str | os.PathLike[str]) -> bool:
-    """True when the file's extension is one of the scan formats of contract 1."""
-    return Path(path).suffix.lower() in SCAN_EXTENSIONS
+def _pcd_open3d(path: Path, n: int) -> ScanSource:
+    def blocks() -> Iterator[RawBlock]:
+        import open3d as o3d
+
+        with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+            pcd = o3d.io.read_point_cloud(str(path), format="pcd", remove_nan_points=False,
+                                          remove_infinite_points=False)
+        if not pcd.has_points():
+            raise InputError(path, "no points (or not a readable PCD file)")
+        if not pcd.has_colors():
+            raise InputError(path, "no colour (PCD has no rgb/rgba field)")
+        pts = np.asarray(pcd.points)
+        cols = np.asarray(pcd.colors)
+        for a, b in _blocks_of(len(pts)):
+            yield pts[a:b, 0], pts[a:b, 1], pts[a:b, 2], _float_colours_to_8(cols[a:b])
+
+    return ScanSource(path, n, blocks, False)
+
+
+for _ext, _reader in ((".ply", _read_ply), (".e57", _read_e57), (".las", _read_las), (".laz", _read_las),
+                      (".pcd", _read_pcd), (".xyz", _read_xyz), (".txt", _read_xyz), (".pts", _read_pts)):
+    register_reader(_ext, _reader)

@@ -1,0 +1,411 @@
+"""Out-of-core data flow: a bounded sample for segmentation, then one partition file per wall.
+
+No stage holds the whole cloud (paper, Figure 2, run on a building instead of a floor):
+
+1. :func:`plan_parts` cuts the scan files into parts (a seekable (binary PLY / PCD) file into ranges of
+   ``part_points``, any other file whole) that workers read side by side.
+2. :func:`sample_part` streams one part (:func:`~sbsc_core.io.scans.iter_scan`) and keeps
+   a regular sample - the points whose index over all files is a multiple of ``step`` -
+   for segmentation. A part of a format that cannot be re-read cheaply (LAS/LAZ, E57,
+   text) is spilled to the scratch folder as float32 + uint8 (15 bytes a point) on the way,
+   so every file is decoded once.
+3. Segmentation runs on the sample (a few million points, bounded).
+4. :func:`partition_part` streams each part again (or its spill) and gives every point to
+   at most one wall (:func:`assign_chunk`, a pure function of a chunk and the walls'
+   frames); a wall's points are binned at once into its orthoimage pixels and appended to
+   the wall's partition files as 11-byte records (pixel, depth, colour).
+5. The orthoimage stage of a wall reads its partition and only computes the per-pixel
+   medians (:func:`~sbsc_core.orthoimage.orthoimage_from_pixels`).
+
+The sample, the spills and the partitions live in a scratch folder (:func:`scratch_dir`)
+that workers of a Dask cluster reach at the same path. The order in which parts are
+processed does not change a wall's orthoimage (the medians do not depend on the order of
+the points), so results are identical however the work is spread.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .io.scans import BLOCK_POINTS, CHUNK_POINTS, ScanChunk, iter_scan, open_scan, sample_scan
+from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
+from .settings import DetectionSettings, OrthoimageSettings, SegmentationSettings
+from .types import Orthoimage, PointCloud, Wall, WallFrame
+
+__all__ = ["ScanPart", "WallIndex", "plan_parts", "sample_part", "partition_part", "assign_chunk",
+           "wall_orthoimage", "scratch_dir", "RECORD"]
+
+PART_POINTS = 1 << 24  # points of a seekable (binary PLY / PCD) file read by one task
+RECORD = np.dtype([("pixel", "<i4"), ("depth", "<f4"), ("rgb", "u1", (3,))])  # 11 bytes, packed
+_TEXT_BYTES_PER_POINT = 30  # to estimate the point count of a text file from its size
+
+
+@dataclass(frozen=True)
+class ScanPart:
+    """Points ``start:stop`` of one scan file (the whole file when ``stop`` is None)."""
+
+    path: str
+    start: int
+    stop: int | None
+    first: int  # index over all files of the part's first point (for the regular sample)
+    key: str  # unique name of the part (scratch file names)
+
+
+@dataclass
+class PartSample:
+    """What :func:`sample_part` returns: the part's sample and its size."""
+
+    xyz: np.ndarray
+    rgb: np.ndarray
+    points: int
+    spilled: bool
+
+
+def scratch_dir(out: Path, scratch: Path | str | None = None) -> Path:
+    """A new scratch folder: in ``scratch`` (or ``$SBSC_SCRATCH_DIR``), else beside ``out``."""
+    base = Path(scratch or os.environ.get("SBSC_SCRATCH_DIR") or Path(out).resolve().parent)
+    base.mkdir(parents=True, exist_ok=True)
+    return Path(tempfile.mkdtemp(prefix=".sbsc-partitions-", dir=base))
+
+
+@contextlib.contextmanager
+def scratch_folder(out: Path, scratch: Path | str | None = None) -> Iterator[Path]:
+    """:func:`scratch_dir`, removed with everything in it at the end."""
+    path = scratch_dir(out, scratch)
+    try:
+        yield path
+    finally:
+        shutil.rmtree(path, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- pass 1
+
+
+def plan_parts(paths: Sequence[Path | str], part_points: int | None = None) -> tuple[list[ScanPart], int]:
+    """Parts of the scan files for the workers, and the (estimated) total point count.
+
+    A seekable (binary PLY / PCD) file is cut into ranges of about ``part_points`` (default
+    ``PART_POINTS``). Every header is read here, so a file that cannot be opened is refused
+    before any work.
+    """
+    part_points = part_points or PART_POINTS
+    parts: list[ScanPart] = []
+    first = 0
+    for k, p in enumerate(paths):
+        src = open_scan(p)
+        path = str(Path(p).resolve())
+        n = src.count if src.count is not None else max(1, src.path.stat().st_size // _TEXT_BYTES_PER_POINT)
+        if src.seekable and src.count is not None and n > part_points:
+            pieces = math.ceil(n / part_points)
+            cuts = [n * j // pieces for j in range(pieces + 1)]
+            parts += [ScanPart(path, cuts[j], cuts[j + 1], first + cuts[j], f"f{k}-{j}") for j in range(pieces)]
+        else:
+            parts.append(ScanPart(path, 0, None, first, f"f{k}"))
+        first += n
+    return parts, first
+
+
+def scan_origin(path: Path | str) -> np.ndarray:
+    """The recentring origin of a set of scans: the one of their first file."""
+    return next(iter_scan(path, chunk_points=BLOCK_POINTS)).origin
+
+
+def _part_chunks(part: ScanPart, origin: np.ndarray) -> Iterator[ScanChunk]:
+    if part.stop is None:
+        return iter_scan(part.path, origin)
+    return iter_scan(part.path, origin, start=part.start, stop=part.stop)
+
+
+def _spill_paths(scratch: Path, part: ScanPart) -> tuple[Path, Path]:
+    return scratch / f"spill-{part.key}.xyz", scratch / f"spill-{part.key}.rgb"
+
+
+def sample_part(part: ScanPart, origin: np.ndarray, step: int, scratch: str | None) -> PartSample:
+    """Stream one part: its regular sample (every ``step``-th point over all files), and
+    a spill of its points into ``scratch`` unless the file is seekable (binary PLY / PCD)."""
+    src = open_scan(part.path)
+    if src.seekable:  # fixed-size records: only the sampled points are converted
+        xyz, rgb, n = sample_scan(src, origin, step, part.first, part.start, part.stop)
+        return PartSample(xyz, rgb, n, False)
+    spill = scratch is not None
+    xs, cs = [], []
+    n = 0
+    files = None
+    if spill:
+        paths = _spill_paths(Path(scratch), part)
+        files = (open(paths[0], "wb"), open(paths[1], "wb"))
+    try:
+        for chunk in _part_chunks(part, origin):
+            g0 = part.first + (chunk.start - part.start)  # global index of the chunk's first point
+            i0 = (-g0) % step
+            xs.append(chunk.xyz[i0::step].copy())
+            cs.append(chunk.rgb[i0::step].copy())
+            n += len(chunk)
+            if files is not None:
+                chunk.xyz.tofile(files[0])
+                chunk.rgb.tofile(files[1])
+    finally:
+        if files is not None:
+            for fh in files:
+                fh.close()
+    xyz = np.concatenate(xs) if xs else np.zeros((0, 3), np.float32)
+    rgb = np.concatenate(cs) if cs else np.zeros((0, 3), np.uint8)
+    return PartSample(xyz, rgb, n, spill)
+
+
+def _spilled_chunks(scratch: Path, part: ScanPart, origin: np.ndarray, points: int) -> Iterator[ScanChunk]:
+    pxyz, prgb = _spill_paths(scratch, part)
+    for a in range(0, points, CHUNK_POINTS):
+        m = min(CHUNK_POINTS, points - a)
+        xyz = np.fromfile(pxyz, np.float32, count=3 * m, offset=12 * a).reshape(m, 3)
+        rgb = np.fromfile(prgb, np.uint8, count=3 * m, offset=3 * a).reshape(m, 3)
+        yield ScanChunk(xyz, rgb, origin, part.start + a)
+
+
+# --------------------------------------------------------------------------- walls
+
+
+@dataclass
+class WallIndex:
+    """The walls' frames and a lookup grid telling which walls may own a point.
+
+    Plan cells of ``cell_m`` (x, y) and Z bands between the walls' bottoms and tops; each
+    cell of the grid holds the id of a combination of walls (``combos``; 0: none) whose
+    slab touches it.
+    """
+
+    ids: list[str]
+    frames: list[WallFrame]
+    origin: np.ndarray  # the cloud's recentring origin
+    lo: np.ndarray  # (2,) plan corner of the grid, relative to origin
+    cell_m: float
+    nx: int
+    ny: int
+    z_edges: np.ndarray  # band boundaries, relative to origin
+    lut: np.ndarray  # (nz * ny * nx,) combination id per cell
+    combos: list[np.ndarray]  # wall numbers per combination id
+    behind_m: float
+    front_m: float
+    end_m: float  # a point this far beyond a wall's end is still looked at
+    slab_m: float  # points this close to a wall's bottom / top are the floor's / ceiling's
+
+    @classmethod
+    def build(cls, walls: Sequence[Wall], origin: np.ndarray, s: SegmentationSettings) -> WallIndex:
+        origin = np.asarray(origin, np.float64)
+        cell = float(s.assign_cell_m)
+        frames = [w.frame for w in walls]
+        sl, tol = s.slab_tolerance_m, s.wall_plane_tolerance_m
+        regions, zr = [], []
+        for f in frames:
+            o = f.origin - origin
+            step = cell / 2
+            us = np.arange(-tol, f.width_m + tol + step, step)
+            ds = np.arange(-s.behind_depth_m, s.object_depth_m + step, step)
+            uu, dd = np.meshgrid(us, ds)
+            pts = o[:2] + uu.ravel()[:, None] * f.axis_u[:2] + dd.ravel()[:, None] * f.normal[:2]
+            regions.append(pts)
+            zr.append((o[2] + sl - _Z_SLACK, o[2] + f.height_m - sl + _Z_SLACK))
+        allp = np.concatenate(regions) if regions else np.zeros((1, 2))
+        lo = np.floor(allp.min(axis=0) / cell) * cell - cell
+        nx, ny = (np.floor((allp.max(axis=0) - lo) / cell).astype(int) + 2).tolist()
+        z_edges = np.unique(np.asarray(zr, np.float64).ravel()) if zr else np.zeros(1)
+        nz = len(z_edges) + 1
+        cells_of: dict[int, set[int]] = {}
+        for w, (pts, (z0, z1)) in enumerate(zip(regions, zr, strict=True)):
+            ij = np.floor((pts - lo) / cell).astype(np.int64)
+            ij = np.unique(ij, axis=0)
+            ij = np.unique((ij[:, None, :] + _NEIGHBOURS[None, :, :]).reshape(-1, 2), axis=0)
+            ij = ij[(ij[:, 0] >= 0) & (ij[:, 0] < nx) & (ij[:, 1] >= 0) & (ij[:, 1] < ny)]
+            bands = np.flatnonzero((z_edges[:-1] >= z0) & (z_edges[1:] <= z1)) + 1
+            for b in bands:
+                for key in ((b * ny + ij[:, 1]) * nx + ij[:, 0]).tolist():
+                    cells_of.setdefault(key, set()).add(w)
+        combo_id: dict[tuple[int, ...], int] = {}
+        combos: list[np.ndarray] = [np.zeros(0, np.int32)]
+        lut = np.zeros(nz * ny * nx, np.int32)
+        for key, ws in cells_of.items():
+            t = tuple(sorted(ws))
+            if t not in combo_id:
+                combo_id[t] = len(combos)
+                combos.append(np.asarray(t, np.int32))
+            lut[key] = combo_id[t]
+        if len(combos) < 32767:
+            lut = lut.astype(np.int16)
+        return cls([w.id for w in walls], frames, origin, lo, cell, int(nx), int(ny), z_edges, lut, combos,
+                   s.behind_depth_m, s.object_depth_m, tol, sl)
+
+
+_Z_SLACK = 0.005  # Z bands reach this beyond a wall's bottom and top (float32 rounding of the test)
+_NEIGHBOURS = np.array([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)], np.int64)
+
+
+def assign_chunk(xyz: np.ndarray, index: WallIndex) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+    """The points of a chunk that belong to each wall: (wall number, indices, their u v d).
+
+    A pure function of the chunk (float32 ``xyz`` relative to ``index.origin``): a point
+    belongs to a wall when it lies over the wall's frame (``u`` within ``end_m`` of
+    ``0..width``, ``v`` more than ``slab_m`` above the bottom and below the top) between
+    ``behind_m`` behind and ``front_m`` in front of the plane; of several such walls the
+    nearest plane gets it (the first wall on a tie). ``u v d`` come from
+    :func:`~sbsc_core.orthoimage.wall_coordinates`, so the orthoimage of the assigned points
+    is the one :func:`~sbsc_core.orthoimage.build_orthoimage` gives.
+    """
+    if len(xyz) == 0 or not index.frames:
+        return
+    # grid cells; points beyond the grid are clamped to its border cells, which no wall's
+    # slab reaches: the exact test below rejects them
+    cell = np.float32(1.0 / index.cell_m)
+    t = xyz[:, 0] - np.float32(index.lo[0])
+    t *= cell
+    np.clip(t, 0, index.nx - 1, out=t)
+    key = t.astype(np.int32)
+    t = xyz[:, 1] - np.float32(index.lo[1])
+    t *= cell
+    np.clip(t, 0, index.ny - 1, out=t)
+    iy = t.astype(np.int32)
+    del t
+    z = xyz[:, 2]
+    band = np.zeros(len(xyz), np.int32)
+    for e in index.z_edges.astype(np.float32).tolist():  # a few edges: one comparison each
+        band += z >= np.float32(e)
+    band *= np.int32(index.ny)
+    band += iy
+    band *= np.int32(index.nx)
+    key += band
+    del band, iy
+    combo = index.lut[key]
+    del key
+    sel = np.flatnonzero(combo)
+    if len(sel) == 0:
+        return
+    c = combo[sel]
+    order = np.argsort(c, kind="stable")
+    sel, c = sel[order], c[order]
+    bounds = np.flatnonzero(np.diff(c)) + 1
+    starts = np.concatenate([[0], bounds])
+    stops = np.concatenate([bounds, [len(c)]])
+    per_wall: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+    for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
+        idx = sel[a:b]
+        walls = index.combos[int(c[a])]
+        pts = xyz[idx]
+        best = None
+        for w in walls.tolist():
+            uvd = wall_coordinates(pts, index.frames[w], index.origin)
+            ok = _inside(uvd, index.frames[w], index)
+            if len(walls) == 1:
+                if ok.any():
+                    per_wall.setdefault(w, []).append((idx[ok], uvd[ok]))
+                break
+            ad = np.abs(uvd[:, 2])
+            if best is None:
+                best = np.full(len(idx), np.inf, np.float32)
+                owner = np.full(len(idx), -1, np.int32)
+                kept: dict[int, np.ndarray] = {}
+            ok &= ad < best
+            best[ok] = ad[ok]
+            owner[ok] = w
+            kept[w] = uvd
+        if best is not None:
+            for w, uvd in kept.items():
+                mine = owner == w
+                if mine.any():
+                    per_wall.setdefault(w, []).append((idx[mine], uvd[mine]))
+    for w in sorted(per_wall):
+        pieces = per_wall[w]
+        if len(pieces) == 1:
+            yield w, pieces[0][0], pieces[0][1]
+        else:
+            yield w, np.concatenate([p[0] for p in pieces]), np.concatenate([p[1] for p in pieces])
+
+
+def _inside(uvd: np.ndarray, f: WallFrame, index: WallIndex) -> np.ndarray:
+    u, v, d = uvd[:, 0], uvd[:, 1], uvd[:, 2]
+    return ((d >= -index.behind_m) & (d <= index.front_m) & (u >= -index.end_m) & (u <= f.width_m + index.end_m)
+            & (v > index.slab_m) & (v < f.height_m - index.slab_m))
+
+
+# --------------------------------------------------------------------------- pass 2
+
+
+def _wall_dir(scratch: Path, w: int) -> Path:
+    return scratch / f"wall-{w:04d}"
+
+
+def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch: str, points: int,
+                   spilled: bool, ortho: OrthoimageSettings) -> list[int]:
+    """Stream one part again (or its spill) and append each wall's binned points to its partition.
+
+    Returns the number of records written per wall.
+    """
+    root = Path(scratch)
+    chunks = _spilled_chunks(root, part, origin, points) if spilled else _part_chunks(part, origin)
+    written = [0] * len(index.frames)
+    for chunk in chunks:
+        for w, idx, uvd in assign_chunk(chunk.xyz, index):
+            keep, pixel = ortho_pixels(uvd, index.frames[w], ortho)
+            rec = np.empty(len(pixel), RECORD)
+            rec["pixel"] = pixel
+            rec["depth"] = uvd[keep, 2]
+            rec["rgb"] = chunk.rgb[idx[keep]]
+            d = _wall_dir(root, w)
+            d.mkdir(exist_ok=True)
+            with open(d / f"{part.key}.rec", "ab") as fh:
+                rec.tofile(fh)
+            written[w] += len(rec)
+    if spilled:
+        for p in _spill_paths(root, part):
+            p.unlink(missing_ok=True)
+    return written
+
+
+def wall_records(scratch: Path | str, w: int) -> np.ndarray:
+    """Every record of wall number ``w`` (in a fixed order of the parts)."""
+    d = _wall_dir(Path(scratch), w)
+    files = sorted(d.glob("*.rec")) if d.is_dir() else []
+    if not files:
+        return np.zeros(0, RECORD)
+    sizes = [f.stat().st_size // RECORD.itemsize for f in files]
+    out = np.empty(sum(sizes), RECORD)
+    at = 0
+    for f, n in zip(files, sizes, strict=True):
+        with open(f, "rb") as fh:
+            fh.readinto(memoryview(out[at:at + n].view(np.uint8)))
+        at += n
+    return out
+
+
+def wall_orthoimage(scratch: Path | str, w: int, wall_id: str, frame: WallFrame,
+                    settings: OrthoimageSettings) -> Orthoimage:
+    """The orthoimage of wall number ``w`` from its partition (the bare per-pixel medians)."""
+    rec = wall_records(scratch, w)
+    pixel = rec["pixel"].astype(np.int64)
+    depth = np.ascontiguousarray(rec["depth"])
+    rgb = np.ascontiguousarray(rec["rgb"])
+    del rec
+    return orthoimage_from_pixels(wall_id, frame, pixel, depth, rgb, settings)
+
+
+def sample_step(total_points: int, s: DetectionSettings) -> int:
+    """Stride of the regular sample: at most twice the points segmentation fits walls on."""
+    return max(1, math.ceil(total_points / (2 * s.segmentation.fit_max_points)))
+
+
+def sample_cloud(samples: Sequence[PartSample], origin: np.ndarray, sources: Sequence[str], limit: int
+                 ) -> PointCloud:
+    """The parts' samples as one cloud, thinned regularly to at most ``limit`` points."""
+    xyz = np.concatenate([p.xyz for p in samples])
+    rgb = np.concatenate([p.rgb for p in samples])
+    if len(xyz) > limit:
+        k = math.ceil(len(xyz) / limit)
+        xyz, rgb = xyz[::k].copy(), rgb[::k].copy()
+    return PointCloud(xyz=xyz, rgb=rgb, origin=np.asarray(origin, np.float64), sources=tuple(sources))
