@@ -4,7 +4,7 @@ A reviewer clicks roughly on the object in a wall's orthoimage; the object's dep
 (contract 2, ``depth.npy``, resampled to the orthoimage's pixels as recognition does it:
 :func:`sbsc_core.templates.make_template`) is correlated with the wall's depth orthoimage in
 a small window around the click with the recognizer's masked normalised cross-correlation
-(:func:`sbsc_core.depth_recognition.masked_ncc`, unseen pixels neither add nor remove
+(:func:`sbsc_core.matching.masked_ncc`, unseen pixels neither add nor remove
 evidence). The click moves to the best match when that match is good enough; otherwise the
 object stays where it was clicked (a flat object, or no relief there).
 """
@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from sbsc_core.depth_recognition import masked_ncc
 from sbsc_core.errors import SbscError
 from sbsc_core.io.models import load_object_model
+from sbsc_core.matching import masked_ncc
 from sbsc_core.templates import make_template
 
 SEARCH_RADIUS_M = 0.12  # how far from the click the object's centre may move
