@@ -43,6 +43,7 @@ from .consensus import consensus_all
 from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
+from .io.crs import georeference_fields, scan_crs
 from .io.documents import detections_document, read_expected
 from .io.models import load_model_library
 from .io.scans import read_scans
@@ -278,6 +279,7 @@ def detect_to_dir(
     try:
         t = time.perf_counter()
         cloud = read_scans([Path(p) for p in scans])
+        georef = georeference_fields(scan_crs([Path(p) for p in scans]), cloud.origin)
         read_s = time.perf_counter() - t
         log(f"read {len(cloud):,} points from {len(scans)} file(s) in {read_s:.1f} s")
         result = detect(cloud, library, counts, s, progress, pool)
@@ -289,7 +291,7 @@ def detect_to_dir(
         f"{len(result.detections)} objects in {result.timings['total']:.1f} s")
     progress("writing", 0.0)
     with atomic_output_dir(out) as tmp:
-        write_outputs(result, tmp, s.orthoimage.pixel_m)
+        write_outputs(result, tmp, s.orthoimage.pixel_m, extra=georef)
     progress("done", 1.0)
     return {
         "points": len(cloud),
@@ -327,8 +329,11 @@ def overlay_image(w: WallResult, detections: Sequence[Detection]) -> np.ndarray:
     return img
 
 
-def write_outputs(result: DetectionResult, out: Path, pixel_m: float) -> None:
-    """Write detections.json, rois.json and the per-wall images into ``out``."""
+def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dict | None = None) -> None:
+    """Write detections.json, rois.json and the per-wall images into ``out``.
+
+    ``extra`` adds top-level keys to detections.json (the scan's ``crs`` and ``origin``).
+    """
     images = out / "orthoimages"
     images.mkdir(parents=True, exist_ok=True)
     rois: dict[str, dict] = {}
@@ -344,7 +349,7 @@ def write_outputs(result: DetectionResult, out: Path, pixel_m: float) -> None:
     doc = detections_document(
         [(wall.id, wall.frame) for wall in result.segmentation.walls],
         result.openings, result.detections,
-        extra={"pixel_m": pixel_m, "classes_searched": result.classes},
+        extra={"pixel_m": pixel_m, "classes_searched": result.classes, **(extra or {})},
     )
     (out / "detections.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
     (out / "rois.json").write_text(
