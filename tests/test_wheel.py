@@ -24,8 +24,16 @@ import httpx
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-IGNORE = shutil.ignore_patterns(".git", ".venv", "venv", "runs", "data", "out", "build", "dist", "*.egg-info",
-                                "__pycache__", ".pytest_cache", ".ruff_cache", "*.log", "node_modules")
+TOP_LEVEL_SKIP = {".git", ".venv", "venv", "runs", "data", "out", "build", "dist"}  # a user's runs, not sources
+ANYWHERE_SKIP = shutil.ignore_patterns("*.egg-info", "__pycache__", ".pytest_cache", ".ruff_cache", "*.log",
+                                       "node_modules")
+
+
+def _ignore(folder: str, names: list[str]) -> set[str]:
+    skip = set(ANYWHERE_SKIP(folder, names))
+    if Path(folder) == ROOT:
+        skip |= TOP_LEVEL_SKIP & set(names)
+    return skip
 
 pytestmark = [pytest.mark.slow, pytest.mark.wheel]
 
@@ -56,7 +64,7 @@ def installed(tmp_path_factory) -> dict:
     (work / "home").mkdir(parents=True, exist_ok=True)
     times = {}
     t = time.monotonic()
-    shutil.copytree(ROOT, work / "src", ignore=IGNORE)  # the checkout is not touched by the build
+    shutil.copytree(ROOT, work / "src", ignore=_ignore)  # the checkout is not touched by the build
     dist = work / "dist"
     shutil.rmtree(dist, ignore_errors=True)
     build = _check([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist), str(work / "src")],
@@ -71,8 +79,10 @@ def installed(tmp_path_factory) -> dict:
                      cwd=work, env=_clean_env(work))
     times["install_s"] = time.monotonic() - t
     print(f"\nwheel test: build {times['build_s']:.0f} s, fresh virtualenv install {times['install_s']:.0f} s")
-    return {"work": work, "wheel": wheel, "env": _clean_env(work), "times": times,
-            "output": build.stdout + build.stderr + install.stdout + install.stderr}
+    yield {"work": work, "wheel": wheel, "env": _clean_env(work), "times": times,
+           "output": build.stdout + build.stderr + install.stdout + install.stderr}
+    if not keep:  # about 2 GB: not left behind in pytest's kept temporary folders
+        shutil.rmtree(work, ignore_errors=True)
 
 
 def _sbsc(installed: dict, *args: str, timeout: float = 600) -> subprocess.CompletedProcess:
