@@ -24,7 +24,7 @@ from sbsc_core.errors import InputError, SbscError
 from .config import AppSettings
 from .db import Database, upgrade
 from .jobs import job_dir
-from .models import Job, ModelLibraryRow, Project, Scan, utcnow
+from .models import DesignRow, Job, ModelLibraryRow, Project, Scan, utcnow
 from .results import import_results
 from .storage import sha256_file
 
@@ -54,12 +54,13 @@ def find_sample_project(settings: AppSettings, name: str = SAMPLE_NAME) -> int |
 
 def ensure_sample_project(scan: Path, detections_dir: Path, *, models: Path | None = None,
                           name: str = SAMPLE_NAME, settings: AppSettings | None = None,
-                          points: int | None = None) -> int:
+                          points: int | None = None, design: Path | None = None) -> int:
     """Create (once) a project from ``scan`` and a finished output dir; returns its id.
 
     ``detections_dir`` holds ``detections.json`` and ``orthoimages/`` as written by
     ``sbsc detect``; ``models`` is the library it was run with (default: the bundled one).
-    ``points`` saves reading the scan to count them.
+    ``points`` saves reading the scan to count them. ``design`` is the as-designed IFC to
+    compare with; by default the simulator's ``as_designed.ifc`` beside the scan, if any.
     """
     settings = settings or AppSettings()
     scan, detections_dir = Path(scan), Path(detections_dir)
@@ -70,6 +71,14 @@ def ensure_sample_project(scan: Path, detections_dir: Path, *, models: Path | No
     existing = find_sample_project(settings, name)
     if existing is not None:
         return existing
+    design = Path(design) if design is not None else scan.parent / "as_designed.ifc"
+    designed = None
+    if design.is_file():
+        from sbsc_core.bim.design import read_as_designed
+        from sbsc_core.io.models import load_model_library
+        from sbsc_core.paths import bundled_models_dir
+
+        designed = read_as_designed(design, load_model_library(models or bundled_models_dir()))
     library_classes = None
     if models is not None:
         from sbsc_core.io.models import load_model_library
@@ -108,6 +117,14 @@ def ensure_sample_project(scan: Path, detections_dir: Path, *, models: Path | No
                 s.add(row)
                 s.flush()
                 models_id = project.models_id = row.id
+            if designed is not None:
+                design_dest = pdir / "design" / f"{uuid.uuid4().hex[:12]}_{design.name}"
+                _link_or_copy(design, design_dest)
+                s.add(DesignRow(project_id=project.id, filename=design.name,
+                                path=design_dest.relative_to(settings.data_dir).as_posix(),
+                                size_bytes=design.stat().st_size, sha256=sha256_file(design),
+                                objects=len(designed.objects), expected_counts=designed.expected_counts(),
+                                uploaded_by="sample"))
             now = utcnow()
             job = Job(project_id=project.id, status="succeeded", stage="imported", progress=1.0,
                       models_id=models_id, created_by="sample", created_at=now, started_at=now,
@@ -136,10 +153,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("detections_dir")
     ap.add_argument("--models")
     ap.add_argument("--name", default=SAMPLE_NAME)
+    ap.add_argument("--design", help="as-designed IFC (default: as_designed.ifc beside the scan, if any)")
     args = ap.parse_args(argv)
     try:
         pid = ensure_sample_project(Path(args.scan), Path(args.detections_dir),
-                                    models=Path(args.models) if args.models else None, name=args.name)
+                                    models=Path(args.models) if args.models else None, name=args.name,
+                                    design=Path(args.design) if args.design else None)
     except SbscError as exc:
         print(f"sbsc: error: {exc}", file=sys.stderr)
         return 2

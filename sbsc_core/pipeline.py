@@ -48,6 +48,7 @@ from .consensus import consensus_all
 from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
+from .io.crs import georeference_fields, scan_crs
 from .io.documents import detections_document, read_expected
 from .io.models import load_model_library
 from .orthoimage import build_orthoimage
@@ -476,6 +477,7 @@ def detect_to_dir(
     paths = [Path(p) for p in scans]
     if not paths:
         raise InputError("scans", "no scan files given")
+    georef = georeference_fields(scan_crs(paths), scan_origin(paths[0]))
     with wall_executor(s, scheduler) as ex, scratch_folder(Path(out), scratch) as tmp:
         result, points = detect_scans(paths, library, counts, s, progress, executor=ex, scratch=tmp, log=log)
     seg = result.segmentation
@@ -490,7 +492,7 @@ def detect_to_dir(
         f"{len(result.detections)} objects in {result.timings['total']:.1f} s")
     progress("writing", 0.0)
     with atomic_output_dir(out) as tmp:
-        write_outputs(result, tmp, s.orthoimage.pixel_m)
+        write_outputs(result, tmp, s.orthoimage.pixel_m, extra=georef)
     progress("done", 1.0)
     return {
         "points": points,
@@ -530,8 +532,11 @@ def overlay_image(w: WallResult, detections: Sequence[Detection]) -> np.ndarray:
     return img
 
 
-def write_outputs(result: DetectionResult, out: Path, pixel_m: float) -> None:
-    """Write detections.json, rois.json and the per-wall images into ``out``."""
+def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dict | None = None) -> None:
+    """Write detections.json, rois.json and the per-wall images into ``out``.
+
+    ``extra`` adds top-level keys to detections.json (the scan's ``crs`` and ``origin``).
+    """
     images = out / "orthoimages"
     images.mkdir(parents=True, exist_ok=True)
     rois: dict[str, dict] = {}
@@ -545,11 +550,12 @@ def write_outputs(result: DetectionResult, out: Path, pixel_m: float) -> None:
         rois[wid] = {"depth": [_box_uv(w.ortho, b) for b in w.depth_rois],
                      "colour": [_box_uv(w.ortho, b) for b in w.colour_rois]}
     seg = result.segmentation
-    extra: dict = {"pixel_m": pixel_m, "classes_searched": result.classes, "stray_points": seg.stray_points}
+    fields: dict = {"pixel_m": pixel_m, "classes_searched": result.classes, "stray_points": seg.stray_points,
+                   **(extra or {})}
     if len(seg.storeys) > 1:  # contract 4: a one-storey scan omits the storeys
-        extra["storeys"] = [st.to_dict() for st in seg.storeys]
+        fields["storeys"] = [st.to_dict() for st in seg.storeys]
     doc = detections_document([(wall.id, wall.frame) for wall in seg.walls], result.openings,
-                              result.detections, extra=extra)
+                              result.detections, extra=fields)
     if len(seg.storeys) > 1:
         for wall, entry in zip(seg.walls, doc["walls"], strict=True):
             entry["storey"] = wall.storey

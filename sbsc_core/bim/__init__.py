@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import InputError
 from ..types import ModelLibrary, ObjectModel
 
-SCHEMAS: tuple[str, ...] = ("IFC4", "IFC4X3")
+SCHEMAS: tuple[str, ...] = ("IFC4", "IFC4X3", "IFC2X3")
 PSET_RECOGNITION = "SBSC_Recognition"  # alpha, rho, source, review of an exported detection
 PSET_DESIGN = "SBSC_Design"  # class of an object in an as-designed file written by sbsc
 DEFAULT_DEPTH_M = 0.02  # body depth of a class whose depth is not known
@@ -48,12 +48,15 @@ class ClassTyping:
 
 
 def normalise_schema(schema: str, where: str = "schema") -> str:
-    """``"ifc4"`` -> ``"IFC4"``; ``IFC4X3`` (any ADD) -> ``"IFC4X3"``; else InputError."""
+    """``"ifc4"`` -> ``"IFC4"``; ``IFC4X3`` (any ADD) -> ``"IFC4X3"``; ``IFC2X3`` (any TC) ->
+    ``"IFC2X3"``; else InputError."""
     s = str(schema).strip().upper()
     if s.startswith("IFC4X3"):
         return "IFC4X3"
     if s == "IFC4":
         return "IFC4"
+    if s.startswith("IFC2X3"):
+        return "IFC2X3"
     raise InputError(where, f"unknown IFC schema '{schema}' (expected one of {', '.join(SCHEMAS)})")
 
 

@@ -47,8 +47,10 @@ import ifcopenshell.guid
 import numpy as np
 
 from ..errors import InputError
+from ..io.crs import CRS, parse_crs
 from ..types import ModelLibrary, WallFrame
 from . import DEFAULT_DEPTH_M, PSET_RECOGNITION, ClassTyping, class_typings, normalise_schema
+from .georeference import Georeference, plan_georeference, projected_crs_name, write_georeference
 
 WALL_THICKNESS_M = 0.20  # thickness given to a wall face with no partner face behind it
 PARTNER_MAX_GAP_M = 0.60  # two opposite faces closer than this are one partition
@@ -68,6 +70,7 @@ class DetectionsDocument:
     openings: list[dict]
     detections: list[dict]
     signoff: dict | None = None
+    crs: CRS | None = None  # the scan's coordinate reference system, when recorded
 
 
 def _vec3(value: Any, where: str) -> np.ndarray:
@@ -137,7 +140,8 @@ def parse_detections_document(doc: Any, where: str = "detections") -> Detections
         if status not in REVIEW_STATUSES:
             raise InputError(f"{at}.review.status", f"unknown status '{status}'")
     signoff = doc.get("signoff") if isinstance(doc.get("signoff"), dict) else None
-    return DetectionsDocument(walls, list(openings), list(doc["detections"]), signoff)
+    crs = CRS.from_dict(doc["crs"], f"{where}: crs") if doc.get("crs") is not None else None
+    return DetectionsDocument(walls, list(openings), list(doc["detections"]), signoff, crs)
 
 
 def load_json(path: Path) -> Any:
@@ -213,6 +217,8 @@ class IfcModelBuilder:
         self.file = ifcopenshell.api.project.create_file(version=self.schema)
         self._schema_def = ifcopenshell.ifcopenshell_wrapper.schema_by_name(self.file.schema_identifier)
         f = self.file
+        if self.schema == "IFC2X3":  # owner history is mandatory there: who and which application
+            self._add_owner()
         self.project = ifcopenshell.api.root.create_entity(f, ifc_class="IfcProject", name=project_name)
         if description:
             self.project.Description = description
@@ -241,6 +247,18 @@ class IfcModelBuilder:
         self._types: dict[str, Any] = {}
 
     # -- low level ------------------------------------------------------------------
+
+    def _add_owner(self) -> None:
+        """The IfcPersonAndOrganization and IfcApplication that every IFC2X3 OwnerHistory names
+        (ifcopenshell's ``owner.settings`` find them in the file)."""
+        from .. import __version__
+
+        f = self.file
+        org = ifcopenshell.api.owner.add_organisation(f, identification="sbsc", name="sbsc")
+        person = ifcopenshell.api.owner.add_person(f, identification="sbsc", family_name="sbsc", given_name=None)
+        ifcopenshell.api.owner.add_person_and_organisation(f, person=person, organisation=org)
+        ifcopenshell.api.owner.add_application(f, application_developer=org, version=__version__,
+                                               application_full_name="sbsc", application_identifier="sbsc")
 
     def _axis2placement(self, m: np.ndarray) -> Any:
         f = self.file
@@ -437,9 +455,15 @@ class IfcModelBuilder:
         with the project and ``related`` objects."""
         f = self.file
         by = str(signoff.get("by") or "unknown")
-        person = ifcopenshell.api.owner.add_person(f, identification=by, family_name=by, given_name=None)
         counts = signoff.get("counts") or {}
         qualifier = "; ".join(f"{k}={v}" for k, v in sorted(counts.items())) if isinstance(counts, dict) else str(counts)
+        if self.schema == "IFC2X3":  # IfcApproval there needs a dated actor relationship: a property set
+            pset = ifcopenshell.api.pset.add_pset(f, product=self.project, name="SBSC_SignOff")
+            values = {"Status": "APPROVED", "By": by, "At": str(signoff.get("at") or "") or None,
+                      "Comment": str(signoff.get("comment") or "") or None, "Counts": qualifier or None}
+            ifcopenshell.api.pset.edit_pset(f, pset=pset, properties={k: v for k, v in values.items() if v})
+            return pset
+        person = ifcopenshell.api.owner.add_person(f, identification=by, family_name=by, given_name=None)
         approval = f.createIfcApproval(
             Identifier="sbsc-signoff", Name="Sign-off of recognized secondary components",
             Description=str(signoff.get("comment") or "") or None,
@@ -451,6 +475,12 @@ class IfcModelBuilder:
         return approval
 
     def finish(self) -> ifcopenshell.file:
+        if self.schema == "IFC2X3":  # relationships made without the API have none yet
+            roots = [e for e in self.file.by_type("IfcRoot") if e.OwnerHistory is None]
+            if roots:
+                history = ifcopenshell.api.owner.create_owner_history(self.file)
+                for e in roots:
+                    e.OwnerHistory = history
         return self.file
 
 
@@ -514,15 +544,19 @@ def selected_detections(detections: list[dict], accepted_only: bool) -> list[dic
 
 def export_ifc(document: dict, *, library: ModelLibrary | None = None, schema: str = "IFC4",
                accepted_only: bool = False, signoff: dict | None = None,
-               typings: dict[str, ClassTyping] | None = None) -> ifcopenshell.file:
+               typings: dict[str, ClassTyping] | None = None, crs: str | CRS | None = None) -> ifcopenshell.file:
     """The as-is IFC model of a detections document (contract 4).
 
     Rejected detections are never written; ``accepted_only`` drops pending ones too.
     ``signoff`` (``{"by", "at", "comment", "counts"}``, default: the document's
-    ``"signoff"``) becomes an IfcApproval.
+    ``"signoff"``) becomes an IfcApproval (IFC2X3: the property set ``SBSC_SignOff``).
+    ``crs`` (``"EPSG:NNNN"``, default: the document's ``crs``) is the scan's coordinate
+    system; with it, or with coordinates beyond 1 km, the model is georeferenced (see
+    :mod:`.georeference`): local coordinates near the origin and an IfcMapConversion.
     """
     schema = normalise_schema(schema)
     doc = parse_detections_document(document)
+    doc = localised(doc, crs)
     typings = typings if typings is not None else class_typings(library)
     builder = IfcModelBuilder(schema, project_name="sbsc as-is model", typings=typings,
                               storey_elevation=storey_elevation(doc.walls),
@@ -541,7 +575,30 @@ def export_ifc(document: dict, *, library: ModelLibrary | None = None, schema: s
     signoff = signoff if signoff is not None else doc.signoff
     if signoff:
         builder.add_approval(signoff, elements)
+    if doc.georeference is not None:
+        write_georeference(builder.file, doc.georeference)
     return builder.finish()
+
+
+@dataclass
+class LocalDocument(DetectionsDocument):
+    georeference: Georeference | None = None
+
+
+def localised(doc: DetectionsDocument, crs: str | CRS | None = None) -> LocalDocument:
+    """``doc`` in the local frame of its georeference (unchanged when it needs none)."""
+    if isinstance(crs, str):
+        crs = parse_crs(crs)
+    crs = crs or doc.crs
+    if crs is not None and not crs.projected:
+        crs = None  # degrees are no map coordinates; IfcMapConversion needs a projected CRS
+    positions = [np.asarray(d["position"], float) for d in doc.detections]
+    geo = plan_georeference(doc.walls, positions, crs)
+    if geo is None:
+        return LocalDocument(doc.walls, doc.openings, doc.detections, doc.signoff, doc.crs, None)
+    walls = {k: geo.local_frame(f) for k, f in doc.walls.items()}
+    dets = [{**d, "position": [float(c) for c in geo.to_local(p)]} for d, p in zip(doc.detections, positions, strict=True)]
+    return LocalDocument(walls, doc.openings, dets, doc.signoff, crs, geo)
 
 
 def write_ifc_atomic(model: ifcopenshell.file, out: Path) -> None:
@@ -560,7 +617,7 @@ def write_ifc_atomic(model: ifcopenshell.file, out: Path) -> None:
 
 
 def export_ifc_file(detections: Path, out: Path, schema: str = "IFC4", accepted_only: bool = False,
-                    models: Path | None = None) -> dict[str, Any]:
+                    models: Path | None = None, crs: str | None = None) -> dict[str, Any]:
     """``sbsc export-ifc``: read ``detections``, write ``out`` (nothing on error).
 
     Returns a summary: the schema and how many walls, openings and objects were written.
@@ -570,8 +627,9 @@ def export_ifc_file(detections: Path, out: Path, schema: str = "IFC4", accepted_
     typings = class_typings(models=Path(models)) if models is not None else class_typings()
     raw = load_json(detections)
     parse_detections_document(raw, where=str(detections))
-    model = export_ifc(raw, schema=schema, accepted_only=accepted_only, typings=typings)
+    model = export_ifc(raw, schema=schema, accepted_only=accepted_only, typings=typings,
+                       crs=parse_crs(crs, "--crs") if crs else None)
     write_ifc_atomic(model, out)
-    return {"schema": schema, "walls": len(model.by_type("IfcWall")),
+    return {"schema": schema, "crs": projected_crs_name(model), "walls": len(model.by_type("IfcWall")),
             "openings": len(model.by_type("IfcOpeningElement")),
             "objects": len(selected_detections(raw.get("detections", []), accepted_only))}
