@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import os
 import re
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -57,7 +58,8 @@ class _Collector:
         """Fix the origin, unless given, as the rounded mean of the first points of these columns."""
         if self.origin is None:
             k = min(len(x), _ORIGIN_SAMPLE)
-            with np.errstate(all="ignore"):
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: refused later
                 mean = np.array([np.nanmean(np.asarray(c[:k], np.float64)) for c in (x, y, z)])
             self.origin = np.where(np.isfinite(mean), np.round(mean), 0.0) + 0.0
 
