@@ -24,6 +24,7 @@ from sbsc_core.io.safe_json import loads_bounded
 
 INT64_MAX = 2**63 - 1
 _NUMBER = re.compile(r"^[+-]?\d+$")
+UPLOAD_PATH = re.compile(r"^/api/projects/[^/]+/(scans|models|design)/?$")  # streamed, own caps
 # NUL and the bidirectional controls (U+202A..U+202E, U+2066..U+2069, U+200E/U+200F, U+061C)
 _BAD_CHARS = re.compile("[\u0000\u202a-\u202e\u2066-\u2069\u200e\u200f\u061c]")
 
@@ -91,7 +92,7 @@ class BoundsMiddleware:
                 .strip(b"0") and b"transfer-encoding" not in headers:
             await self.app(scope, receive, send)
             return
-        if ctype.startswith(b"multipart/"):
+        if ctype.startswith(b"multipart/") and UPLOAD_PATH.match(scope["path"]):
             await self.app(scope, receive, send)  # uploads: streamed with their own caps
             return
         declared = headers.get(b"content-length", b"")
@@ -112,7 +113,8 @@ class BoundsMiddleware:
             chunks.append(chunk)
             more = msg.get("more_body", False)
         body = b"".join(chunks)
-        if body.strip() and (ctype in (b"application/json", b"") or ctype.endswith(b"+json")):
+        if body.strip() and (ctype in (b"application/json", b"") or ctype.endswith(b"+json")) \
+                and scope["method"] != "GET":
             try:
                 doc = loads_bounded(body, "body", max_depth=self.max_depth, max_keys=self.max_keys)
             except InputError as exc:

@@ -289,3 +289,43 @@ def test_job_processes_die_with_the_job_and_with_the_server(tmp_path):
                 os.killpg(p, signal.SIGKILL)
         server.stop()
         shutil.rmtree(data / "projects", ignore_errors=True)
+
+
+def test_concurrent_uploads_per_user_are_limited(live):
+    """A second upload of the same user while the first still streams: 429 (limit 1 here)."""
+    import threading
+
+    h = auth(live.tokens["rita"])
+    pid = live.ids["pid"]
+    boundary = "sbscboundary"
+    head = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"slow.xyz\"\r\n"
+            "Content-Type: application/octet-stream\r\n\r\n").encode()
+    release = threading.Event()
+
+    def body():
+        yield head
+        for _ in range(20):
+            yield b"0 0 0 1 2 3\n" * 100
+            if release.wait(0.1):
+                break
+        yield f"\r\n--{boundary}--\r\n".encode()
+
+    first: dict = {}
+
+    def slow() -> None:
+        with httpx.Client(base_url=live.url, timeout=60) as c:
+            first["r"] = c.post(f"/api/projects/{pid}/scans", content=body(),
+                                headers={**h, "content-type": f"multipart/form-data; boundary={boundary}"})
+
+    t = threading.Thread(target=slow)
+    t.start()
+    time.sleep(0.8)
+    with httpx.Client(base_url=live.url, timeout=60) as c:
+        r = c.post(f"/api/projects/{pid}/scans", files={"file": ("b.xyz", b"0 0 0 1 2 3\n")}, headers=h)
+        other = c.post(f"/api/projects/{pid}/scans", files={"file": ("c.xyz", b"0 0 0 1 2 3\n")},
+                       headers=auth(live.tokens["admin"]))
+    release.set()
+    t.join(30)
+    assert r.status_code == 429 and "in progress" in r.json()["detail"], r.text
+    assert other.status_code == 201  # another user is not held up
+    assert first["r"].status_code == 201, first["r"].text
