@@ -329,3 +329,21 @@ def test_concurrent_uploads_per_user_are_limited(live):
     assert r.status_code == 429 and "in progress" in r.json()["detail"], r.text
     assert other.status_code == 201  # another user is not held up
     assert first["r"].status_code == 201, first["r"].text
+
+
+def test_text_scan_lines_are_counted_in_blocks_like_line_by_line(tmp_path, monkeypatch):
+    import random
+
+    from app import scan_check
+
+    monkeypatch.setattr(scan_check, "CHUNK", 7)  # many block boundaries
+    monkeypatch.setattr(scan_check, "_sample_read", lambda *a: None)
+    rng = random.Random(1)
+    for _ in range(200):
+        parts = [rng.choice(["1 2 3 4 5 6\n", "\n", "# c\n", "1 2 3 4 5 6\r\n", "\r\n", "7 8 9 1 1 1"])
+                 for _ in range(rng.randint(1, 30))]
+        p = tmp_path / "t.xyz"
+        p.write_bytes("".join(parts).encode())
+        slow = scan_check._count_text_lines_slow(p)
+        if slow:
+            assert scan_check._text(p) == slow, parts
