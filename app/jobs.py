@@ -21,6 +21,7 @@ supervisor has given up can never be overwritten by a late worker.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import logging
 import multiprocessing as mp
@@ -52,6 +53,8 @@ STAGE_SPANS: dict[str, tuple[float, float]] = {
     "done": (0.96, 0.96), "importing": (0.96, 1.0),
 }
 TERMINAL = ("succeeded", "failed", "cancelled")
+MAX_EXPECTED_CLASSES = 200  # keys of a job's ``expected`` counts
+MAX_EXPECTED_COUNT = 100_000  # instances of one class on one floor
 
 
 class JobAbandoned(Exception):
@@ -86,6 +89,113 @@ def describe_exit(code: int | None) -> str:
     return f"worker process exited with code {code} before finishing"
 
 
+ADMIN_LOG = "job.admin.log"
+_ABS_PATH = re.compile(r"(?<![\w.:/])(?:/[^\s/'\"`:;,()\[\]]+)+/([^\s/'\"`:;,()\[\]]+)")
+
+
+def redact(text: str, data_dir: Path | str | None = None) -> str:
+    """``text`` without server paths: the data dir prefix goes, other absolute paths keep
+    only their last component (``/srv/sbsc/projects/3/scans/ab_x.ply`` -> ``ab_x.ply``)."""
+    if data_dir:
+        text = text.replace(str(Path(data_dir)) + os.sep, "").replace(str(Path(data_dir)), "<data>")
+    return _ABS_PATH.sub(lambda m: m.group(1), text)
+
+
+# --------------------------------------------------------------------------- process groups
+
+
+def _proc_stat(pid: int) -> list[str] | None:
+    """Fields of /proc/<pid>/stat after the command name (state is [0], pgid [2], start [19])."""
+    try:
+        raw = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return raw[raw.rindex(")") + 2:].split()
+
+
+def start_time(pid: int) -> str | None:
+    stat = _proc_stat(pid)
+    return stat[19] if stat else None
+
+
+def group_members(pgid: int) -> list[int]:
+    """Live processes of process group ``pgid`` (Linux /proc; empty elsewhere)."""
+    out = []
+    proc = Path("/proc")
+    if not proc.is_dir():
+        return out
+    for d in proc.iterdir():
+        if d.name.isdigit():
+            stat = _proc_stat(int(d.name))
+            if stat and stat[2] == str(pgid) and stat[0] != "Z":
+                out.append(int(d.name))
+    return out
+
+
+def _is_worker(pid: int) -> bool:
+    """A process started by multiprocessing (a job worker or one of its pool processes)."""
+    try:
+        cmd = Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return False
+    return b"multiprocessing" in cmd or b"sbsc" in cmd
+
+
+def kill_group(pgid: int, leader_start: str | None = None) -> int:
+    """SIGKILL the job process group ``pgid``; returns how many processes it had.
+
+    The group is only killed while it is ours: its leader (the worker) still has the start
+    time we recorded, or the leader is gone and every member is a multiprocessing child.
+    """
+    if not hasattr(os, "killpg") or pgid <= 1 or pgid == os.getpgid(0):
+        return 0
+    members = group_members(pgid)
+    if not members:
+        return 0
+    if pgid in members:
+        if leader_start is not None and start_time(pgid) != leader_start:
+            return 0  # the pid was reused by something else
+    elif not all(_is_worker(p) for p in members):
+        return 0
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(pgid, signal.SIGKILL)
+    return len(members)
+
+
+class GroupFiles:
+    """One file per running job's process group under ``<data>/run/``: ``<job>.pgid`` holding
+    ``pgid start-time``. Written when a worker starts, removed once its group is gone, read at
+    start-up to reap the groups a crashed server left behind."""
+
+    def __init__(self, data_dir: Path) -> None:
+        self.dir = Path(data_dir) / "run"
+
+    def write(self, jid: int, pgid: int) -> None:
+        self.dir.mkdir(parents=True, exist_ok=True)
+        tmp = self.dir / f"{jid}.pgid.tmp"
+        tmp.write_text(f"{pgid} {start_time(pgid) or '-'}\n")
+        os.replace(tmp, self.dir / f"{jid}.pgid")
+
+    def remove(self, jid: int) -> None:
+        with contextlib.suppress(FileNotFoundError):
+            (self.dir / f"{jid}.pgid").unlink()
+
+    def reap_all(self) -> int:
+        """Kill every recorded group that is still alive; returns the processes killed."""
+        killed = 0
+        if not self.dir.is_dir():
+            return 0
+        for f in sorted(self.dir.glob("*.pgid")):
+            try:
+                pgid_s, start = f.read_text().split()[:2]
+                killed += kill_group(int(pgid_s), None if start == "-" else start)
+            except (OSError, ValueError):
+                pass
+            with contextlib.suppress(FileNotFoundError):
+                f.unlink()
+        return killed
+
+
 # --------------------------------------------------------------------------- worker side
 
 
@@ -113,17 +223,24 @@ class ProgressWriter:
 
 
 def _watch_parent(parent_pid: int, interval_s: float = 0.5) -> None:
-    """Exit this worker when the server that started it has gone."""
+    """End this worker and its process group (its pool processes) when the server has gone."""
     def loop() -> None:
         while True:
             time.sleep(interval_s)
             if os.getppid() != parent_pid:
+                with contextlib.suppress(OSError):
+                    if hasattr(os, "killpg") and os.getpgid(0) == os.getpid():
+                        os.killpg(0, signal.SIGKILL)  # this process is in the group too
                 os._exit(70)
     threading.Thread(target=loop, name="sbsc-parent-watch", daemon=True).start()
 
 
 def run_job(job_id: int, owner: str, settings_data: dict, parent_pid: int) -> None:
-    """Entry point of a worker process."""
+    """Entry point of a worker process: its own session and process group, so that the
+    supervisor ends it with every process it started (``killpg``)."""
+    if hasattr(os, "setsid"):
+        with contextlib.suppress(OSError):
+            os.setsid()
     settings = AppSettings(**settings_data)
     _watch_parent(parent_pid)
     db = Database(settings.db_url)
@@ -149,8 +266,14 @@ def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
     progress = ProgressWriter(db, job_id, owner, settings.progress_min_interval_s)
     with open(out.parent / "job.log", "a", encoding="utf-8") as logf:
         def say(msg: str) -> None:
-            logf.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {msg}\n")
+            """A line of the job's log (shown to reviewers): without server paths."""
+            logf.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {redact(msg, settings.data_dir)}\n")
             logf.flush()
+
+        def admin(text: str) -> None:
+            """The admin-only log (full tracebacks, paths): ``job.admin.log``."""
+            with open(out.parent / ADMIN_LOG, "a", encoding="utf-8") as fh:
+                fh.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {text}\n")
 
         try:
             progress("starting", 1.0, force=True)
@@ -159,7 +282,8 @@ def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
             from sbsc_core.paths import bundled_models_dir
 
             models = settings.data_dir / models_rel if models_rel else bundled_models_dir()
-            say(f"job {job_id}: {len(scans)} scan(s), models {models}, pid {os.getpid()}")
+            say(f"job {job_id}: {len(scans)} scan(s), models {models.name}")
+            admin(f"job {job_id}: scans {[str(p) for p in scans]}, models {models}, pid {os.getpid()}")
             runner = load_runner(settings.job_runner)
             cluster = os.environ.get("SBSC_DASK_SCHEDULER")  # run on a Dask cluster (sbsc detect --scheduler)
             summary = runner(scans, models, expected=expected, out=out, log=say, progress=progress,
@@ -173,10 +297,14 @@ def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
             say(f"stopped: {exc}")
         except SbscError as exc:
             say(f"failed: {exc}")
-            _finish_failed(db, job_id, owner, str(exc))
+            admin(f"failed: {exc}")
+            _finish_failed(db, job_id, owner, redact(str(exc), settings.data_dir))
         except Exception as exc:  # noqa: BLE001 - the job must end failed with a reason
-            say(traceback.format_exc())
-            _finish_failed(db, job_id, owner, f"internal error: {type(exc).__name__}: {exc}")
+            admin(traceback.format_exc())
+            log.error("job %d: internal error\n%s", job_id, traceback.format_exc())
+            say(f"failed: internal error ({type(exc).__name__}); the details are in the administrator's log")
+            _finish_failed(db, job_id, owner, f"internal error ({type(exc).__name__}); "
+                                              "an administrator can read the details in the job's admin log")
 
 
 def _prepare_viewer(settings: AppSettings, project_id: int, scans: list[Path],
@@ -240,6 +368,8 @@ class JobManager:
         self.owner = uuid.uuid4().hex
         self.procs: dict[int, mp.process.BaseProcess] = {}
         self.started: dict[int, float] = {}
+        self.groups = GroupFiles(settings.data_dir)
+        self._leaders: dict[int, str | None] = {}
         self._ctx = mp.get_context("spawn")
         self._stop = threading.Event()
         self._wake = threading.Event()
@@ -252,7 +382,11 @@ class JobManager:
         self._thread.start()
 
     def recover(self) -> int:
-        """Fail the jobs a previous server left running; queued ones will simply run."""
+        """Reap the worker processes a crashed server left behind, fail the jobs it left
+        running; queued ones will simply run."""
+        killed = self.groups.reap_all()
+        if killed:
+            log.warning("killed %d orphaned worker process(es) of a previous server", killed)
         with self.db.write() as s:
             jobs = s.scalars(select(Job).where(Job.status == "running", Job.owner != self.owner)).all()
             for job in jobs:
@@ -272,12 +406,7 @@ class JobManager:
         if self._thread is not None:
             self._thread.join(timeout_s)
         for jid, proc in list(self.procs.items()):
-            if proc.is_alive():
-                proc.terminate()
-            proc.join(timeout_s)
-            if proc.is_alive():
-                proc.kill()
-                proc.join(timeout_s)
+            self._end_group(jid, proc)
             self._fail(jid, "server shut down while the job was running (stage '{stage}')")
         self.procs.clear()
 
@@ -304,13 +433,13 @@ class JobManager:
         for jid, proc in list(self.procs.items()):
             if proc.is_alive():
                 if time.monotonic() - self.started[jid] > self.settings.job_timeout_s:
-                    proc.kill()
-                    proc.join(5)
+                    self._end_group(jid, proc)
                     self._fail(jid, f"timed out after {self.settings.job_timeout_s:.0f} s "
                                     "(stage '{stage}')")
                     self._forget(jid)
                 continue
             proc.join(1)
+            self._end_group(jid, proc)  # pool processes of a worker that died or finished
             self._fail(jid, describe_exit(proc.exitcode) + " during stage '{stage}'")
             self._forget(jid)
 
@@ -322,19 +451,27 @@ class JobManager:
             gone = set(s.scalars(select(Job.id).where(Job.id.in_(list(self.procs)),
                                                       Job.status == "cancelled")))
         for jid in gone:
-            proc = self.procs[jid]
-            if proc.is_alive():
-                proc.terminate()
-                proc.join(5)
-                if proc.is_alive():
-                    proc.kill()
-                    proc.join(5)
+            self._end_group(jid, self.procs[jid], grace_s=5.0)
             log.info("job %d cancelled: worker stopped", jid)
             self._forget(jid)
+
+    def _end_group(self, jid: int, proc: mp.process.BaseProcess, grace_s: float = 0.0) -> None:
+        """Kill the job's whole process group (the worker and every process it started)."""
+        if grace_s and proc.is_alive():
+            proc.terminate()
+            proc.join(grace_s)
+        if proc.pid is not None:
+            kill_group(proc.pid, self._leaders.get(jid))
+        if proc.is_alive():
+            proc.kill()
+        proc.join(5)
+        if proc.pid is None or not group_members(proc.pid):
+            self.groups.remove(jid)
 
     def _forget(self, jid: int) -> None:
         self.procs.pop(jid, None)
         self.started.pop(jid, None)
+        self._leaders.pop(jid, None)
 
     def _claim_next(self) -> int | None:
         with self.db.write() as s:
@@ -359,6 +496,8 @@ class JobManager:
             self._fail(jid, f"could not start a worker process ({exc})")
             return
         self.procs[jid], self.started[jid] = proc, time.monotonic()
+        self._leaders[jid] = start_time(proc.pid)
+        self.groups.write(jid, proc.pid)  # the worker makes its pid its process group id
         with self.db.write() as s:
             s.execute(update(Job).where(Job.id == jid, Job.owner == self.owner)
                       .values(worker_pid=proc.pid))
@@ -386,11 +525,13 @@ def parse_expected(value: object) -> dict[str, int] | None:
         value = value["counts"]
     if not isinstance(value, dict):
         raise InputError("expected", "must be an object of class id -> count")
+    if len(value) > MAX_EXPECTED_CLASSES:
+        raise InputError("expected", f"{len(value):,} classes; at most {MAX_EXPECTED_CLASSES} allowed")
     out: dict[str, int] = {}
     for k, v in value.items():
         if not isinstance(k, str) or not re.fullmatch(r"[a-z0-9_]+", k):
             raise InputError(f"expected.{k}", "class ids are lower case letters, digits and '_'")
-        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0 or v > MAX_EXPECTED_COUNT:
             raise InputError(f"expected.{k}", f"count must be a whole number >= 0, not {v!r}")
         out[k] = v
     return out

@@ -164,5 +164,4 @@ def job_dict(job: Job) -> dict:
             "progress": round(float(job.progress), 4), "error": job.error, "retry_of": job.retry_of,
             "created_by": job.created_by, "created_at": iso(job.created_at),
             "started_at": iso(job.started_at), "finished_at": iso(job.finished_at),
-            "updated_at": iso(job.updated_at), "worker_pid": job.worker_pid,
-            "expected": job.expected}
+            "updated_at": iso(job.updated_at), "expected": job.expected}

@@ -23,9 +23,11 @@ from fastapi.staticfiles import StaticFiles
 from sbsc_core.errors import SbscError
 
 from .api.deps import TokenCache
+from .bounds import BoundsMiddleware
 from .config import AppSettings
 from .db import Database, upgrade
 from .jobs import JobManager
+from .openapi import allowed_methods, truthful_openapi
 from .storage import clean_tmp, sweep_orphans
 from .thumbnails import ImageCache
 
@@ -100,6 +102,15 @@ def create_app(settings: AppSettings | None = None, *, start_jobs: bool = True) 
     async def _on_sbsc_error(_: Request, exc: SbscError) -> JSONResponse:
         return JSONResponse({"detail": str(exc)}, status_code=422)
 
+    @app.exception_handler(OverflowError)
+    async def _on_overflow(_: Request, exc: OverflowError) -> JSONResponse:
+        # a number beyond what the database stores (64-bit) that the bounds did not catch
+        return JSONResponse({"detail": "a number in the request is out of range (at most 2**63-1)"},
+                            status_code=422)
+
+    app.add_middleware(BoundsMiddleware, max_body=settings.max_json_body_bytes,
+                       max_depth=settings.max_json_depth, max_keys=settings.max_json_keys)
+
     from .api import design, export, jobs, projects, review, uploads
 
     for module in (projects, uploads, jobs, review, export, design):
@@ -108,10 +119,16 @@ def create_app(settings: AppSettings | None = None, *, start_jobs: bool = True) 
     if settings.viewer:
         _include_viewer(app)
 
-    @app.api_route("/api/{path:path}", methods=["GET", "POST", "PATCH", "PUT", "DELETE"],
+    @app.api_route("/api/{path:path}", methods=["GET", "POST", "PATCH", "PUT", "DELETE", "HEAD", "OPTIONS"],
                    include_in_schema=False)
-    def _api_not_found(path: str) -> None:
+    def _api_not_found(path: str, request: Request) -> JSONResponse:
+        allowed = allowed_methods(app, request.url.path)
+        if allowed:
+            return JSONResponse({"detail": f"method {request.method} not allowed on /api/{path}"},
+                                status_code=405, headers={"Allow": ", ".join(sorted(allowed))})
         raise HTTPException(404, f"no such API endpoint: /api/{path}")
+
+    app.openapi = lambda: truthful_openapi(app)
 
     @app.get("/", include_in_schema=False)
     def _index() -> RedirectResponse:

@@ -4,7 +4,8 @@ An upload is parsed as it arrives (``python-multipart``'s streaming parser): the
 part goes in 64 KiB pieces straight into a ``.partial`` file under ``<data>/tmp`` while
 its size is counted and its SHA-256 computed, so memory stays flat whatever the size.
 A refused or broken upload leaves nothing behind. Scans are checked by reading them in a
-separate process (memory and crashes of the readers stay out of the server), model
+separate process from their header and a bounded sample (:mod:`app.scan_check`; memory
+and crashes of the readers stay out of the server), model
 libraries by :func:`sbsc_core.io.models.library_from_zip`.
 """
 
@@ -211,28 +212,28 @@ async def receive_file(request: Request, *, tmp_dir: Path, max_bytes: int, drain
 
 
 def _count_points(path: str, filename: str, conn) -> None:  # noqa: ANN001 - a Connection
-    """Child process: read the scan, send back ("ok", n) or ("error", message)."""
+    """Child process: check the scan's header and a sample, send ("ok", n) or ("error", reason)."""
     try:
-        from sbsc_core.io.scans import read_scan
+        from .scan_check import ScanRefused, count_points
 
-        cloud = read_scan(path)
-        n = len(cloud)
-        conn.send(("ok", n) if n > 0 else ("error", f"{filename}: no points"))
-    except InputError as exc:
-        conn.send(("error", f"{filename}: {exc.reason}"))
+        try:
+            conn.send(("ok", count_points(Path(path))))
+        except ScanRefused as exc:
+            conn.send(("error", f"{filename}: {exc}"))
     except MemoryError:
         conn.send(("error", f"{filename}: too large to read"))
     except Exception as exc:  # noqa: BLE001 - any reader failure is the file's fault here
-        conn.send(("error", f"{filename}: cannot read ({type(exc).__name__}: {exc})"))
+        conn.send(("error", f"{filename}: cannot read ({type(exc).__name__})"))
     finally:
         conn.close()
 
 
 def check_scan(path: Path, filename: str, timeout_s: float) -> int:
-    """Count the points of a scan by reading it in a child process; raise UploadRefused(422).
+    """Count the points of a scan from its header and check a sample of it
+    (:mod:`app.scan_check`) in a child process; raise UploadRefused(422).
 
-    The readers of :mod:`sbsc_core.io.scans` decide (colour, finite coordinates, points);
-    a reader that crashes or takes longer than ``timeout_s`` refuses the file too.
+    Memory stays bounded by the sample whatever the file's size; a reader that crashes or
+    takes longer than ``timeout_s`` refuses the file too.
     """
     ctx = mp.get_context("spawn")
     parent, child = ctx.Pipe(duplex=False)

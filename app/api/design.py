@@ -58,7 +58,7 @@ def _read_design(settings: AppSettings, s: Session, p: Project, path: Path, file
 async def upload_design(pid: int, request: Request, user: Reviewer, settings: Settings, db: DB):
     """An as-designed IFC file (IFC2X3, IFC4, IFC4X3) in the multipart field ``file``."""
     return await handle_upload(request, settings, db, pid, settings.max_design_bytes, IFC_SUFFIXES,
-                               lambda got: _store_design(db, settings, pid, got, user))
+                               lambda got: _store_design(db, settings, pid, got, user), user)
 
 
 def _store_design(db: Database, settings: AppSettings, pid: int, got: ReceivedFile,

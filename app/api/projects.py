@@ -2,21 +2,27 @@
 
 from __future__ import annotations
 
+from typing import Annotated
+
 from fastapi import APIRouter, HTTPException, Request
-from pydantic import BaseModel, Field
+from fastapi.responses import PlainTextResponse
+from pydantic import AfterValidator, BaseModel, Field
 from sqlalchemy import func, select
+
+from sbsc_core.io.detections_model import bad_text
 
 from ..auth import create_user
 from ..models import DesignRow, Job, ModelLibraryRow, Project, Scan, SignOff, User, iso
 from ..results import job_dict, review_counts
 from ..review_service import current_signoff
-from .deps import DB, Admin, ReadSession, Reviewer, get_project, library_classes
+from .deps import DB, Admin, ReadSession, Reviewer, Settings, get_project, library_classes
 
 router = APIRouter(prefix="/api")
 
 
 @router.get("/health", tags=["meta"])
-def health() -> dict:
+async def health() -> dict:
+    """Liveness; answered on the event loop, without a worker thread or the database."""
     return {"status": "ok"}
 
 
@@ -25,8 +31,19 @@ def me(user: Reviewer) -> dict:
     return {"id": user.id, "name": user.name, "role": user.role}
 
 
+def _printable(value: str) -> str:
+    """A name: no control, format (bidi) or separator characters but spaces."""
+    why = bad_text(value)
+    if why:
+        raise ValueError(why)
+    return value
+
+
+Name = Annotated[str, AfterValidator(_printable)]
+
+
 class NewUser(BaseModel):
-    name: str = Field(min_length=1, max_length=100)
+    name: Name = Field(min_length=1, max_length=100, pattern=r"\S")
     role: str = Field(pattern="^(reviewer|manager|admin)$")
 
 
@@ -48,7 +65,7 @@ def add_user(body: NewUser, _: Admin, db: DB) -> dict:
 
 
 class NewProject(BaseModel):
-    name: str = Field(min_length=1, max_length=200)
+    name: Name = Field(min_length=1, max_length=200, pattern=r"\S")
 
 
 def project_summary(s, p: Project) -> dict:  # noqa: ANN001
@@ -119,3 +136,18 @@ def project_classes(pid: int, request: Request, _: Reviewer, s: ReadSession) -> 
     if p.current_job_id is not None:
         models_id = s.get(Job, p.current_job_id).models_id
     return library_classes(request, s, models_id)
+
+
+@router.get("/admin/jobs/{jid}/log", tags=["users"], response_class=PlainTextResponse)
+def job_admin_log(jid: int, _: Admin, s: ReadSession, settings: Settings) -> str:
+    """The admin-only log of a job: full tracebacks and server paths (the reviewers' log,
+    ``/api/jobs/{jid}/log``, and the job's ``error`` carry neither)."""
+    from ..jobs import ADMIN_LOG
+
+    job = s.get(Job, jid)
+    if job is None:
+        raise HTTPException(404, f"job {jid} not found")
+    if not job.out_dir:
+        return ""
+    path = (settings.data_dir / job.out_dir).parent / ADMIN_LOG
+    return path.read_text(encoding="utf-8", errors="replace")[-500_000:] if path.is_file() else ""

@@ -8,11 +8,13 @@ after; if the commit fails the file is removed again.
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import anyio
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
@@ -62,23 +64,65 @@ MULTIPART_FILE = {"requestBody": {"content": {"multipart/form-data": {"schema": 
     "properties": {"file": {"type": "string", "format": "binary"}}}}}}}
 
 
+class UploadSlots:
+    """Concurrent uploads per user (429 beyond ``per_user``) and the bounded pool of checks.
+
+    The checks of uploaded files run in at most ``checks`` worker threads of their own
+    (each waits on a child process), never in the pool that serves ordinary requests, so
+    many large uploads at once cannot starve ``/api/health`` or the review calls.
+    """
+
+    def __init__(self, per_user: int, checks: int) -> None:
+        import anyio
+
+        self.per_user = per_user
+        self.active: dict[int, int] = {}
+        self.limiter = anyio.CapacityLimiter(max(1, checks))
+
+    @contextlib.contextmanager
+    def slot(self, user: Principal) -> Iterator[None]:
+        n = self.active.get(user.id, 0)
+        if n >= self.per_user:
+            raise UploadRefused(429, f"user '{user.name}' already has {n} upload(s) in progress "
+                                     f"(at most {self.per_user}); try again when one has finished")
+        self.active[user.id] = n + 1
+        try:
+            yield
+        finally:
+            left = self.active.get(user.id, 1) - 1
+            if left > 0:
+                self.active[user.id] = left
+            else:
+                self.active.pop(user.id, None)
+
+
+def upload_slots(request: Request) -> UploadSlots:
+    state = request.app.state
+    if getattr(state, "upload_slots", None) is None:
+        s = state.settings
+        state.upload_slots = UploadSlots(s.uploads_per_user, s.upload_check_workers)
+    return state.upload_slots
+
+
 async def handle_upload(request: Request, settings: AppSettings, db: Database, pid: int,
                         max_bytes: int, suffixes: tuple[str, ...],
-                        store: Callable[[ReceivedFile], dict]) -> dict | JSONResponse:
-    """The shape every upload shares: the project must be open (423), the body is streamed to
-    a temporary file (4xx refusals), ``store`` checks and stores it in a worker thread, and the
-    temporary file is always removed."""
+                        store: Callable[[ReceivedFile], dict],
+                        user: Principal | None = None) -> dict | JSONResponse:
+    """The shape every upload shares: the project must be open (423), the caller may have a
+    few uploads in progress (429), the body is streamed to a temporary file (4xx refusals),
+    ``store`` checks and stores it in the bounded check pool, and the temporary file is
+    always removed."""
     await run_in_threadpool(_check_open, db, pid)
+    slots = upload_slots(request)
     try:
-        got = await _receive(request, settings, max_bytes, suffixes)
+        with slots.slot(user) if user is not None else contextlib.nullcontext():
+            got = await _receive(request, settings, max_bytes, suffixes)
+            try:
+                return await anyio.to_thread.run_sync(store, got, limiter=slots.limiter)
+            finally:
+                got.discard()
     except UploadRefused as exc:
         return _refusal(exc)
-    try:
-        return await run_in_threadpool(store, got)
-    except UploadRefused as exc:
-        return _refusal(exc)
-    finally:
-        got.discard()
 
 
 @router.post("/projects/{pid}/scans", status_code=201, openapi_extra=MULTIPART_FILE)
@@ -89,7 +133,8 @@ async def upload_scan(pid: int, request: Request, user: Reviewer, settings: Sett
         points = check_scan(got.path, got.filename, settings.scan_check_timeout_s)
         return _store_scan(db, settings, pid, got, points, user)
 
-    return await handle_upload(request, settings, db, pid, settings.max_scan_bytes, SCAN_SUFFIXES, store)
+    return await handle_upload(request, settings, db, pid, settings.max_scan_bytes, SCAN_SUFFIXES, store,
+                               user)
 
 
 def _store_scan(db: Database, settings: AppSettings, pid: int, got: ReceivedFile, points: int,
@@ -110,7 +155,7 @@ def _store_scan(db: Database, settings: AppSettings, pid: int, got: ReceivedFile
 async def upload_models(pid: int, request: Request, user: Reviewer, settings: Settings, db: DB):
     """A zipped model library (contract 2) in the multipart field ``file``; used by later jobs."""
     return await handle_upload(request, settings, db, pid, settings.max_models_zip_bytes, ZIP_SUFFIXES,
-                               lambda got: _store_models(db, settings, pid, got, user))
+                               lambda got: _store_models(db, settings, pid, got, user), user)
 
 
 def _store_models(db: Database, settings: AppSettings, pid: int, got: ReceivedFile,

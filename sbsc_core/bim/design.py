@@ -215,10 +215,14 @@ def open_ifc(path: Path) -> ifcopenshell.file:
     try:
         with open(path, "rb") as fh:
             head = fh.read(64)
+            fh.seek(max(0, path.stat().st_size - 512))
+            tail = fh.read()
     except OSError as exc:
         raise InputError(path, f"cannot read ({exc.strerror})") from None
     if not head.lstrip().startswith(b"ISO-10303-21"):
         raise InputError(path, "not an IFC file (expected an ISO-10303-21 STEP file)")
+    if b"END-ISO-10303-21" not in tail:  # the parser reads a cut file up to the cut, silently
+        raise InputError(path, "malformed IFC file: truncated (no END-ISO-10303-21; at its end)")
     ifcopenshell.ifcopenshell_wrapper.get_log()  # drop messages of earlier reads
     try:
         f = ifcopenshell.open(str(path))
@@ -514,7 +518,7 @@ def write_as_designed_ifc(truth_doc: dict, out: Path, *, seed: int = 0, n_moved:
     where = "ground truth"
     if not isinstance(truth_doc, dict):
         raise InputError(where, "expected a JSON object")
-    parsed = parse_detections_document({"walls": truth_doc.get("walls") or [],
+    parsed = parse_detections_document({"schema": "sbsc.detections/1", "walls": truth_doc.get("walls") or [],
                                         "openings": truth_doc.get("openings") or [], "detections": []}, where)
     walls = parsed.walls
     built = _truth_objects(truth_doc, walls, where)

@@ -22,7 +22,6 @@ recognized", meant to augment the as-is BIM model. This module writes that model
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import tempfile
@@ -48,6 +47,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.crs import CRS, parse_crs
+from ..io.detections_model import parse_detections, show
+from ..io.safe_json import load_json_file
 from ..types import ModelLibrary, WallFrame
 from . import DEFAULT_DEPTH_M, PSET_RECOGNITION, ClassTyping, class_typings, normalise_schema
 from .georeference import Georeference, plan_georeference, projected_crs_name, write_georeference
@@ -73,22 +74,6 @@ class DetectionsDocument:
     crs: CRS | None = None  # the scan's coordinate reference system, when recorded
 
 
-def _vec3(value: Any, where: str) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InputError(where, "expected 3 numbers") from None
-    if arr.shape != (3,) or not np.isfinite(arr).all():
-        raise InputError(where, "expected 3 finite numbers")
-    return arr
-
-
-def _number(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise InputError(where, f"expected a finite number, got {json.dumps(value)}")
-    return float(value)
-
-
 def review_status(det: dict) -> str:
     """A detection's review status; without a ``review`` key it is pending."""
     review = det.get("review") or {}
@@ -96,65 +81,33 @@ def review_status(det: dict) -> str:
 
 
 def parse_detections_document(doc: Any, where: str = "detections") -> DetectionsDocument:
-    """Check the parts of a contract-4 document that the BIM side uses."""
-    if not isinstance(doc, dict):
-        raise InputError(where, "expected a JSON object (a detections document)")
-    for key in ("walls", "detections"):
-        if not isinstance(doc.get(key), list):
-            raise InputError(where, f"'{key}' must be a list")
+    """Check a contract-4 document (:func:`~sbsc_core.io.detections_model.parse_detections`,
+    the same path as ``evaluate``) plus what the BIM side needs: frames that are not
+    degenerate, openings that are not empty and known review statuses."""
+    model = parse_detections(doc, where)
     walls: dict[str, WallFrame] = {}
-    for i, w in enumerate(doc["walls"]):
-        at = f"{where}: walls[{i}]"
-        if not isinstance(w, dict) or not isinstance(w.get("id"), str) or not w["id"]:
-            raise InputError(at, "a wall needs a string 'id'")
-        for key in ("origin", "axis_u", "axis_v", "normal", "width_m", "height_m"):
-            if key not in w:
-                raise InputError(at, f"missing key '{key}'")
-        frame = WallFrame(
-            origin=_vec3(w["origin"], f"{at}.origin"), axis_u=_vec3(w["axis_u"], f"{at}.axis_u"),
-            axis_v=_vec3(w["axis_v"], f"{at}.axis_v"), normal=_vec3(w["normal"], f"{at}.normal"),
-            width_m=_number(w["width_m"], f"{at}.width_m"), height_m=_number(w["height_m"], f"{at}.height_m"),
-        )
-        if np.linalg.norm(frame.axis_u[:2]) < 1e-6 or frame.width_m <= 0 or frame.height_m <= 0:
-            raise InputError(at, "degenerate frame (axis_u vertical or zero size)")
-        if w["id"] in walls:
-            raise InputError(at, f"duplicate wall id '{w['id']}'")
-        walls[w["id"]] = frame
-    openings = doc.get("openings") or []
-    if not isinstance(openings, list):
-        raise InputError(where, "'openings' must be a list")
-    for i, o in enumerate(openings):
-        at = f"{where}: openings[{i}]"
-        if not isinstance(o, dict) or o.get("wall") not in walls:
-            raise InputError(at, "an opening needs the id of a listed 'wall'")
-        for key in ("u_min", "u_max", "v_min", "v_max"):
-            _number(o.get(key), f"{at}.{key}")
-        if o["u_max"] <= o["u_min"] or o["v_max"] <= o["v_min"]:
-            raise InputError(at, "empty opening (u_max <= u_min or v_max <= v_min)")
+    for i, w in enumerate(model.walls):
+        frame = WallFrame(origin=np.asarray(w.origin), axis_u=np.asarray(w.axis_u),
+                          axis_v=np.asarray(w.axis_v), normal=np.asarray(w.normal),
+                          width_m=w.width_m, height_m=w.height_m)
+        if np.linalg.norm(frame.axis_u[:2]) < 1e-6:
+            raise InputError(f"{where}: walls[{i}]", "degenerate frame (axis_u vertical or zero size)")
+        walls[w.id] = frame
+    for i, o in enumerate(model.openings):
+        if o.u_max <= o.u_min or o.v_max <= o.v_min:
+            raise InputError(f"{where}: openings[{i}]", "empty opening (u_max <= u_min or v_max <= v_min)")
     for i, d in enumerate(doc["detections"]):
-        at = f"{where}: detections[{i}]"
-        if not isinstance(d, dict) or not isinstance(d.get("class"), str) or not d["class"]:
-            raise InputError(at, "a detection needs a string 'class'")
-        _vec3(d.get("position"), f"{at}.position")
         status = review_status(d)
         if status not in REVIEW_STATUSES:
-            raise InputError(f"{at}.review.status", f"unknown status '{status}'")
+            raise InputError(f"{where}: detections[{i}].review.status", f"unknown status {show(status)}")
     signoff = doc.get("signoff") if isinstance(doc.get("signoff"), dict) else None
     crs = CRS.from_dict(doc["crs"], f"{where}: crs") if doc.get("crs") is not None else None
-    return DetectionsDocument(walls, list(openings), list(doc["detections"]), signoff, crs)
+    return DetectionsDocument(walls, list(doc["openings"]), list(doc["detections"]), signoff, crs)
 
 
 def load_json(path: Path) -> Any:
-    """Read a JSON file; InputError naming the file when it cannot be read or parsed."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(path, "no such file")
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise InputError(path, "not UTF-8 text") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(path, f"invalid JSON (line {exc.lineno} column {exc.colno}: {exc.msg})") from None
+    """Read a JSON file (bounded depth, keys and size); InputError naming the file otherwise."""
+    return load_json_file(path)
 
 
 # --------------------------------------------------------------------------- geometry

@@ -62,8 +62,8 @@ def wall_background(frame: WallFrame, openings: list[dict], ortho: np.ndarray | 
         return cv2.resize(ortho, size, interpolation=cv2.INTER_AREA), s
     img = np.full((size[1], size[0], 3), 236, np.uint8)
     for o in openings:
-        p0 = (round(o["u_min"] * s), round((frame.height_m - o["v_max"]) * s))
-        p1 = (round(o["u_max"] * s), round((frame.height_m - o["v_min"]) * s))
+        p0 = (_px(o["u_min"] * s), _px((frame.height_m - o["v_max"]) * s))
+        p1 = (_px(o["u_max"] * s), _px((frame.height_m - o["v_min"]) * s))
         cv2.rectangle(img, p0, p1, (205, 205, 205), -1)
         cv2.rectangle(img, p0, p1, (150, 150, 150), 1)
         cv2.putText(img, str(o.get("kind", "")), (p0[0] + 4, p0[1] + 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
@@ -72,15 +72,28 @@ def wall_background(frame: WallFrame, openings: list[dict], ortho: np.ndarray | 
     return img, s
 
 
+PX_LIMIT = 1 << 20  # drawing coordinates are clipped to this (OpenCV takes 32-bit ints)
+
+
+def _px(x: float) -> int:
+    """A pixel coordinate for OpenCV: rounded, clipped to +-PX_LIMIT (a far or non-finite
+    position is drawn off the picture rather than overflowing)."""
+    x = float(x)
+    if x != x:  # NaN
+        return -PX_LIMIT
+    return round(min(max(x, -PX_LIMIT), PX_LIMIT))
+
+
 def _to_px(frame: WallFrame, s: float, u: float, v: float) -> tuple[int, int]:
-    return round(u * s), round((frame.height_m - v) * s)
+    return _px(u * s), _px((frame.height_m - v) * s)
 
 
 def _box(img: np.ndarray, frame: WallFrame, s: float, u: float, v: float, w: float, h: float,
          colour: tuple[int, int, int], thickness: int = 2) -> tuple[tuple[int, int], tuple[int, int]]:
     cx, cy = _to_px(frame, s, u, v)
     hw, hh = max(MIN_MARK_PX / 2, w * s / 2), max(MIN_MARK_PX / 2, h * s / 2)
-    p0, p1 = (round(cx - hw), round(cy - hh)), (round(cx + hw), round(cy + hh))
+    hw, hh = min(hw, PX_LIMIT), min(hh, PX_LIMIT)
+    p0, p1 = (_px(cx - hw), _px(cy - hh)), (_px(cx + hw), _px(cy + hh))
     cv2.rectangle(img, p0, p1, colour, thickness, cv2.LINE_AA)
     return p0, p1
 
@@ -163,7 +176,7 @@ def finding_snapshot(comparison: Comparison, item: ComparisonItem, image_dir: Pa
     frame = comparison.walls[wid]
     p = item.designed_position if item.designed is not None and item.design_wall == wid else item.detected_position
     cx, cy = _to_px(frame, s, *_uv(frame, p))
-    r = round(half_window_m * s)
+    r = _px(half_window_m * s)
     crop = img[max(0, cy - r):cy + r, max(0, cx - r):cx + r]
     if crop.size == 0:
         return None

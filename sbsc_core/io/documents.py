@@ -1,6 +1,7 @@
 """JSON documents of contracts 3-5: expected counts, detections and ground truth.
 
-Readers check every field they use and raise :class:`~sbsc_core.errors.InputError`
+Readers check every field they use (detections: the pydantic models of
+:mod:`.detections_model`, the one validation path of contract 4) and raise :class:`~sbsc_core.errors.InputError`
 naming the file and the field, e.g. ``truth.json: objects[3].position: expected 3
 numbers``. Unknown extra keys are accepted (and kept) everywhere, so that documents
 from newer writers or from the web API (``review``) still read.
@@ -20,13 +21,12 @@ import numpy as np
 from ..errors import InputError
 from ..types import Detection, Opening, WallFrame
 from .atomic import write_json_atomic
+from .detections_model import COORD_MAX, DETECTIONS_SCHEMA, LOCAL_MAX, SIZE_MAX, validate_detections
+from .safe_json import load_json_file
 
 EXPECTED_SCHEMA = "sbsc.expected/1"
-DETECTIONS_SCHEMA = "sbsc.detections/1"
 TRUTH_SCHEMA = "sbsc.truth/1"
 CLASS_ID_RE = re.compile(r"^[a-z0-9_]+$")
-SOURCES = ("both", "depth", "colour")
-OPENING_KINDS = ("door", "window")
 
 
 @dataclass
@@ -89,6 +89,8 @@ class _Checker:
             raise self.fail(where, f"expected a number{' or null' if nullable else ''}, got {_show(value)}")
         if positive and value <= 0:
             raise self.fail(where, f"must be > 0, got {_show(value)}")
+        if positive and value > SIZE_MAX:
+            raise self.fail(where, f"must be at most {SIZE_MAX:g}, got {_show(value)}")
         if (lo is not None and value < lo) or (hi is not None and value > hi):
             raise self.fail(where, f"must be between {lo:g} and {hi:g}, got {_show(value)}")
         return float(value)
@@ -98,6 +100,8 @@ class _Checker:
                 or any(isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x)
                        for x in value)):
             raise self.fail(where, f"expected 3 numbers, got {_show(value)}")
+        if any(abs(x) > COORD_MAX for x in value):
+            raise self.fail(where, f"coordinates must lie within ±{COORD_MAX:g} m, got {_show(value)}")
         return np.asarray(value, dtype=np.float64)
 
     def string(self, value: Any, where: str, *, nullable: bool = False,
@@ -123,23 +127,10 @@ def _show(value: Any) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def _reject_constant(name: str) -> Any:
-    raise ValueError(f"{name} is not valid JSON")
-
-
 def _load_json(path: Path) -> tuple[dict, _Checker]:
     path = Path(path)
+    doc = load_json_file(path)
     check = _Checker(str(path))
-    if not path.is_file():
-        raise InputError(path, "no such file")
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"), parse_constant=_reject_constant)
-    except UnicodeDecodeError:
-        raise InputError(path, "not UTF-8 text") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(path, f"invalid JSON (line {exc.lineno} column {exc.colno}: {exc.msg})") from None
-    except ValueError as exc:
-        raise InputError(path, f"invalid JSON ({exc})") from None
     return check.obj(doc, ""), check
 
 
@@ -179,8 +170,8 @@ def read_truth(path: Path | str) -> TruthDocument:
             width_m=check.number(check.key(o, "width_m", w), f"{w}.width_m", positive=True),
             height_m=check.number(check.key(o, "height_m", w), f"{w}.height_m", positive=True),
             wall=check.string(o.get("wall"), f"{w}.wall", nullable=True),
-            u=check.number(o.get("u"), f"{w}.u", nullable=True),
-            v=check.number(o.get("v"), f"{w}.v", nullable=True),
+            u=check.number(o.get("u"), f"{w}.u", nullable=True, lo=-LOCAL_MAX, hi=LOCAL_MAX),
+            v=check.number(o.get("v"), f"{w}.v", nullable=True, lo=-LOCAL_MAX, hi=LOCAL_MAX),
             extra={k: v for k, v in o.items()
                    if k not in ("class", "position", "normal", "width_m", "height_m", "wall", "u", "v")},
         ))
@@ -195,58 +186,6 @@ def read_truth(path: Path | str) -> TruthDocument:
 
 
 # --------------------------------------------------------------------------- detections (4)
-
-
-def validate_detections(doc: Any, label: str = "detections.json") -> dict:
-    """Check a detections document (contract 4); returns it unchanged."""
-    check = _Checker(label)
-    check.obj(doc, "")
-    check.schema(doc, DETECTIONS_SCHEMA)
-    wall_ids: set[str] = set()
-    for i, w in enumerate(check.lst(check.key(doc, "walls", ""), "walls")):
-        where = f"walls[{i}]"
-        check.obj(w, where)
-        wid = check.string(check.key(w, "id", where), f"{where}.id")
-        if wid in wall_ids:
-            raise check.fail(f"{where}.id", f"duplicate wall id {_show(wid)}")
-        wall_ids.add(wid)
-        for k in ("origin", "axis_u", "axis_v", "normal"):
-            check.vec3(check.key(w, k, where), f"{where}.{k}")
-        for k in ("width_m", "height_m"):
-            check.number(check.key(w, k, where), f"{where}.{k}", positive=True)
-    for i, o in enumerate(check.lst(check.key(doc, "openings", ""), "openings")):
-        where = f"openings[{i}]"
-        check.obj(o, where)
-        wid = check.string(check.key(o, "wall", where), f"{where}.wall")
-        if wid not in wall_ids:
-            raise check.fail(f"{where}.wall", f"unknown wall {_show(wid)}")
-        check.string(check.key(o, "kind", where), f"{where}.kind", choices=OPENING_KINDS)
-        b = {k: check.number(check.key(o, k, where), f"{where}.{k}")
-             for k in ("u_min", "u_max", "v_min", "v_max")}
-        if b["u_min"] > b["u_max"] or b["v_min"] > b["v_max"]:
-            raise check.fail(where, "u_min/v_min must not exceed u_max/v_max")
-    ids: set[str] = set()
-    for i, d in enumerate(check.lst(check.key(doc, "detections", ""), "detections")):
-        where = f"detections[{i}]"
-        check.obj(d, where)
-        did = check.string(check.key(d, "id", where), f"{where}.id")
-        if did in ids:
-            raise check.fail(f"{where}.id", f"duplicate detection id {_show(did)}")
-        ids.add(did)
-        check.string(check.key(d, "class", where), f"{where}.class", pattern=CLASS_ID_RE)
-        wid = check.string(check.key(d, "wall", where), f"{where}.wall")
-        if wid not in wall_ids:
-            raise check.fail(f"{where}.wall", f"unknown wall {_show(wid)}")
-        check.vec3(check.key(d, "position", where), f"{where}.position")
-        for k in ("u", "v"):
-            check.number(check.key(d, k, where), f"{where}.{k}")
-        for k in ("width_m", "height_m"):
-            check.number(check.key(d, k, where), f"{where}.{k}", positive=True)
-        check.number(check.key(d, "alpha", where), f"{where}.alpha", lo=0.0, hi=1.0)
-        for k in ("rho_depth", "rho_colour"):
-            check.number(check.key(d, k, where), f"{where}.{k}", nullable=True)
-        check.string(check.key(d, "source", where), f"{where}.source", choices=SOURCES)
-    return doc
 
 
 def read_detections(path: Path | str) -> dict:

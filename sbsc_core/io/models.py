@@ -26,10 +26,15 @@ import numpy as np
 
 from ..errors import InputError
 from ..types import ModelLibrary, ObjectModel
+from .detections_model import bad_text
+from .safe_json import load_json_file
 
 CLASS_ID_RE = re.compile(r"^[a-z0-9_]+$")
 COLOUR_FILE_RE = re.compile(r"^colour(?:_(\d+))?\.png$")
 REQUIRED_KEYS = ("name", "ifc_class", "width_m", "height_m")
+MODEL_MIN_M = 0.005  # an object's footprint side: at least about one orthoimage pixel
+MODEL_MAX_M = 10.0  # at most a wall's size (a 1e5 m model would allocate a huge template)
+MODEL_JSON_MAX_BYTES = 1024 * 1024
 DEPTH_ASPECT_TOLERANCE = 0.10  # relative mismatch allowed between depth.npy and width/height
 
 # Limits of library_from_zip (a zip comes from a web upload).
@@ -81,12 +86,7 @@ def load_object_model(class_dir: Path) -> ObjectModel:
 def _read_model_json(path: Path) -> dict:
     if not path.is_file():
         raise InputError(path, "missing")
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise InputError(path, "not UTF-8 text") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(path, f"invalid JSON (line {exc.lineno} column {exc.colno}: {exc.msg})") from None
+    meta = load_json_file(path, max_bytes=MODEL_JSON_MAX_BYTES)
     if not isinstance(meta, dict):
         raise InputError(path, "expected a JSON object")
     for key in REQUIRED_KEYS:
@@ -95,6 +95,9 @@ def _read_model_json(path: Path) -> dict:
     for key in ("name", "ifc_class"):
         if not isinstance(meta[key], str) or not meta[key].strip():
             raise InputError(path, f"'{key}' must be a non-empty string")
+        why = bad_text(meta[key])
+        if why:
+            raise InputError(path, f"'{key}' {why}")
     if not meta["ifc_class"].startswith("Ifc"):
         raise InputError(path, f"'ifc_class' must be an IFC entity name such as IfcOutlet, got '{meta['ifc_class']}'")
     pt = meta.get("predefined_type")
@@ -104,6 +107,9 @@ def _read_model_json(path: Path) -> dict:
         v = meta[key]
         if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
             raise InputError(path, f"'{key}' must be a number > 0, got {json.dumps(v)}")
+        if not MODEL_MIN_M <= v <= MODEL_MAX_M:
+            raise InputError(path, f"'{key}' must be between {MODEL_MIN_M:g} and {MODEL_MAX_M:g} m "
+                                   f"(a wall-mounted object), got {json.dumps(v)}")
         meta[key] = float(v)
     return meta
 

@@ -22,6 +22,7 @@ import contextlib
 import itertools
 import os
 import re
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -275,7 +276,8 @@ def is_scan_file(path: str | os.PathLike[str]) -> bool:
 def _median_origin(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
     """The rounded median of the first points (whole metres; 0 where not finite)."""
     k = min(len(x), _ORIGIN_SAMPLE)
-    with np.errstate(all="ignore"):
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: refused later
         med = np.array([np.nanmedian(np.asarray(c[:k], np.float64)) for c in (x, y, z)])
     return np.where(np.isfinite(med), np.round(med), 0.0) + 0.0
 

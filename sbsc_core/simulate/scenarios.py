@@ -57,6 +57,8 @@ def simulate_scenario(scenario: str, out: Path, seed: int = 0, angular_step_deg:
     """Scan the shipped Scenario ``"I"`` or ``"II"`` into ``out`` (see :func:`simulate_scene`)."""
     if scenario not in ("I", "II"):
         raise InputError("--scenario", f"unknown scenario {scenario!r} (I or II)")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
+        raise InputError("--seed", f"expected a whole number from 0 to 2**63-1, got {seed!r}")
     path = sample_projects_dir() / f"scenario_{scenario}.yaml"
     return simulate_scene(path, out, seed=seed, angular_step_deg=angular_step_deg, log=log,
                           object_builder=object_builder, library_builder=library_builder)
