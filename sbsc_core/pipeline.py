@@ -46,6 +46,7 @@ from .io.atomic import atomic_output_dir
 from .io.documents import detections_document, read_expected
 from .io.models import load_model_library
 from .io.scans import read_scans
+from .lookalikes import resolve_on_wall
 from .orthoimage import build_orthoimage
 from .placement import place_hits
 from .segmentation import segment_floor_ceiling_walls
@@ -122,6 +123,7 @@ def process_wall(cloud: PointCloud, wall: Wall, templates: dict[str, ModelTempla
     c_img = colour_image(ortho, area, s.colour)  # J_C and J_BW, computed once per wall
     c_rois = colour_rois(ortho, area, s.colour, c_img)
     c_cands = match_colour(ortho, area, c_rois, prototypes, s.colour, c_img)
+    d_cands, c_cands = resolve_on_wall(d_cands, c_cands, c_img, prototypes, s.lookalikes)
     t_stage["colour"] = time.perf_counter() - t
     return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
 

@@ -213,6 +213,18 @@ class ColourRecognitionSettings:
 
 
 @dataclass
+class LookalikeSettings:
+    """Look-alike classes found in the library and told apart by their print (issue 13)."""
+
+    enabled: bool = True
+    size_tolerance: float = 0.15  # footprints whose sides differ by at most this share are the same size
+    min_depth_ncc: float = 0.9  # ... whose depth models correlate at least this much
+    max_colour_delta_e: float = 25.0  # ... and whose mean colours differ by at most this (CIE76)
+    search_px: int = 3  # the print is compared within this many pixels of the candidate's centre
+    min_margin: float = 0.05  # another look-alike's print must correlate this much better to relabel
+
+
+@dataclass
 class ConsensusSettings:
     """Consensus of depth and colour candidates (paper, section 4.4)."""
 
@@ -234,6 +246,7 @@ class DetectionSettings:
     depth: DepthRecognitionSettings = field(default_factory=DepthRecognitionSettings)
     colour: ColourRecognitionSettings = field(default_factory=ColourRecognitionSettings)
     consensus: ConsensusSettings = field(default_factory=ConsensusSettings)
+    lookalikes: LookalikeSettings = field(default_factory=LookalikeSettings)
     workers: int = 0  # processes for the per-wall stages; 0 = up to 2, by the CPU count
 
     def to_dict(self) -> dict[str, Any]:
