@@ -14,7 +14,9 @@ with each class's front view as seen on that wall (:class:`~sbsc_core.colour_rec
 WallPrototype`), at the candidate's position (within ``search_px``) and turn (and its
 quarter turns: a square plate's relief does not tell them), by normalised
 cross-correlation: the pictogram decides. A candidate whose own class's print correlates
-less than another look-alike's by more than ``min_margin`` is relabelled to that class.
+less than another look-alike's by more than ``min_margin`` is relabelled to that class,
+provided that print does correlate (``min_print_ncc``: a white switch on a white wall
+shows too little of its print to decide anything).
 The margin (own print minus the best other look-alike's) is kept on the candidate.
 """
 
@@ -136,7 +138,7 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
                   for c in seen}
         own = scores[cand.class_id]
         other, other_score = max(((c, s) for c, s in scores.items() if c != cand.class_id), key=lambda x: x[1])
-        if other_score > own + settings.min_margin:
+        if other_score > own + settings.min_margin and other_score >= settings.min_print_ncc:
             out.append(replace(cand, class_id=other, lookalike_margin=other_score - own))
             touched = True
         else:

@@ -222,6 +222,7 @@ class LookalikeSettings:
     max_colour_delta_e: float = 25.0  # ... and whose mean colours differ by at most this (CIE76)
     search_px: int = 3  # the print is compared within this many pixels of the candidate's centre
     min_margin: float = 0.05  # another look-alike's print must correlate this much better to relabel
+    min_print_ncc: float = 0.5  # ... and at least this much
 
 
 @dataclass
