@@ -39,6 +39,7 @@ from .colour_recognition import (
     learn_prototypes,
     match_colour,
 )
+from .confidence import screen_hits
 from .consensus import consensus_all
 from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
@@ -251,7 +252,8 @@ def detect(
     colour_c = [c for w in walls.values() for c in w.colour_candidates]
     hits = consensus_all(depth_c, colour_c, expected, s.consensus, classes)
     orthos = {k: w.ortho for k, w in walls.items()}
-    detections = place_hits([h for cls in classes for h in hits.get(cls, [])], orthos, templates)
+    chosen = screen_hits([h for cls in classes for h in hits.get(cls, [])], depth_c, colour_c, s.confidence)
+    detections = place_hits(chosen, orthos, templates)
     timings["consensus"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     progress("consensus", 1.0)

@@ -6,6 +6,7 @@ the object's footprint on the wall plane (contract 4). The footprint size is the
 a model matched turned nearer to 90 or 270 than to 0 or 180 degrees has its width and
 height exchanged (the sides nearest to horizontal and vertical); ``rotation_deg`` is the
 model's full turn, counter-clockwise seen from the room, in (-180, 180].
+A hit marked ``unknown`` keeps its footprint and gets the class ``unknown``.
 Detections are numbered "D0001", ... by wall id, then top to bottom (v descending), then
 left to right (u ascending), so the same result always gets the same ids.
 """
@@ -16,6 +17,8 @@ from .consensus import ConsensusHit
 from .errors import SbscError
 from .templates import ModelTemplate
 from .types import Detection, Orthoimage
+
+UNKNOWN = "unknown"  # the class of a hit too weak or ambiguous to name (for review)
 
 
 def place_hits(hits: list[ConsensusHit], orthos: dict[str, Orthoimage],
@@ -38,10 +41,10 @@ def place_hits(hits: list[ConsensusHit], orthos: dict[str, Orthoimage],
         w_m, h_m = (t.height_m, t.width_m) if quarter else (t.width_m, t.height_m)
         turn = float(h.rotation_deg) % 360.0
         out.append(Detection(
-            id=f"D{k:04d}", class_id=cid, wall_id=wid, u=u, v=v,
+            id=f"D{k:04d}", class_id=UNKNOWN if h.unknown else cid, wall_id=wid, u=u, v=v,
             position=orthos[wid].frame.to_world(u, v, 0.0),
             width_m=w_m, height_m=h_m, alpha=h.alpha,
             rho_depth=h.rho_depth, rho_colour=h.rho_colour, source=h.source,
-            rotation_deg=turn - 360.0 if turn > 180.0 else turn,
+            rotation_deg=turn - 360.0 if turn > 180.0 else turn, confidence=h.confidence,
         ))
     return out

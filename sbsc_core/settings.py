@@ -239,6 +239,16 @@ class ConsensusSettings:
 
 
 @dataclass
+class ConfidenceSettings:
+    """Calibrated confidence per detection and the "none of these" rule (issue 13)."""
+
+    enabled: bool = True
+    calibration: str = ""  # a calibration JSON (empty: the one shipped in sbsc_core/calibration/)
+    min_confidence: float = 0.5  # hits less likely right than this give no detection ...
+    report_unknown: bool = False  # ... or, with this, a detection of class "unknown" for review
+
+
+@dataclass
 class DetectionSettings:
     segmentation: SegmentationSettings = field(default_factory=SegmentationSettings)
     orthoimage: OrthoimageSettings = field(default_factory=OrthoimageSettings)
@@ -248,6 +258,7 @@ class DetectionSettings:
     colour: ColourRecognitionSettings = field(default_factory=ColourRecognitionSettings)
     consensus: ConsensusSettings = field(default_factory=ConsensusSettings)
     lookalikes: LookalikeSettings = field(default_factory=LookalikeSettings)
+    confidence: ConfidenceSettings = field(default_factory=ConfidenceSettings)
     workers: int = 0  # processes for the per-wall stages; 0 = up to 2, by the CPU count
 
     def to_dict(self) -> dict[str, Any]:
