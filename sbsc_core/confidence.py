@@ -25,7 +25,10 @@ from scipy.optimize import minimize
 from .consensus import ConsensusHit
 from .matching import box_overlap
 from .settings import ConfidenceSettings
-from .types import Candidate
+from .templates import ModelTemplate
+from .types import Box, Candidate
+
+UNKNOWN_CLASS = "unknown"
 
 CALIBRATION_PATH = Path(__file__).with_name("calibration") / "confidence.json"
 FEATURES = ("in_depth", "in_colour", "rho_depth", "colour_goodness", "alpha", "class_margin",
@@ -150,4 +153,29 @@ def screen_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[C
                 continue
             h.unknown = True
         out.append(h)
+    return out
+
+
+def unexplained_regions(rois: dict[str, list[Box]], hits: list[ConsensusHit], templates: dict[str, ModelTemplate],
+                        *, min_overlap: float = 0.1) -> list[ConsensusHit]:
+    """``unknown`` hits for the depth RoIs of an object's size that no hit explains (a thermostat,
+    a clock: like no class of the library), for review with ``report_unknown``.
+
+    A RoI is of an object's size when its longer side lies between half the smallest and
+    the largest model side; it is explained when a hit's footprint covers more than
+    ``min_overlap`` of it.
+    """
+    if not templates:
+        return []
+    sides = [s for t in templates.values() for s in (t.height_px, t.width_px)]
+    lo, hi = 0.5 * min(sides), max(sides)
+    out = []
+    for wid in sorted(rois):
+        for roi in rois[wid]:
+            if not lo <= max(roi.height, roi.width) <= hi:
+                continue
+            if any(h.wall_id == wid and h.box is not None and box_overlap(h.box, roi) > min_overlap for h in hits):
+                continue
+            out.append(ConsensusHit(class_id=UNKNOWN_CLASS, wall_id=wid, centre=roi.centre, alpha=0.0,
+                                    rho_depth=None, rho_colour=None, source="depth", box=roi, unknown=True))
     return out

@@ -39,7 +39,7 @@ from .colour_recognition import (
     learn_prototypes,
     match_colour,
 )
-from .confidence import screen_hits
+from .confidence import screen_hits, unexplained_regions
 from .consensus import consensus_all
 from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
@@ -253,6 +253,8 @@ def detect(
     hits = consensus_all(depth_c, colour_c, expected, s.consensus, classes)
     orthos = {k: w.ortho for k, w in walls.items()}
     chosen = screen_hits([h for cls in classes for h in hits.get(cls, [])], depth_c, colour_c, s.confidence)
+    if s.confidence.enabled and s.confidence.report_unknown:  # regions like no class, for review
+        chosen += unexplained_regions({k: w.depth_rois for k, w in walls.items()}, chosen, templates)
     detections = place_hits(chosen, orthos, templates)
     timings["consensus"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0

@@ -88,3 +88,18 @@ def test_weak_hits_are_dropped_or_reported_as_unknown(tmp_path) -> None:
     dets = place_hits(both, {"W01": ortho}, templates)
     assert sorted(d.class_id for d in dets) == sorted(["socket", UNKNOWN])
     assert all(d.to_dict()["confidence"] is not None for d in dets)
+
+
+def test_regions_like_no_class_become_unknown_for_review() -> None:
+    from sbsc_core.confidence import unexplained_regions
+
+    ortho, _ = make_wall()
+    templates = make_templates(synthetic_library(), ortho.pixel_m)
+    socket = make_hit(_cand("socket", "depth", 0.98), None, 0.5)
+    thermostat = Box(150, 300, 175, 320)  # an object's size, no hit on it
+    rois = {"W01": [socket.depth.box, thermostat, Box(10, 10, 12, 13), Box(0, 0, 290, 400)]}
+    unknown = unexplained_regions(rois, [socket], templates)
+    assert [(u.box, u.unknown) for u in unknown] == [(thermostat, True)]
+    dets = place_hits([socket, *unknown], {"W01": ortho}, templates)
+    u = next(d for d in dets if d.class_id == UNKNOWN)
+    assert (u.width_m, u.height_m) == pytest.approx((20 * ortho.pixel_m, 25 * ortho.pixel_m))
