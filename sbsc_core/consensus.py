@@ -66,6 +66,8 @@ class ConsensusHit:
     colour: Candidate | None = None
     box: Box | None = None  # the footprint at ``centre``
     rotation_deg: float = 0.0
+    confidence: float | None = None  # calibrated probability that class and place are right
+    unknown: bool = False  # too weak or ambiguous: reported as class "unknown" for review
 
     @property
     def goodness(self) -> float:

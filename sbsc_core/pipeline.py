@@ -44,6 +44,7 @@ from .colour_recognition import (
     learn_prototypes,
     match_colour,
 )
+from .confidence import screen_hits, unexplained_regions
 from .consensus import consensus_all
 from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
@@ -51,6 +52,7 @@ from .io.atomic import atomic_output_dir
 from .io.crs import georeference_fields, scan_crs
 from .io.documents import detections_document, read_expected
 from .io.models import load_model_library
+from .lookalikes import resolve_on_wall
 from .orthoimage import build_orthoimage
 from .partition import (
     WallIndex,
@@ -146,6 +148,7 @@ def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], p
     c_img = colour_image(ortho, area, s.colour)  # J_C and J_BW, computed once per wall
     c_rois = colour_rois(ortho, area, s.colour, c_img)
     c_cands = match_colour(ortho, area, c_rois, prototypes, s.colour, c_img)
+    d_cands, c_cands = resolve_on_wall(d_cands, c_cands, c_img, prototypes, s.lookalikes)
     t_stage["colour"] = time.perf_counter() - t
     return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
 
@@ -264,7 +267,10 @@ def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[
     colour_c = [c for w in walls.values() for c in w.colour_candidates]
     hits = consensus_all(depth_c, colour_c, expected, s.consensus, classes)
     orthos = {k: w.ortho for k, w in walls.items()}
-    detections = place_hits([h for cls in classes for h in hits.get(cls, [])], orthos, templates)
+    chosen = screen_hits([h for cls in classes for h in hits.get(cls, [])], depth_c, colour_c, s.confidence)
+    if s.confidence.enabled and s.confidence.report_unknown:  # regions like no class, for review
+        chosen += unexplained_regions({k: w.depth_rois for k, w in walls.items()}, chosen, templates)
+    detections = place_hits(chosen, orthos, templates)
     timings["consensus"] = time.perf_counter() - t
     progress("consensus", 1.0)
     return DetectionResult(seg, walls, detections, timings, classes)

@@ -6,6 +6,7 @@ the object's footprint on the wall plane (contract 4). The footprint size is the
 a model matched turned nearer to 90 or 270 than to 0 or 180 degrees has its width and
 height exchanged (the sides nearest to horizontal and vertical); ``rotation_deg`` is the
 model's full turn, counter-clockwise seen from the room, in (-180, 180].
+A hit marked ``unknown`` keeps its footprint and gets the class ``unknown``.
 Detections are numbered "D0001", ... by wall id, then top to bottom (v descending), then
 left to right (u ascending), so the same result always gets the same ids.
 """
@@ -17,6 +18,8 @@ from .errors import SbscError
 from .templates import ModelTemplate
 from .types import Detection, Orthoimage
 
+UNKNOWN = "unknown"  # the class of a hit too weak, ambiguous or like no class to name (for review)
+
 
 def place_hits(hits: list[ConsensusHit], orthos: dict[str, Orthoimage],
                templates: dict[str, ModelTemplate]) -> list[Detection]:
@@ -25,7 +28,7 @@ def place_hits(hits: list[ConsensusHit], orthos: dict[str, Orthoimage],
     for h in hits:
         if h.wall_id not in orthos:
             raise SbscError(f"hit of class '{h.class_id}' on unknown wall '{h.wall_id}'")
-        if h.class_id not in templates:
+        if h.class_id not in templates and not (h.unknown and h.box is not None):
             raise SbscError(f"hit of unknown class '{h.class_id}'")
         o = orthos[h.wall_id]
         u, v = o.pixel_to_uv(h.centre[0], h.centre[1])
@@ -33,15 +36,18 @@ def place_hits(hits: list[ConsensusHit], orthos: dict[str, Orthoimage],
     rows.sort(key=lambda x: x[:4])
     out = []
     for k, (wid, _, _, cid, h, u, v) in enumerate(rows, start=1):
-        t = templates[cid]
         quarter = int(round(float(h.rotation_deg) / 90.0)) % 2  # nearer to 90 or 270 than to 0 or 180
-        w_m, h_m = (t.height_m, t.width_m) if quarter else (t.width_m, t.height_m)
+        if cid in templates:
+            t = templates[cid]
+            w_m, h_m = (t.height_m, t.width_m) if quarter else (t.width_m, t.height_m)
+        else:  # a region like no class: its box
+            w_m, h_m = h.box.width * orthos[wid].pixel_m, h.box.height * orthos[wid].pixel_m
         turn = float(h.rotation_deg) % 360.0
         out.append(Detection(
-            id=f"D{k:04d}", class_id=cid, wall_id=wid, u=u, v=v,
+            id=f"D{k:04d}", class_id=UNKNOWN if h.unknown else cid, wall_id=wid, u=u, v=v,
             position=orthos[wid].frame.to_world(u, v, 0.0),
             width_m=w_m, height_m=h_m, alpha=h.alpha,
             rho_depth=h.rho_depth, rho_colour=h.rho_colour, source=h.source,
-            rotation_deg=turn - 360.0 if turn > 180.0 else turn,
+            rotation_deg=turn - 360.0 if turn > 180.0 else turn, confidence=h.confidence,
         ))
     return out

@@ -226,6 +226,19 @@ class ColourRecognitionSettings:
 
 
 @dataclass
+class LookalikeSettings:
+    """Look-alike classes found in the library and told apart by their print (issue 13)."""
+
+    enabled: bool = True
+    size_tolerance: float = 0.15  # footprints whose sides differ by at most this share are the same size
+    min_depth_ncc: float = 0.9  # ... whose depth models correlate at least this much
+    max_colour_delta_e: float = 25.0  # ... and whose mean colours differ by at most this (CIE76)
+    search_px: int = 3  # the print is compared within this many pixels of the candidate's centre
+    min_margin: float = 0.05  # another look-alike's print must correlate this much better to relabel
+    min_print_ncc: float = 0.5  # ... and at least this much
+
+
+@dataclass
 class ConsensusSettings:
     """Consensus of depth and colour candidates (paper, section 4.4)."""
 
@@ -239,6 +252,16 @@ class ConsensusSettings:
 
 
 @dataclass
+class ConfidenceSettings:
+    """Calibrated confidence per detection and the "none of these" rule (issue 13)."""
+
+    enabled: bool = True
+    calibration: str = ""  # a calibration JSON (empty: the one shipped in sbsc_core/calibration/)
+    min_confidence: float = 0.5  # hits less likely right than this give no detection ...
+    report_unknown: bool = False  # ... or, with this, a detection of class "unknown" for review
+
+
+@dataclass
 class DetectionSettings:
     segmentation: SegmentationSettings = field(default_factory=SegmentationSettings)
     orthoimage: OrthoimageSettings = field(default_factory=OrthoimageSettings)
@@ -247,6 +270,8 @@ class DetectionSettings:
     depth: DepthRecognitionSettings = field(default_factory=DepthRecognitionSettings)
     colour: ColourRecognitionSettings = field(default_factory=ColourRecognitionSettings)
     consensus: ConsensusSettings = field(default_factory=ConsensusSettings)
+    lookalikes: LookalikeSettings = field(default_factory=LookalikeSettings)
+    confidence: ConfidenceSettings = field(default_factory=ConfidenceSettings)
     workers: int = 0  # processes for the per-wall stages; 0 = up to 2, by the CPU count
 
     def to_dict(self) -> dict[str, Any]:

@@ -238,6 +238,7 @@ class Candidate:
     score: float
     roi: Box | None = None  # the RoI the match came from
     rotation_deg: float = 0  # the model's in-plane rotation at the match (degrees, counter-clockwise)
+    lookalike_margin: float | None = None  # print NCC of its class minus the best other look-alike's
 
 
 @dataclass

@@ -1,0 +1,144 @@
+"""Fit the detection confidence on simulated scenes and report its calibration on others.
+
+Usage (heavy: run under the shared lock)::
+
+    flock /tmp/sbsc-heavy.lock python benchmarks/bench_confidence.py [--work DIR] [--write]
+
+Scenes: ``one_room.yaml`` in every pairing of scene and library design sets (standard /
+standard, alt / alt and the two crosses, which give real mistakes to learn from), upright
+and with a third of the rotatable objects turned, at several seeds. The FIT seeds and the
+EVALUATION seeds are disjoint and listed below; each scene is detected once and its
+candidates go through consensus both with and without the expected counts. A hit is right
+when a ground-truth object of its class lies within ``--radius`` of it (each object counts
+once). The logistic model is fitted on the FIT scenes only; the reliability table and the
+expected calibration error (ECE) are printed for the EVALUATION scenes. ``--write`` stores
+the fitted model as ``sbsc_core/calibration/confidence.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from sbsc_core.confidence import CALIBRATION_PATH, FEATURES, fit_logistic, hit_features, reliability  # noqa: E402
+from sbsc_core.consensus import consensus_all  # noqa: E402
+from sbsc_core.io.models import load_model_library  # noqa: E402
+from sbsc_core.io.scans import read_scans  # noqa: E402
+from sbsc_core.paths import sample_projects_dir  # noqa: E402
+from sbsc_core.pipeline import detect  # noqa: E402
+from sbsc_core.settings import DetectionSettings  # noqa: E402
+from sbsc_core.simulate.designs import design_builder  # noqa: E402
+from sbsc_core.simulate.scenarios import simulate_scene  # noqa: E402
+
+FIT_SEEDS = (11, 12)
+EVAL_SEEDS = (21, 22)
+PAIRS = (("standard", "standard"), ("alt", "alt"), ("standard", "alt"), ("alt", "standard"))
+TURNED = (0.0, 0.34)
+
+
+def scene_file(work: Path, turned: float, seed: int) -> Path:
+    data = yaml.safe_load((sample_projects_dir() / "one_room.yaml").read_text())
+    if turned:
+        data["object_rotation"] = {"fraction": turned, "seed": seed}
+    path = work / f"one_room_t{turned:g}_s{seed}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def rows_of(scan: Path, settings: DetectionSettings, radius: float) -> list[tuple[np.ndarray, int]]:
+    """(features, right) of every hit, with and without the expected counts."""
+    res = detect(read_scans([scan / "scan.ply"]), load_model_library(scan / "models"), None, settings)
+    truth = json.loads((scan / "ground_truth.json").read_text())["objects"]
+    expected = json.loads((scan / "expected.json").read_text())["counts"]
+    depth = [c for w in res.walls.values() for c in w.depth_candidates]
+    colour = [c for w in res.walls.values() for c in w.colour_candidates]
+    out = []
+    for exp in (None, expected):
+        hits = [h for v in consensus_all(depth, colour, exp, settings.consensus, res.classes).values() for h in v]
+        feats = [hit_features(h, depth, colour) for h in hits]
+        pos = []
+        for h in hits:
+            o = res.walls[h.wall_id].ortho
+            u, v = o.pixel_to_uv(h.centre[0], h.centre[1])
+            pos.append(o.frame.to_world(u, v, 0.0))
+        order = np.argsort([-f[2] - f[3] for f in feats])  # the best evidence takes an object first
+        taken: set[int] = set()
+        right = [0] * len(hits)
+        for k in order:
+            best = None
+            for j, t in enumerate(truth):
+                if j in taken or t["class"] != hits[k].class_id:
+                    continue
+                dist = float(np.linalg.norm(np.subtract(t["position"], pos[k])))
+                if dist <= radius and (best is None or dist < best[0]):
+                    best = (dist, j)
+            if best is not None:
+                taken.add(best[1])
+                right[k] = 1
+        out.extend(zip(feats, right, strict=True))
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--work", type=Path, default=Path("/tmp/sbsc-bench-confidence"))
+    ap.add_argument("--radius", type=float, default=0.05, help="a hit within this of its object is right (m)")
+    ap.add_argument("--step", type=float, default=0.15, help="scanner angular step (degrees)")
+    ap.add_argument("--write", action="store_true", help="store the fitted model in the package")
+    args = ap.parse_args()
+    args.work.mkdir(parents=True, exist_ok=True)
+    settings = DetectionSettings()
+    settings.confidence.enabled = False
+    data: dict[str, list[tuple[np.ndarray, int]]] = {"fit": [], "eval": []}
+    t0 = time.perf_counter()
+    for part, seeds in (("fit", FIT_SEEDS), ("eval", EVAL_SEEDS)):
+        for seed in seeds:
+            for scene_d, lib_d in PAIRS:
+                for turned in TURNED:
+                    scan = args.work / f"{scene_d}-{lib_d}-t{turned:g}-s{seed}"
+                    if not (scan / "ground_truth.json").is_file():
+                        simulate_scene(scene_file(args.work, turned, seed), scan, seed=seed,
+                                       angular_step_deg=args.step, design=False,
+                                       object_builder=design_builder(scene_d), library_builder=design_builder(lib_d))
+                    rows = rows_of(scan, settings, args.radius)
+                    data[part].extend(rows)
+                    n_right = sum(r for _, r in rows)
+                    print(f"{part:4s} {scan.name:32s} hits {len(rows):3d} right {n_right:3d} "
+                          f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    xf = np.stack([f for f, _ in data["fit"]])
+    yf = np.array([r for _, r in data["fit"]], float)
+    xe = np.stack([f for f, _ in data["eval"]])
+    ye = np.array([r for _, r in data["eval"]], float)
+    cal = fit_logistic(xf, yf)
+    table, ece = reliability(cal.predict(xe), ye)
+    _, ece_fit = reliability(cal.predict(xf), yf)
+    print(f"\nfitted on {len(yf)} hits ({int(yf.sum())} right) of seeds {FIT_SEEDS}; "
+          f"evaluated on {len(ye)} hits ({int(ye.sum())} right) of seeds {EVAL_SEEDS}")
+    print("coefficients: " + ", ".join(f"{n} {c:+.3f}" for n, c in zip(FEATURES, cal.coef, strict=True))
+          + f", intercept {cal.intercept:+.3f}")
+    print("\nreliability on the evaluation scenes")
+    print(f"{'confidence':>12s} {'hits':>6s} {'mean conf':>10s} {'accuracy':>9s}")
+    for lo, hi, n, conf, acc in table:
+        print(f"{lo:5.1f}-{hi:4.1f}   {n:6d} {conf:10.3f} {acc:9.3f}")
+    print(f"\nECE (evaluation scenes, 10 bins): {ece:.4f}   (fit scenes: {ece_fit:.4f})")
+    if args.write:
+        cal.info = {"fit_seeds": list(FIT_SEEDS), "eval_seeds": list(EVAL_SEEDS), "scenes": "one_room.yaml",
+                    "pairs": [f"{a}/{b}" for a, b in PAIRS], "turned": list(TURNED), "radius_m": args.radius,
+                    "fit_hits": int(len(yf)), "eval_hits": int(len(ye)), "eval_ece": round(ece, 4)}
+        CALIBRATION_PATH.parent.mkdir(parents=True, exist_ok=True)
+        CALIBRATION_PATH.write_text(json.dumps(cal.to_dict(), indent=1) + "\n", encoding="utf-8")
+        print(f"written {CALIBRATION_PATH}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,181 @@
+"""A calibrated ``confidence`` per detection and an honest "none of these" (issue 13, items 3, 4).
+
+``confidence`` is the probability that a detection is an object of its class at that place
+(contract 4). It is a logistic regression on what recognition measured (:func:`hit_features`):
+which recognizers found the object, rho_D, 1 - rho_C, alpha (equation 15), the class
+margin (how much better the hit's class matched there than any other class) and the
+look-alike margin (how much better its print matched than the other look-alikes'). The
+coefficients are fitted on the project's own simulated scenes by
+``benchmarks/bench_confidence.py`` and ship as ``sbsc_core/calibration/confidence.json``.
+
+A hit whose confidence is below ``min_confidence`` is weak, ambiguous between classes or
+like no class well enough: by default it gives no detection; with ``report_unknown`` it
+gives a detection of class ``unknown`` for review (its footprint is the best class's).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import minimize
+
+from .consensus import ConsensusHit
+from .matching import box_overlap
+from .settings import ConfidenceSettings
+from .templates import ModelTemplate
+from .types import Box, Candidate
+
+UNKNOWN_CLASS = "unknown"
+
+CALIBRATION_PATH = Path(__file__).with_name("calibration") / "confidence.json"
+FEATURES = ("in_depth", "in_colour", "rho_depth", "colour_goodness", "alpha", "class_margin",
+            "lookalike_margin")
+_MARGIN_CAP = 0.3  # margins beyond this say nothing more
+
+
+def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candidate]) -> np.ndarray:
+    """The features (:data:`FEATURES`) of one consensus hit among all the candidates of its wall.
+
+    ``class_margin``: the hit's rho_D minus the best rho_D of another class at its place
+    (footprints overlapping by more than a quarter), or, without depth, the best other
+    class's rho_C minus the hit's; capped to [0, 0.3] (0.3 when no other class is there).
+    """
+    here = hit.box
+
+    def others(cands: list[Candidate]) -> list[Candidate]:
+        return [c for c in cands if c.wall_id == hit.wall_id and c.class_id != hit.class_id
+                and here is not None and box_overlap(c.box, here) > 0.25]
+
+    if hit.rho_depth is not None:
+        rivals = others(depth)
+        margin = hit.rho_depth - max(c.score for c in rivals) if rivals else _MARGIN_CAP
+    else:
+        rivals = others(colour)
+        margin = min(c.score for c in rivals) - float(hit.rho_colour or 0.0) if rivals else _MARGIN_CAP
+    looks = [c.lookalike_margin for c in (hit.depth, hit.colour) if c is not None and c.lookalike_margin is not None]
+    look = min(looks) if looks else _MARGIN_CAP
+    return np.array([
+        float(hit.rho_depth is not None), float(hit.rho_colour is not None),
+        float(hit.rho_depth or 0.0), 0.0 if hit.rho_colour is None else 1.0 - float(hit.rho_colour),
+        float(hit.alpha), float(np.clip(margin, 0.0, _MARGIN_CAP)), float(np.clip(look, -_MARGIN_CAP, _MARGIN_CAP)),
+    ])
+
+
+@dataclass
+class Calibration:
+    """A logistic model: confidence = 1 / (1 + exp(-(intercept + coef . features)))."""
+
+    coef: np.ndarray
+    intercept: float
+    features: tuple[str, ...] = FEATURES
+    info: dict | None = None
+
+    def predict(self, x: np.ndarray) -> np.ndarray:
+        z = self.intercept + np.asarray(x, float) @ self.coef
+        return 1.0 / (1.0 + np.exp(-np.clip(z, -40, 40)))
+
+    def to_dict(self) -> dict:
+        return {"schema": "sbsc.confidence/1", "features": list(self.features),
+                "coef": [round(float(c), 6) for c in self.coef], "intercept": round(float(self.intercept), 6),
+                **({"info": self.info} if self.info else {})}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Calibration:
+        if tuple(d.get("features", ())) != FEATURES:
+            raise ValueError(f"calibration features {d.get('features')} are not {list(FEATURES)}")
+        return cls(np.asarray(d["coef"], float), float(d["intercept"]), FEATURES, d.get("info"))
+
+
+def load_calibration(path: Path | None = None) -> Calibration | None:
+    """The shipped calibration (or the one at ``path``); None when there is none."""
+    p = Path(path) if path is not None else CALIBRATION_PATH
+    if not p.is_file():
+        return None
+    return Calibration.from_dict(json.loads(p.read_text(encoding="utf-8")))
+
+
+def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2) -> Calibration:
+    """Maximum-likelihood logistic regression with a small L2 penalty on the coefficients."""
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
+
+    def loss(w: np.ndarray) -> tuple[float, np.ndarray]:
+        z = w[0] + x @ w[1:]
+        p = 1.0 / (1.0 + np.exp(-np.clip(z, -40, 40)))
+        nll = float(np.sum(np.logaddexp(0.0, z) - y * z)) + 0.5 * l2 * float(w[1:] @ w[1:])
+        g = np.concatenate([[np.sum(p - y)], x.T @ (p - y) + l2 * w[1:]])
+        return nll, g
+
+    res = minimize(loss, np.zeros(x.shape[1] + 1), jac=True, method="L-BFGS-B")
+    return Calibration(res.x[1:], float(res.x[0]))
+
+
+def reliability(p: np.ndarray, y: np.ndarray, bins: int = 10) -> tuple[list[tuple[float, float, int, float, float]], float]:
+    """Reliability table ((bin low, bin high, count, mean confidence, accuracy) per non-empty
+    bin of equal width) and the expected calibration error (count-weighted |accuracy - confidence|)."""
+    p, y = np.asarray(p, float), np.asarray(y, float)
+    edges = np.linspace(0.0, 1.0, bins + 1)
+    rows, ece = [], 0.0
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        on = (p >= lo) & ((p < hi) if hi < 1.0 else (p <= hi))
+        if not on.any():
+            continue
+        conf, acc = float(p[on].mean()), float(y[on].mean())
+        rows.append((float(lo), float(hi), int(on.sum()), conf, acc))
+        ece += on.sum() / max(1, len(p)) * abs(acc - conf)
+    return rows, float(ece)
+
+
+def score_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[Candidate],
+               calibration: Calibration | None) -> list[float | None]:
+    """The confidence of every hit (None for all without a calibration)."""
+    if calibration is None or not hits:
+        return [None] * len(hits)
+    x = np.stack([hit_features(h, depth, colour) for h in hits])
+    return [float(v) for v in calibration.predict(x)]
+
+
+def screen_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[Candidate],
+                settings: ConfidenceSettings) -> list[ConsensusHit]:
+    """The hits with their ``confidence``; those below ``min_confidence`` are left out, or kept
+    as ``unknown`` with ``report_unknown`` (see the module)."""
+    if not settings.enabled:
+        return hits
+    cal = load_calibration(Path(settings.calibration) if settings.calibration else None)
+    out = []
+    for h, conf in zip(hits, score_hits(hits, depth, colour, cal), strict=True):
+        h.confidence = conf
+        if conf is not None and conf < settings.min_confidence:
+            if not settings.report_unknown:
+                continue
+            h.unknown = True
+        out.append(h)
+    return out
+
+
+def unexplained_regions(rois: dict[str, list[Box]], hits: list[ConsensusHit], templates: dict[str, ModelTemplate],
+                        *, min_overlap: float = 0.1) -> list[ConsensusHit]:
+    """``unknown`` hits for the depth RoIs of an object's size that no hit explains (a thermostat,
+    a clock: like no class of the library), for review with ``report_unknown``.
+
+    A RoI is of an object's size when its longer side lies between half the smallest and
+    the largest model side; it is explained when a hit's footprint covers more than
+    ``min_overlap`` of it.
+    """
+    if not templates:
+        return []
+    sides = [s for t in templates.values() for s in (t.height_px, t.width_px)]
+    lo, hi = 0.5 * min(sides), max(sides)
+    out = []
+    for wid in sorted(rois):
+        for roi in rois[wid]:
+            if not lo <= max(roi.height, roi.width) <= hi:
+                continue
+            if any(h.wall_id == wid and h.box is not None and box_overlap(h.box, roi) > min_overlap for h in hits):
+                continue
+            out.append(ConsensusHit(class_id=UNKNOWN_CLASS, wall_id=wid, centre=roi.centre, alpha=0.0,
+                                    rho_depth=None, rho_colour=None, source="depth", box=roi, unknown=True))
+    return out

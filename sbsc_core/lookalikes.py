@@ -1,0 +1,176 @@
+"""Look-alike classes, told apart at the level of the pictogram (issue 13, item 1).
+
+Two classes are look-alikes when the library itself says that the paper's recognizers
+cannot tell them apart: footprints of the same size (``size_tolerance``), depth models
+that correlate highly with each other (``min_depth_ncc``, best of the quarter turns; two
+flat plates correlate ~1) and colour footprints of about the same mean colour
+(``max_colour_delta_e``, CIE76 in Lab). An extinguisher sign and a fire-alarm call-point
+sign, both square red plates, are such a pair: depth correlates 0.94-0.97 with either and
+the 15 global colour descriptors are alike.
+
+For a candidate of a class in such a set, the colour orthoimage patch (Lab difference to
+the local wall colour, the foreground only: what the colour recognizer sees) is compared
+with each class's front view as seen on that wall (:class:`~sbsc_core.colour_recognition.
+WallPrototype`), at the candidate's position (within ``search_px``) and turn (and its
+quarter turns: a square plate's relief does not tell them), by normalised
+cross-correlation: the pictogram decides. A candidate whose own class's print correlates
+less than another look-alike's by more than ``min_margin`` is relabelled to that class,
+provided that print does correlate (``min_print_ncc``: a white switch on a white wall
+shows too little of its print to decide anything).
+The margin (own print minus the best other look-alike's) is kept on the candidate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+
+from .colour_recognition import ColourImage, ColourPrototypes
+from .matching import box_at, crop_padded, ncc_map, nms, padded_template, rotate_template
+from .settings import LookalikeSettings
+from .templates import ModelTemplate
+from .types import Candidate
+
+
+def _mean_lab(t: ModelTemplate) -> np.ndarray | None:
+    if not t.colour_views:
+        return None
+    v = t.colour_views[0]
+    fg = v[..., 3] > 127
+    if not fg.any():
+        return None
+    lab = cv2.cvtColor(np.ascontiguousarray(v[..., :3], np.float32) / 255.0, cv2.COLOR_RGB2Lab)
+    return lab[fg].mean(axis=0)
+
+
+def _same_size(a: ModelTemplate, b: ModelTemplate, tol: float) -> bool:
+    def close(x: float, y: float) -> bool:
+        return abs(x - y) <= tol * max(x, y)
+
+    return (close(a.height_m, b.height_m) and close(a.width_m, b.width_m)) or \
+        (close(a.height_m, b.width_m) and close(a.width_m, b.height_m))
+
+
+def depth_similarity(a: ModelTemplate, b: ModelTemplate, pad_px: int = 4) -> float:
+    """Best NCC over quarter turns of ``b``'s depth model (resampled to ``a``'s footprint) with
+    ``a``'s, both padded with wall; 1 when neither has depth, 0 when only one has."""
+    da, db = a.depth_filled(), b.depth_filled()
+    if da is None and db is None:
+        return 1.0
+    if da is None or db is None:
+        return 0.0
+    best = -1.0
+    ta = padded_template(da, pad_px)
+    for k in range(4):
+        r = np.rot90(db, k)
+        r = cv2.resize(np.ascontiguousarray(r), (da.shape[1], da.shape[0]), interpolation=cv2.INTER_AREA)
+        best = max(best, float(ncc_map(ta, padded_template(r, pad_px))[0, 0]))
+    return best
+
+
+def lookalike_sets(templates: dict[str, ModelTemplate], settings: LookalikeSettings) -> list[frozenset[str]]:
+    """The groups (two or more classes) of look-alike classes of the library."""
+    ids = sorted(templates)
+    parent = {c: c for c in ids}
+
+    def root(c: str) -> str:
+        while parent[c] != c:
+            c = parent[c]
+        return c
+
+    labs = {c: _mean_lab(templates[c]) for c in ids}
+    for i, a in enumerate(ids):
+        for b in ids[i + 1:]:
+            ta, tb = templates[a], templates[b]
+            if labs[a] is None or labs[b] is None or not _same_size(ta, tb, settings.size_tolerance):
+                continue
+            if float(np.linalg.norm(labs[a] - labs[b])) > settings.max_colour_delta_e:
+                continue
+            if depth_similarity(ta, tb) >= settings.min_depth_ncc:
+                parent[root(b)] = root(a)
+    groups: dict[str, set[str]] = {}
+    for c in ids:
+        groups.setdefault(root(c), set()).add(c)
+    return sorted((frozenset(g) for g in groups.values() if len(g) > 1), key=sorted)
+
+
+def print_score(diff: np.ndarray, view: np.ndarray, centre: tuple[float, float], rotation_deg: float,
+                *, search_px: int) -> float:
+    """Best NCC of a class's front view (Lab difference, (h, w, 3)) turned by ``rotation_deg``
+    and its quarter turns, with the scene's Lab difference ``diff`` around ``centre``."""
+    best = -1.0
+    for k in range(4):
+        v = rotate_template(view, float(rotation_deg) + 90.0 * k)
+        h, w = v.shape[:2]
+        b = box_at(centre, h, w)
+        region = crop_padded(diff, b.r0 - search_px, b.r1 + search_px, b.c0 - search_px, b.c1 + search_px)
+        if float(np.abs(v).sum()) <= 0 or float(np.abs(region).sum()) <= 0:
+            continue
+        best = max(best, float(ncc_map(np.ascontiguousarray(region, np.float32),
+                                       np.ascontiguousarray(v, np.float32)).max()))
+    return best
+
+
+def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str, np.ndarray],
+                       groups: list[frozenset[str]], settings: LookalikeSettings) -> list[Candidate]:
+    """Candidates with every look-alike class decided by its print (see the module).
+
+    ``diff`` is the wall's Lab difference to the local wall colour (0 off the foreground);
+    ``views`` the upright front view of each class as seen on this wall. Candidates of a
+    class outside every group, or whose group has fewer than two views here, are kept as
+    they are. Relabelled candidates that then coincide with another of the same class and
+    source are folded (:func:`~sbsc_core.matching.nms`).
+    """
+    if not groups or not cands:
+        return cands
+    group_of = {c: g for g in groups for c in g}
+    out: list[Candidate] = []
+    touched = False
+    for cand in cands:
+        g = group_of.get(cand.class_id)
+        seen = sorted(c for c in (g or ()) if c in views)
+        if g is None or len(seen) < 2 or cand.class_id not in views:
+            out.append(cand)
+            continue
+        scores = {c: print_score(diff, views[c], cand.centre, cand.rotation_deg, search_px=settings.search_px)
+                  for c in seen}
+        own = scores[cand.class_id]
+        other, other_score = max(((c, s) for c, s in scores.items() if c != cand.class_id), key=lambda x: x[1])
+        if other_score > own + settings.min_margin and other_score >= settings.min_print_ncc:
+            out.append(replace(cand, class_id=other, lookalike_margin=other_score - own))
+            touched = True
+        else:
+            out.append(replace(cand, lookalike_margin=own - other_score))
+    if not touched:
+        return out
+    folded: list[Candidate] = []
+    for source in sorted({c.source for c in out}):
+        same = [c for c in out if c.source == source]
+        folded.extend(nms(same, 0.5, higher_is_better=source == "depth"))
+    return folded
+
+
+def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: ColourImage,
+                    prototypes: ColourPrototypes, settings: LookalikeSettings
+                    ) -> tuple[list[Candidate], list[Candidate]]:
+    """:func:`resolve_lookalikes` for one wall's depth and colour candidates.
+
+    The look-alike sets are found once per library (cached on ``prototypes``); the views
+    are the classes' front views as seen on this wall's colour.
+    """
+    if not settings.enabled:
+        return depth, colour
+    key = ("lookalike_sets", settings.size_tolerance, settings.min_depth_ncc, settings.max_colour_delta_e)
+    if key not in prototypes._cache:
+        prototypes._cache[key] = lookalike_sets(prototypes.templates, settings)  # type: ignore[assignment]
+    groups: list[frozenset[str]] = prototypes._cache[key]  # type: ignore[assignment]
+    if not groups:
+        return depth, colour
+    protos = prototypes.for_wall(image.wall_rgb, image.threshold, image.noise_rgb)
+    views = {c: p.views[0][1] for c, p in protos.items() if p.views}
+    diff = np.ascontiguousarray(image.lab - image.background, dtype=np.float32)
+    diff[~image.foreground] = 0.0
+    return (resolve_lookalikes(depth, diff, views, groups, settings),
+            resolve_lookalikes(colour, diff, views, groups, settings))

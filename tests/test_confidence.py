@@ -1,0 +1,105 @@
+"""Calibrated confidence and the "none of these" rule (confidence.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sbsc_core.confidence import (
+    FEATURES,
+    Calibration,
+    fit_logistic,
+    hit_features,
+    load_calibration,
+    reliability,
+    screen_hits,
+)
+from sbsc_core.consensus import make_hit
+from sbsc_core.placement import UNKNOWN, place_hits
+from sbsc_core.settings import ConfidenceSettings
+from sbsc_core.templates import make_templates
+from sbsc_core.types import Box, Candidate
+from tests.recognition_synth import make_wall, synthetic_library
+
+
+def test_fit_logistic_recovers_a_known_model_and_is_calibrated() -> None:
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(4000, 2))
+    p = 1 / (1 + np.exp(-(0.5 + 2.0 * x[:, 0] - 1.0 * x[:, 1])))
+    y = (rng.random(4000) < p).astype(float)
+    cal = fit_logistic(x, y, l2=0.0)
+    assert cal.intercept == pytest.approx(0.5, abs=0.15)
+    assert cal.coef == pytest.approx([2.0, -1.0], abs=0.15)
+    xt = rng.normal(size=(4000, 2))
+    yt = (rng.random(4000) < 1 / (1 + np.exp(-(0.5 + 2.0 * xt[:, 0] - xt[:, 1])))).astype(float)
+    _, ece = reliability(cal.predict(xt), yt)
+    assert ece < 0.03
+    _, ece_bad = reliability(np.clip(cal.predict(xt) + 0.2, 0, 1), yt)  # a biased model is not calibrated
+    assert ece_bad > 0.1
+
+
+def test_reliability_table_counts_and_ece() -> None:
+    rows, ece = reliability(np.array([0.05, 0.05, 0.95, 0.95]), np.array([0, 0, 1, 0]))
+    assert [(n, acc) for _, _, n, _, acc in rows] == [(2, 0.0), (2, 0.5)]
+    assert ece == pytest.approx(0.5 * 0.05 + 0.5 * 0.45)
+
+
+def _cand(cid: str, source: str, score: float, r: float = 100.0, c: float = 100.0) -> Candidate:
+    return Candidate(cid, "W01", source, Box(int(r) - 8, int(c) - 8, int(r) + 8, int(c) + 8), (r, c), score)
+
+
+def test_features_measure_the_class_margin() -> None:
+    d = _cand("socket", "depth", 0.97)
+    rival = _cand("knob", "depth", 0.90)
+    far = _cand("knob", "depth", 0.99, 10.0, 10.0)
+    hit = make_hit(d, None, 0.5)
+    f = dict(zip(FEATURES, hit_features(hit, [d, rival, far], []), strict=True))
+    assert f["in_depth"] == 1 and f["in_colour"] == 0 and f["rho_depth"] == pytest.approx(0.97)
+    assert f["class_margin"] == pytest.approx(0.07)
+    alone = dict(zip(FEATURES, hit_features(hit, [d, far], []), strict=True))
+    assert alone["class_margin"] == pytest.approx(0.3)
+
+
+def test_shipped_calibration_orders_strong_above_weak_evidence() -> None:
+    cal = load_calibration()
+    assert cal is not None
+    strong = make_hit(_cand("socket", "depth", 0.98), _cand("socket", "colour", 0.03), 1.0)
+    weak = make_hit(None, _cand("socket", "colour", 0.19), 0.5)
+    rival = _cand("knob", "colour", 0.17)
+    ps = cal.predict(np.stack([hit_features(strong, [], []), hit_features(weak, [], [rival])]))
+    assert ps[0] > 0.9 and ps[0] > ps[1]
+
+
+def test_weak_hits_are_dropped_or_reported_as_unknown(tmp_path) -> None:
+    ortho, _ = make_wall()
+    templates = make_templates(synthetic_library(), ortho.pixel_m)
+    cal = Calibration(np.array([0, 0, 10.0, 0, 0, 0, 0]), -9.0)  # confident from rho_D 0.9 up
+    path = tmp_path / "cal.json"
+    import json
+
+    path.write_text(json.dumps(cal.to_dict()))
+    good = make_hit(_cand("socket", "depth", 0.98), None, 0.5)
+    weak = make_hit(_cand("knob", "depth", 0.8, 200.0, 300.0), None, 0.5)
+    s = ConfidenceSettings(calibration=str(path))
+    kept = screen_hits([good, weak], [good.depth, weak.depth], [], s)
+    assert kept == [good] and good.confidence == pytest.approx(cal.predict(np.array([[1, 0, .98, 0, .5, .3, .3]]))[0])
+    s = ConfidenceSettings(calibration=str(path), report_unknown=True)
+    both = screen_hits([good, weak], [good.depth, weak.depth], [], s)
+    dets = place_hits(both, {"W01": ortho}, templates)
+    assert sorted(d.class_id for d in dets) == sorted(["socket", UNKNOWN])
+    assert all(d.to_dict()["confidence"] is not None for d in dets)
+
+
+def test_regions_like_no_class_become_unknown_for_review() -> None:
+    from sbsc_core.confidence import unexplained_regions
+
+    ortho, _ = make_wall()
+    templates = make_templates(synthetic_library(), ortho.pixel_m)
+    socket = make_hit(_cand("socket", "depth", 0.98), None, 0.5)
+    thermostat = Box(150, 300, 175, 320)  # an object's size, no hit on it
+    rois = {"W01": [socket.depth.box, thermostat, Box(10, 10, 12, 13), Box(0, 0, 290, 400)]}
+    unknown = unexplained_regions(rois, [socket], templates)
+    assert [(u.box, u.unknown) for u in unknown] == [(thermostat, True)]
+    dets = place_hits([socket, *unknown], {"W01": ortho}, templates)
+    u = next(d for d in dets if d.class_id == UNKNOWN)
+    assert (u.width_m, u.height_m) == pytest.approx((20 * ortho.pixel_m, 25 * ortho.pixel_m))
