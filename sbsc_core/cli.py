@@ -21,8 +21,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
     builder = design_builder(args.designs)
     library = design_builder(args.library_designs) if args.library_designs else builder
+    everything = args.all_realism
     simulate_scenario(args.scenario, Path(args.out), seed=args.seed, angular_step_deg=args.step,
-                      log=_log(args), object_builder=builder, library_builder=library)
+                      log=_log(args), object_builder=builder, library_builder=library,
+                      realistic=args.realistic or everything, clutter=args.clutter or everything,
+                      furniture=args.furniture or everything, survey_frame=args.survey_frame or everything)
     return 0
 
 
@@ -94,10 +97,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True)
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--step", type=float, default=None, help="scanner angular step in degrees")
-    s.add_argument("--designs", choices=["standard", "alt"], default="standard",
-                   help="design set the objects are built with (default: standard)")
-    s.add_argument("--library-designs", choices=["standard", "alt"], default=None,
+    s.add_argument("--designs", choices=["standard", "alt", "third"], default="standard",
+                   help="design set the objects are built with (default: standard; third: for testing only)")
+    s.add_argument("--library-designs", choices=["standard", "alt", "third"], default=None,
                    help="design set of the model library (default: the same as --designs)")
+    s.add_argument("--realistic", action="store_true",
+                   help="realistic scanner: mixed pixels, range noise growing with range and incidence, "
+                        "dropouts, registration error, per-station exposure, highlights")
+    s.add_argument("--clutter", action="store_true", help="wall clutter that is none of the classes")
+    s.add_argument("--furniture", action="store_true", help="furniture in front of the walls")
+    s.add_argument("--survey-frame", action="store_true",
+                   help="write scan and truth at UTM-like coordinates, turned 23.5 degrees in plan")
+    s.add_argument("--all-realism", action="store_true", help="all four options above together")
     s.set_defaults(func=_cmd_simulate)
 
     d = sub.add_parser("detect", help="recognize objects on the walls of a scan")
