@@ -153,3 +153,40 @@ def test_evaluator_counts_false_positives_on_distractors(tmp_path: Path) -> None
     plain = dict(truth_doc)
     del plain["distractors"]
     assert evaluate(dets, truth(plain)).distractors is None
+
+
+def test_cli_realism_options(monkeypatch, tmp_path: Path) -> None:
+    from sbsc_core import cli
+    from sbsc_core.simulate import scenarios
+
+    calls = []
+    monkeypatch.setattr(scenarios, "simulate_scenario", lambda *a, **kw: calls.append(kw))
+    assert cli.main(["-q", "simulate", "--scenario", "I", "--out", str(tmp_path / "a")]) == 0
+    assert cli.main(["-q", "simulate", "--scenario", "I", "--out", str(tmp_path / "b"), "--clutter",
+                     "--survey-frame", "--designs", "third"]) == 0
+    assert cli.main(["-q", "simulate", "--scenario", "I", "--out", str(tmp_path / "c"), "--all-realism"]) == 0
+    keys = ("realistic", "clutter", "furniture", "survey_frame")
+    assert [calls[0][k] for k in keys] == [False] * 4
+    assert [calls[1][k] for k in keys] == [False, True, False, True]
+    assert [calls[2][k] for k in keys] == [True] * 4
+
+
+def test_description_keys_and_their_errors(tmp_path: Path) -> None:
+    from sbsc_core.errors import InputError
+
+    text = ONE_ROOM.read_text()
+    good = tmp_path / "g.yaml"
+    good.write_text(text + "realism: {range_noise_10m_m: 0.002}\nclutter: {per_metre: 0.8}\n"
+                    "survey_frame: {offset: [500000, 4400000, 650], rotation_deg: -12}\n")
+    scene = load_scene(good)
+    assert scene.effects.range_noise_10m_m == 0.002 and scene.effects.beam_divergence_rad == 0.0003
+    assert scene.clutter_per_metre == 0.8 and scene.furniture_per_metre == 0.0
+    assert scene.survey_frame.rotation_deg == -12
+    assert not load_scene(ONE_ROOM).realistic
+    bad = tmp_path / "b.yaml"
+    for extra, field in (("realism: {laser_colour: 1}\n", "realism.laser_colour"),
+                         ("clutter: {per_metre: -1}\n", "clutter.per_metre"),
+                         ("survey_frame: {offset: [1, 2]}\n", "survey_frame.offset")):
+        bad.write_text(text + extra)
+        with pytest.raises(InputError, match=field.replace(".", r"\.")):
+            load_scene(bad)
