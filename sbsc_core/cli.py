@@ -124,10 +124,18 @@ def _add_simulate(cmds: Commands) -> None:
     s.add_argument("--seed", type=int, default=0, help="random seed of the scanner noise and the design changes (default: 0)")
     s.add_argument("--step", type=float, default=None, metavar="DEG",
                    help="scanner angular step in degrees (default: the scene's)")
-    s.add_argument("--designs", choices=["standard", "alt"], default="standard",
-                   help="design set the objects are built with (default: standard)")
-    s.add_argument("--library-designs", choices=["standard", "alt"], default=None,
+    s.add_argument("--designs", choices=["standard", "alt", "third"], default="standard",
+                   help="design set the objects are built with (default: standard; third: for testing only)")
+    s.add_argument("--library-designs", choices=["standard", "alt", "third"], default=None,
                    help="design set of the model library (default: the same as --designs)")
+    s.add_argument("--realistic", action="store_true",
+                   help="realistic scanner: mixed pixels, range noise growing with range and incidence, "
+                        "dropouts, registration error, per-station exposure, highlights")
+    s.add_argument("--clutter", action="store_true", help="wall clutter that is none of the classes")
+    s.add_argument("--furniture", action="store_true", help="furniture in front of the walls")
+    s.add_argument("--survey-frame", action="store_true",
+                   help="write scan and truth at UTM-like coordinates, turned 23.5 degrees in plan")
+    s.add_argument("--all-realism", action="store_true", help="all four options above together")
     json_option(s)
 
 
@@ -375,6 +383,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     out = output_parent(args.out)
     builder = design_builder(args.designs)
     library = design_builder(args.library_designs) if args.library_designs else builder
+    everything = args.all_realism
+    realism = {"realistic": args.realistic or everything, "clutter": args.clutter or everything,
+               "furniture": args.furniture or everything, "survey_frame": args.survey_frame or everything}
     if args.scenario == "building":
         from .simulate.building_scenario import simulate_building
 
@@ -383,10 +394,10 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
                                     object_builder=builder)
     elif args.scene:
         summary = simulate_scene(scene_path(args.scene), out, seed=args.seed, angular_step_deg=args.step,
-                                 log=con.info, object_builder=builder, library_builder=library)
+                                 log=con.info, object_builder=builder, library_builder=library, **realism)
     else:
         summary = simulate_scenario(args.scenario, out, seed=args.seed, angular_step_deg=args.step,
-                                    log=con.info, object_builder=builder, library_builder=library)
+                                    log=con.info, object_builder=builder, library_builder=library, **realism)
     if args.json:
         con.result({"out": out, **_jsonable(summary)})
     return 0

@@ -10,6 +10,11 @@ table gives, like Table 1: instances, TP %, FN %, FP % (all over the number of
 instances: 10 FP among 116 instances read 8.6 %), the share of true positives with
 recognition coherence level alpha > 0.9, and the mean and maximum horizontal (XY
 plane) and vertical (|dz|) position errors of the true positives in millimetres.
+
+When the ground truth lists ``distractors`` (wall clutter and furniture that are none of
+the classes, contract 5), the table also counts the false positives that fall on one (the
+detection's centre inside the distractor's box grown by ``DISTRACTOR_MARGIN_M``) and the
+share of distractors, wall clutter and furniture separately, that carry at least one.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from .simulate.catalogue import CATALOGUE, CLASS_ORDER
 
 EVALUATION_SCHEMA = "sbsc.evaluation/1"
 ALPHA_HIGH = 0.9  # Table 1, sixth column: TPs with alpha above this
+DISTRACTOR_MARGIN_M = 0.05  # a false positive this close to a distractor's box falls on it
 
 
 @dataclass
@@ -73,9 +79,11 @@ class EvaluationTable:
     max_distance_m: float
     unknown_class_detections: int = 0  # detections of classes absent from the ground truth
     matches: list[Match] = field(default_factory=list)
+    distractors: DistractorFigures | None = None  # when the truth lists distractors
 
     def to_dict(self) -> dict:
         return {
+            **({"distractors": asdict(self.distractors)} if self.distractors is not None else {}),
             "schema": EVALUATION_SCHEMA,
             "max_distance_m": self.max_distance_m,
             "rows": [r.to_dict() for r in self.rows],
@@ -84,6 +92,51 @@ class EvaluationTable:
             "matches": [{k: (round(v, 6) if isinstance(v, float) else v) for k, v in asdict(m).items()}
                         for m in self.matches],
         }
+
+
+@dataclass
+class DistractorFigures:
+    """False positives on things that are none of the classes (clutter and furniture)."""
+
+    clutter: int  # wall clutter items in the truth
+    furniture: int  # furniture pieces in the truth
+    fp_on_distractors: int  # false positives whose centre falls on a distractor
+    clutter_with_fp: int
+    furniture_with_fp: int
+    fp_by_kind: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def clutter_with_fp_pct(self) -> float | None:
+        return _pct(self.clutter_with_fp, self.clutter)
+
+    @property
+    def furniture_with_fp_pct(self) -> float | None:
+        return _pct(self.furniture_with_fp, self.furniture)
+
+
+def on_distractor(position: np.ndarray, d: dict, margin_m: float = DISTRACTOR_MARGIN_M) -> bool:
+    """Whether a point lies in a distractor's box (truth ``centre``, axes, ``size_m``) grown by ``margin_m``."""
+    rel = np.asarray(position, float) - np.asarray(d["centre"], float)
+    axes = np.array([d["axis_u"], d["axis_v"], d["normal"]], float)
+    return bool(np.all(np.abs(axes @ rel) <= np.asarray(d["size_m"], float) / 2 + margin_m))
+
+
+def distractor_figures(false_positives: list[dict], distractors: list[dict]) -> DistractorFigures:
+    """Count the false positives (detections) that fall on the ground truth's distractors."""
+    hit = np.zeros(len(distractors), bool)
+    on = 0
+    by_kind: dict[str, int] = {}
+    for det in false_positives:
+        inside = [k for k, d in enumerate(distractors) if on_distractor(det["position"], d)]
+        if inside:
+            on += 1
+            hit[inside] = True
+            kind = distractors[inside[0]]["kind"]
+            by_kind[kind] = by_kind.get(kind, 0) + 1
+    furn = np.array([bool(d.get("furniture")) for d in distractors], bool)
+    return DistractorFigures(clutter=int((~furn).sum()), furniture=int(furn.sum()), fp_on_distractors=on,
+                             clutter_with_fp=int((hit & ~furn).sum()), furniture_with_fp=int((hit & furn).sum()),
+                             fp_by_kind=by_kind)
 
 
 def match_class(truth_xyz: np.ndarray, det_xyz: np.ndarray, max_distance_m: float) -> list[tuple[int, int]]:
@@ -136,18 +189,22 @@ def evaluate(detections_doc: dict, truth: TruthDocument, max_distance_m: float =
     rows: list[EvaluationRow] = []
     all_matches: list[Match] = []
     total_fp = 0
+    false_positives: list[dict] = []
     for cls in ordered:
         t_idx = [i for i, o in enumerate(truth.objects) if o.class_id == cls]
         d_idx = [j for j, d in enumerate(dets) if d["class"] == cls]
         t_xyz = np.array([truth.objects[i].position for i in t_idx], np.float64).reshape(-1, 3)
         d_xyz = np.array([dets[j]["position"] for j in d_idx], np.float64).reshape(-1, 3)
         matches = []
-        for a, b in match_class(t_xyz, d_xyz, max_distance_m):
+        pairs = match_class(t_xyz, d_xyz, max_distance_m)
+        for a, b in pairs:
             delta = d_xyz[b] - t_xyz[a]
             det = dets[d_idx[b]]
             matches.append(Match(cls, t_idx[a], str(det["id"]), float(np.linalg.norm(delta)),
                                  float(np.hypot(delta[0], delta[1])), float(abs(delta[2])),
                                  float(det["alpha"])))
+        matched = {b for _, b in pairs}
+        false_positives += [dets[j] for k, j in enumerate(d_idx) if k not in matched]
         fp = len(d_idx) - len(matches)
         total_fp += fp
         name = CATALOGUE[cls].name if cls in CATALOGUE else cls
@@ -155,8 +212,11 @@ def evaluate(detections_doc: dict, truth: TruthDocument, max_distance_m: float =
         all_matches.extend(matches)
     total = _row("TOTAL", "TOTAL", len(truth.objects), total_fp, all_matches)
     unknown = sum(1 for d in dets if d["class"] not in truth_classes)
+    figures = None
+    if "distractors" in truth.extra:
+        figures = distractor_figures(false_positives, list(truth.extra["distractors"]))
     return EvaluationTable(rows=rows, total=total, max_distance_m=float(max_distance_m),
-                           unknown_class_detections=unknown, matches=all_matches)
+                           unknown_class_detections=unknown, matches=all_matches, distractors=figures)
 
 
 _COLUMNS = (  # header, attribute, width, decimals
@@ -200,6 +260,14 @@ def format_table(table: EvaluationTable) -> str:
     if table.unknown_class_detections:
         note += f"; {table.unknown_class_detections} detection(s) of classes absent from the ground truth (counted as FP)"
     lines.append(note)
+    f = table.distractors
+    if f is not None:
+        pct = lambda v: "-" if v is None else f"{v:.1f} %"  # noqa: E731
+        kinds = ", ".join(f"{k} {n}" for k, n in sorted(f.fp_by_kind.items()))
+        lines.append(f"false positives on distractors: {f.fp_on_distractors}"
+                     + (f" ({kinds})" if kinds else "")
+                     + f"; clutter items with a FP: {f.clutter_with_fp}/{f.clutter} ({pct(f.clutter_with_fp_pct)})"
+                     + f"; furniture with a FP: {f.furniture_with_fp}/{f.furniture} ({pct(f.furniture_with_fp_pct)})")
     return "\n".join(lines)
 
 

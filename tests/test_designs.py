@@ -31,7 +31,8 @@ def _clean(class_id: str, builder) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_registry() -> None:
-    assert DESIGN_SETS == {"standard": build_object, "alt": build_object_alt}
+    assert DESIGN_SETS["standard"] is build_object and DESIGN_SETS["alt"] is build_object_alt
+    assert set(DESIGN_SETS) == {"standard", "alt", "third"}  # third: tests only (test_sim_third.py)
     assert design_builder(None) is build_object and design_builder("alt") is build_object_alt
     with pytest.raises(InputError, match="unknown design set 'ikea'"):
         design_builder("ikea")

@@ -10,7 +10,7 @@ index as triangle label; the building carries -1.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -18,6 +18,7 @@ from ..types import WallFrame
 from . import mesh as M
 from .catalogue import CATALOGUE, CLASS_ORDER
 from .mesh import ColouredMesh
+from .realism import CLASS_GLOSS
 from .scene import (
     Layout,
     OpeningPlacement,
@@ -70,10 +71,12 @@ class Building:
     mesh: ColouredMesh
     objects: list[PlacedObject]
     stations: np.ndarray  # (S, 3) scanner origins, world
+    distractors: list = field(default_factory=list)  # clutter.Distractor: clutter and furniture
 
     def truth_document(self) -> dict:
-        """``ground_truth.json`` (contract 5, extended with walls and openings)."""
-        return {
+        """``ground_truth.json`` (contract 5, extended with walls and openings; with clutter or
+        furniture, the top-level ``distractors``)."""
+        doc = {
             "schema": "sbsc.truth/1",
             "scene": self.scene.name,
             "objects": [o.to_truth() for o in self.objects],
@@ -81,6 +84,9 @@ class Building:
             "openings": [o.to_dict() for o in self.layout.openings],
             "stations": [[round(float(x), 4) for x in s] for s in self.stations],
         }
+        if self.scene.clutter_per_metre or self.scene.furniture_per_metre or self.distractors:
+            doc["distractors"] = [d.to_truth(self.layout) for d in self.distractors]
+        return doc
 
     def expected_document(self) -> dict:
         """``expected.json`` (contract 3): instances per class present in the scene."""
@@ -90,8 +96,13 @@ class Building:
         return {"schema": "sbsc.expected/1", "counts": {c: n for c, n in counts.items() if n}}
 
 
-def build_building(scene: SceneDescription, object_builder: ObjectBuilder | None = None) -> Building:
-    """Mesh and truth of a (validated) description."""
+def build_building(scene: SceneDescription, object_builder: ObjectBuilder | None = None,
+                   seed: int = 0) -> Building:
+    """Mesh and truth of a (validated) description.
+
+    With the description's ``clutter`` / ``furniture`` options, distractors are laid out
+    for ``seed`` (:mod:`clutter`) and added to the mesh (label -2).
+    """
     if object_builder is None:
         from .objects import build_object as object_builder
     layout = validate_scene(scene)
@@ -110,11 +121,23 @@ def build_building(scene: SceneDescription, object_builder: ObjectBuilder | None
         wall = layout.walls[p.wall]
         spec = CATALOGUE[p.class_id]
         local = object_builder(p.class_id)
+        local = local.glossy(CLASS_GLOSS.get(p.class_id, 0.0))
         turn = _rotation(wall.frame) @ _in_plane(p.rotation_deg)
         parts.append(local.transformed(turn, wall.frame.to_world(p.u, p.v)).labelled(p.index))
         objects.append(PlacedObject(p.index, p.class_id, p.wall, p.u, p.v, wall.frame.to_world(p.u, p.v),
                                     wall.frame.normal.copy(), spec.width_m, spec.height_m, p.rotation_deg))
-    return Building(scene, layout, M.merge(parts), objects, station_positions(scene))
+    stations = station_positions(scene)
+    distractors = []
+    if scene.clutter_per_metre or scene.furniture_per_metre:
+        from .clutter import distractor_mesh, place_clutter, place_furniture
+
+        if scene.clutter_per_metre:
+            distractors += place_clutter(scene, layout, seed, scene.clutter_per_metre)
+        if scene.furniture_per_metre:
+            distractors += place_furniture(scene, layout, stations, seed, scene.furniture_per_metre,
+                                           existing=distractors)
+        parts += [distractor_mesh(d, layout) for d in distractors]
+    return Building(scene, layout, M.merge(parts), objects, stations, distractors)
 
 
 def station_positions(scene: SceneDescription) -> np.ndarray:

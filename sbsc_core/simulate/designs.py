@@ -2,7 +2,9 @@
 
 ``standard`` is :func:`objects.build_object` (the designs the method was developed on),
 ``alt`` is :func:`objects_alt.build_object_alt` (another manufacturer's products with the
-same catalogue footprints), for measuring recognition on designs it was not tuned on.
+same catalogue footprints), for measuring recognition on designs it was not tuned on;
+``third`` is :func:`objects_third.build_object_third`, a third manufacturer used ONLY TO
+TEST, never to tune (see that module).
 A builder maps a class id to its :class:`~sbsc_core.simulate.mesh.ColouredMesh` in the
 object-local frame; :func:`~sbsc_core.simulate.building.build_building` and
 :func:`~sbsc_core.simulate.library.write_model_library` both take one.
@@ -14,10 +16,12 @@ from ..errors import InputError
 from .building import ObjectBuilder
 from .objects import build_object
 from .objects_alt import build_object_alt
+from .objects_third import build_object_third
 
 DESIGN_SETS: dict[str, ObjectBuilder] = {
     "standard": build_object,
     "alt": build_object_alt,
+    "third": build_object_third,
 }
 DEFAULT_DESIGNS = "standard"
 

@@ -5,6 +5,8 @@ textured: ``tri_texture`` indexes ``textures`` (H, W, 3 uint8 images) and ``tri_
 holds the texture coordinates of its three corners (u right, v *down*, both 0..1, so a
 texture image is drawn as it is seen). ``tri_label`` is -1 for the building and the index
 of the placed object otherwise, which lets tests and the scanner tell what a ray hit.
+``tri_gloss`` (0 matte .. 1 mirror-like) drives the realistic scanner's specular
+highlights and dropouts (:mod:`~sbsc_core.simulate.realism`); it is 0 unless set.
 """
 
 from __future__ import annotations
@@ -24,10 +26,13 @@ class ColouredMesh:
     tri_uv: np.ndarray  # (T, 3, 2) float32
     textures: list[np.ndarray] = field(default_factory=list)
     tri_label: np.ndarray | None = None  # (T,) int32
+    tri_gloss: np.ndarray | None = None  # (T,) float32, 0 = matte
 
     def __post_init__(self) -> None:
         if self.tri_label is None:
             self.tri_label = np.full(len(self.triangles), -1, dtype=np.int32)
+        if self.tri_gloss is None:
+            self.tri_gloss = np.zeros(len(self.triangles), dtype=np.float32)
 
     @property
     def n_triangles(self) -> int:
@@ -44,12 +49,18 @@ class ColouredMesh:
         """Apply x' = R x + t to the vertices; everything else is shared."""
         v = self.vertices @ np.asarray(rotation, float).T + np.asarray(translation, float)
         return ColouredMesh(v, self.triangles, self.tri_colour, self.tri_texture, self.tri_uv,
-                            self.textures, self.tri_label)
+                            self.textures, self.tri_label, self.tri_gloss)
 
     def labelled(self, label: int) -> ColouredMesh:
         return ColouredMesh(self.vertices, self.triangles, self.tri_colour, self.tri_texture,
                             self.tri_uv, self.textures,
-                            np.full(len(self.triangles), label, dtype=np.int32))
+                            np.full(len(self.triangles), label, dtype=np.int32), self.tri_gloss)
+
+    def glossy(self, gloss: float) -> ColouredMesh:
+        """The same mesh with every triangle's gloss set to ``gloss`` (0..1)."""
+        return ColouredMesh(self.vertices, self.triangles, self.tri_colour, self.tri_texture,
+                            self.tri_uv, self.textures, self.tri_label,
+                            np.full(len(self.triangles), gloss, dtype=np.float32))
 
 
 def merge(meshes: Sequence[ColouredMesh]) -> ColouredMesh:
@@ -57,7 +68,7 @@ def merge(meshes: Sequence[ColouredMesh]) -> ColouredMesh:
     meshes = [m for m in meshes if m.n_triangles]
     if not meshes:
         return ColouredMesh.empty()
-    verts, tris, cols, texs, uvs, labels, textures = [], [], [], [], [], [], []
+    verts, tris, cols, texs, uvs, labels, textures, gloss = [], [], [], [], [], [], [], []
     v_off = 0
     for m in meshes:
         verts.append(m.vertices)
@@ -70,10 +81,11 @@ def merge(meshes: Sequence[ColouredMesh]) -> ColouredMesh:
         textures.extend(m.textures)
         uvs.append(m.tri_uv)
         labels.append(m.tri_label)
+        gloss.append(m.tri_gloss)
     return ColouredMesh(
         np.concatenate(verts), np.concatenate(tris), np.concatenate(cols),
         np.concatenate(texs).astype(np.int32), np.concatenate(uvs), textures,
-        np.concatenate(labels).astype(np.int32),
+        np.concatenate(labels).astype(np.int32), np.concatenate(gloss).astype(np.float32),
     )
 
 

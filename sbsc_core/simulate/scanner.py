@@ -9,6 +9,12 @@ surface (``grazing_cos``) and at random (``drop_fraction``). The range gets gaus
 along the ray; the colour (from the scanner's camera) gets a per-station gain, tint and
 offset, a smooth brightness change around the panorama and gaussian noise. The stations
 share one world frame, so merging is concatenation.
+
+With ``effects`` (:class:`~sbsc_core.simulate.realism.ScanEffects`) the sweep also gets
+what a real scanner adds: range noise growing with range, incidence and darkness (in place
+of the constant ``range_sigma_m``), mixed pixels at depth edges, dropouts on dark or glossy
+surfaces, a registration error per station, per-station exposure and white balance and
+specular highlights. Without it the output is exactly that of the plain scanner.
 """
 
 from __future__ import annotations
@@ -21,6 +27,17 @@ import numpy as np
 
 from .mesh import ColouredMesh
 from .raycast import MeshRaycaster
+from .realism import (
+    ScanEffects,
+    camera_response,
+    highlight,
+    mix_edges,
+    range_sigma,
+    reflectance,
+    return_probability,
+    station_camera,
+    station_pose_error,
+)
 
 BLOCK_COLUMNS = 16  # azimuth columns sharing one noise generator
 
@@ -77,6 +94,7 @@ class Scan:
     label: np.ndarray | None  # (N,) int32 mesh tri_label (object index, -1 building)
     stations: np.ndarray  # (S, 3) float64 station origins
     rays: int  # rays cast in all
+    pose_errors: list[tuple[np.ndarray, np.ndarray]] | None = None  # per station (R, t), with effects
 
     def __len__(self) -> int:
         return int(len(self.xyz))
@@ -96,7 +114,7 @@ def angular_grid(settings: ScannerSettings, azimuth_offset: float = 0.0,
 def scan_mesh(mesh: ColouredMesh, stations: Sequence[Sequence[float]], settings: ScannerSettings,
               seed: int = 0, keep_labels: bool = False, keep_station: bool = False,
               log: Callable[[str], None] | None = None,
-              raycaster: MeshRaycaster | None = None) -> Scan:
+              raycaster: MeshRaycaster | None = None, effects: ScanEffects | None = None) -> Scan:
     """Scan ``mesh`` from every station and merge the points (one world frame).
 
     Deterministic for a seed: station ``k`` draws its illumination from
@@ -111,7 +129,7 @@ def scan_mesh(mesh: ColouredMesh, stations: Sequence[Sequence[float]], settings:
     rays = 0
     origins = np.asarray(stations, float).reshape(-1, 3)
     for k, origin in enumerate(origins):
-        xyz, rgb, lab, n = scan_station(rc, origin, settings, seed, k, keep_labels)
+        xyz, rgb, lab, n = scan_station(rc, origin, settings, seed, k, keep_labels, effects)
         rays += n
         xyz_parts.append(xyz)
         rgb_parts.append(rgb)
@@ -128,20 +146,25 @@ def scan_mesh(mesh: ColouredMesh, stations: Sequence[Sequence[float]], settings:
     del rgb_parts
     return Scan(xyz, rgb, (np.concatenate(st_parts) if st_parts else np.zeros(0, np.uint16)) if keep_station else None,
                 (np.concatenate(lab_parts) if lab_parts else np.zeros(0, np.int32)) if keep_labels else None,
-                origins, rays)
+                origins, rays,
+                [station_pose_error(seed, k, effects) for k in range(len(origins))] if effects else None)
 
 
 def scan_station(rc: MeshRaycaster, origin: np.ndarray, settings: ScannerSettings,
-                 seed: int = 0, station: int = 0, keep_labels: bool = False
+                 seed: int = 0, station: int = 0, keep_labels: bool = False,
+                 effects: ScanEffects | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, int]:
     """One station's sweep: (xyz float32, rgb uint8, labels or None, rays cast)."""
     s = settings
+    e = effects
     rng = np.random.default_rng([int(seed), int(station)])
     az, el = angular_grid(s, azimuth_offset=rng.uniform(0, 2 * math.pi), elevation_offset=rng.uniform(0, 1))
     # per-station illumination of the colour camera
     gain = rng.normal(1.0, s.gain_sigma) * rng.normal(1.0, s.tint_sigma, 3)
     offset = rng.normal(0.0, s.offset_sigma, 3)
     light_dir = rng.uniform(0, 2 * math.pi)
+    if e is not None:
+        exposure, wb = station_camera(seed, station, e)
     gain32, offset32 = gain.astype(np.float32), offset.astype(np.float32)
     cos_el, sin_el = np.cos(el).astype(np.float32), np.sin(el).astype(np.float32)
     origin32 = np.asarray(origin, np.float32)
@@ -157,16 +180,38 @@ def scan_station(rc: MeshRaycaster, origin: np.ndarray, settings: ScannerSetting
         dirs = dirs.reshape(-1, 3)
         hits = rc.cast(origin32, dirs)
         t = hits.t
+        cos_inc = np.einsum("ij,ij->i", dirs, hits.normal)
+        surface = hits.rgb
+        if e is not None:
+            g_eff = np.random.default_rng([int(seed), int(station), a0, 0xE1])
+            grid = (len(a), len(el))
+            mt, mrgb, _ = mix_edges(t.reshape(grid), surface.reshape(*grid, 3), dirs.reshape(*grid, 3),
+                                    hits.normal.reshape(*grid, 3), math.radians(s.angular_step_deg), e, g_eff)
+            t, surface = mt.ravel(), mrgb.reshape(-1, 3)
         keep = np.isfinite(t) & (t >= s.min_range_m) & (t <= s.max_range_m)
-        keep &= np.abs(np.einsum("ij,ij->i", dirs, hits.normal)) >= s.grazing_cos
+        keep &= np.abs(cos_inc) >= s.grazing_cos
+        if e is not None:
+            gloss = np.zeros(len(t), np.float32)
+            gloss[hits.hit] = rc.mesh.tri_gloss[hits.triangle[hits.hit]]
+            rho = reflectance(hits.rgb)
+            k_idx = np.nonzero(keep)[0]
+            p = return_probability(t[k_idx], cos_inc[k_idx], rho[k_idx], gloss[k_idx], e)
+            keep[k_idx[g_eff.random(len(k_idx), dtype=np.float32) >= p]] = False
         idx, t_noise, c_noise = _block_noise(np.nonzero(keep)[0], a0, len(el), s.drop_fraction,
                                              (int(seed), int(station)))
-        t = t[idx] + np.float32(s.range_sigma_m) * t_noise
+        if e is None:
+            t = t[idx] + np.float32(s.range_sigma_m) * t_noise
+        else:
+            t = t[idx] + range_sigma(t[idx], cos_inc[idx], rho[idx], e) * t_noise
         out_xyz.append(origin32 + t[:, None] * dirs[idx])
         # colour: per-station gain / offset, smooth brightness around the panorama, noise
         column_gain = (1.0 + s.gradient_amplitude * np.cos(a - light_dir)).astype(np.float32)
         shade = column_gain[idx // len(el)][:, None] * gain32[None, :]
-        col = hits.rgb[idx].astype(np.float32)
+        if e is None:
+            col = surface[idx].astype(np.float32)
+        else:
+            col = camera_response(surface[idx], exposure, wb)
+            col += 255.0 * highlight(out_xyz[-1], hits.normal[idx], origin32, gloss[idx], e)[:, None]
         col *= shade
         col += offset32
         col += np.float32(s.colour_sigma) * c_noise
@@ -176,6 +221,9 @@ def scan_station(rc: MeshRaycaster, origin: np.ndarray, settings: ScannerSetting
         if keep_labels:
             out_lab.append(hits.label[idx])
     xyz = np.concatenate(out_xyz) if out_xyz else np.zeros((0, 3), np.float32)
+    if e is not None:
+        rot, shift = station_pose_error(seed, station, e)
+        xyz = (origin32 + (xyz - origin32) @ rot.T.astype(np.float32) + shift.astype(np.float32)).astype(np.float32)
     rgb = np.concatenate(out_rgb) if out_rgb else np.zeros((0, 3), np.uint8)
     lab = (np.concatenate(out_lab) if out_lab else np.zeros(0, np.int32)) if keep_labels else None
     return xyz, rgb, lab, len(az) * len(el)

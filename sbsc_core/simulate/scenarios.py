@@ -13,6 +13,7 @@ under version control; regenerate them with ``python -m sbsc_core.simulate.scena
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -51,9 +52,12 @@ class SimulationSummary:
 # --------------------------------------------------------------------------- simulate
 
 
+REALISM_OPTIONS = ("realistic", "clutter", "furniture", "survey_frame")
+
+
 def simulate_scenario(scenario: str, out: Path, seed: int = 0, angular_step_deg: float | None = None,
                       log: Log | None = None, object_builder: ObjectBuilder | None = None,
-                      library_builder: ObjectBuilder | None = None) -> SimulationSummary:
+                      library_builder: ObjectBuilder | None = None, **realism: bool) -> SimulationSummary:
     """Scan the shipped Scenario ``"I"`` or ``"II"`` into ``out`` (see :func:`simulate_scene`)."""
     if scenario not in ("I", "II"):
         raise InputError("--scenario", f"unknown scenario {scenario!r} (I or II)")
@@ -61,13 +65,37 @@ def simulate_scenario(scenario: str, out: Path, seed: int = 0, angular_step_deg:
         raise InputError("--seed", f"expected a whole number from 0 to 2**63-1, got {seed!r}")
     path = sample_projects_dir() / f"scenario_{scenario}.yaml"
     return simulate_scene(path, out, seed=seed, angular_step_deg=angular_step_deg, log=log,
-                          object_builder=object_builder, library_builder=library_builder)
+                          object_builder=object_builder, library_builder=library_builder, **realism)
+
+
+def apply_realism(scene: SceneDescription, realistic: bool = False, clutter: bool = False,
+                  furniture: bool = False, survey_frame: bool = False) -> SceneDescription:
+    """Turn on realism options with their defaults where the description leaves them off.
+
+    ``realistic``: the realistic scanner with published defaults (:class:`ScanEffects`);
+    ``clutter``: 0.4 wall items per metre of wall; ``furniture``: 0.15 pieces per metre;
+    ``survey_frame``: a UTM-like frame at (412000, 5612000, 100) m turned by 23.5 degrees.
+    """
+    from .realism import ScanEffects
+    from .scene import SurveyFrameSpec
+    from .survey import DEFAULT_ROTATION_DEG, UTM_LIKE_OFFSET
+
+    if realistic and scene.effects is None:
+        scene.effects = ScanEffects()
+    if clutter and not scene.clutter_per_metre:
+        scene.clutter_per_metre = 0.4
+    if furniture and not scene.furniture_per_metre:
+        scene.furniture_per_metre = 0.15
+    if survey_frame and scene.survey_frame is None:
+        scene.survey_frame = SurveyFrameSpec(UTM_LIKE_OFFSET, DEFAULT_ROTATION_DEG)
+    return scene
 
 
 def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_step_deg: float | None = None,
                    log: Log | None = None, object_builder: ObjectBuilder | None = None,
-                   design: bool = True, library_builder: ObjectBuilder | None = None
-                   ) -> SimulationSummary:
+                   design: bool = True, library_builder: ObjectBuilder | None = None,
+                   realistic: bool = False, clutter: bool = False, furniture: bool = False,
+                   survey_frame: bool = False) -> SimulationSummary:
     """Build the described floor, scan it and write contracts 1, 2, 3 and 5 into ``out``.
 
     ``out`` receives ``scan.ply`` (float32 xyz, uchar colour), ``ground_truth.json``,
@@ -80,10 +108,17 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
     designs; see :mod:`designs`). The model library in ``models/`` is rendered with the same
     designs unless ``library_builder`` names another set (a cross-design test: scene in one
     set, models in another).
+
+    The realism options (``realistic``, ``clutter``, ``furniture``, ``survey_frame``; or the
+    description's ``realism``, ``clutter``, ``furniture``, ``survey_frame`` keys) add the
+    realistic scanner, wall clutter and furniture (the truth's ``distractors``), and write
+    scan and truth in a survey frame; with any of them the truth also records each
+    object's ``visible_fraction`` and the stations' ``registration_errors``. All off, the
+    output is that of the plain simulator.
     """
     t0 = time.perf_counter()
     say = log or (lambda msg: None)
-    scene = load_scene(description_path)
+    scene = apply_realism(load_scene(description_path), realistic, clutter, furniture, survey_frame)
     settings = scene.scanner
     if angular_step_deg is not None:
         try:
@@ -91,17 +126,41 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
         except ValueError as exc:
             raise InputError("--step", str(exc)) from None
         scene.scanner = settings
-    building = build_building(scene, object_builder)
+    building = build_building(scene, object_builder, seed=seed)
     say(f"{scene.source}: {len(building.layout.walls)} walls, {len(building.objects)} objects, "
-        f"{building.mesh.n_triangles:,} triangles; scanning from {len(building.stations)} stations "
-        f"at {settings.angular_step_deg:g} deg")
-    scan = scan_mesh(building.mesh, building.stations, settings, seed=seed, log=log)
+        f"{len(building.distractors)} distractors, {building.mesh.n_triangles:,} triangles; scanning from "
+        f"{len(building.stations)} stations at {settings.angular_step_deg:g} deg"
+        + (" with the realistic scanner" if scene.effects else ""))
+    from .raycast import MeshRaycaster
+
+    rc = MeshRaycaster(building.mesh, chunk=int(settings.chunk_rays))
+    scan = scan_mesh(building.mesh, building.stations, settings, seed=seed, log=log, raycaster=rc,
+                     effects=scene.effects)
     say(f"{len(scan):,} points from {scan.rays:,} rays; writing {out}")
+    truth = building.truth_document()
+    if scene.realistic:
+        from .visibility import visible_fractions
+
+        for obj, frac in zip(truth["objects"], visible_fractions(building, settings, rc), strict=True):
+            obj["visible_fraction"] = round(frac, 4)
+        if scan.pose_errors is not None:
+            truth["registration_errors"] = [
+                {"station": k, "translation_m": [round(float(x), 6) for x in t],
+                 "rotation_deg": round(math.degrees(math.acos(min(1.0, (float(np.trace(r)) - 1) / 2))), 6)}
+                for k, (r, t) in enumerate(scan.pose_errors)]
+    frame = None
+    if scene.survey_frame is not None:
+        from .survey import SurveyFrame
+
+        frame = SurveyFrame(scene.survey_frame.offset, scene.survey_frame.rotation_deg)
+        truth = frame.truth(truth)
     with atomic_output_dir(out) as tmp:
-        write_ply(tmp / "scan.ply", scan.xyz, scan.rgb)
+        if frame is None:
+            write_ply(tmp / "scan.ply", scan.xyz, scan.rgb)
+        else:
+            write_ply(tmp / "scan.ply", frame.points(scan.xyz), scan.rgb, double=True)
         n_points, n_rays = len(scan), scan.rays
         del scan
-        truth = building.truth_document()
         if design:
             from ..bim.design import write_as_designed_ifc
 

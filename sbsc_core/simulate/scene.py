@@ -19,6 +19,11 @@ outlines, openings (doors, windows) on walls and objects placed on walls::
     stations:                                       # optional; default: planned per room
       - {room: R1, xy: [2.0, 1.5]}
     scanner: {angular_step_deg: 0.1}                # optional ScannerSettings fields
+    # optional realism (all off by default; see realism.py, clutter.py, survey.py):
+    realism: {}                      # the realistic scanner; {} = published defaults, or ScanEffects fields
+    clutter: {per_metre: 0.4}        # wall clutter that is none of the classes
+    furniture: {per_metre: 0.15}     # furniture against the walls
+    survey_frame: {offset: [412000, 5612000, 100], rotation_deg: 23.5}
 
 Rooms are the free space; the solid between two rooms is a wall whose thickness is the
 gap between their outlines. Every edge of a room outline is one wall (contract 4): its id
@@ -49,6 +54,7 @@ import yaml
 from ..errors import InputError
 from ..types import WallFrame
 from .catalogue import CATALOGUE
+from .realism import ScanEffects
 from .scanner import ScannerSettings
 
 SCHEMA = "sbsc.scene/1"
@@ -150,6 +156,23 @@ class SceneDescription:
     objects: list[ObjectPlacement]
     stations: list[StationSpec]  # empty: planned by the scanner
     scanner: ScannerSettings
+    effects: ScanEffects | None = None  # the realistic scanner (None: off)
+    clutter_per_metre: float = 0.0  # wall clutter items per metre of wall (0: none)
+    furniture_per_metre: float = 0.0  # furniture pieces per metre of wall (0: none)
+    survey_frame: SurveyFrameSpec | None = None  # write scan and truth in a survey frame
+
+    @property
+    def realistic(self) -> bool:
+        """Any of the realism options on (the truth then records ``visible_fraction``)."""
+        return bool(self.effects or self.clutter_per_metre or self.furniture_per_metre or self.survey_frame)
+
+
+@dataclass(frozen=True)
+class SurveyFrameSpec:
+    """World = R_z(rotation_deg) * local + offset (a projected survey frame, e.g. UTM)."""
+
+    offset: tuple[float, float, float]
+    rotation_deg: float
 
 
 @dataclass(frozen=True)
@@ -227,7 +250,8 @@ def parse_scene(data: Any, source: str = "scene") -> SceneDescription:
         raise InputError(source, "expected a mapping at the top level")
     r.known_keys(data, "", {"schema", "name", "ceiling_height_m", "exterior_wall_thickness_m",
                             "door_frame_width_m", "colours", "rooms", "openings", "objects",
-                            "stations", "scanner", "object_rotation"})
+                            "stations", "scanner", "object_rotation", "realism", "clutter", "furniture",
+                            "survey_frame"})
     schema = data.get("schema", SCHEMA)
     if schema != SCHEMA:
         raise InputError(f"{source}: schema", f"unsupported schema {schema!r} (expected {SCHEMA!r})")
@@ -254,13 +278,14 @@ def parse_scene(data: Any, source: str = "scene") -> SceneDescription:
                                int(r.number(turn, "seed", "object_rotation", default=0.0, lo=0.0, hi=2.0**31)))
     stations = [r.station(item, i, height) for i, item in enumerate(r.seq(data, "stations"))]
     scanner = r.scanner(data.get("scanner", {}) or {})
+    extras = r.realism_options(data)
     scene = SceneDescription(
         name=str(data.get("name", source)), source=source, ceiling_height_m=height,
         exterior_wall_thickness_m=r.number(data, "exterior_wall_thickness_m", "", default=0.25,
                                            lo=0.02, hi=2.0),
         door_frame_width_m=r.number(data, "door_frame_width_m", "", default=0.07, lo=0.0, hi=0.3),
         colours=colours, rooms=rooms, openings=openings, objects=objects, stations=stations,
-        scanner=scanner,
+        scanner=scanner, **extras,
     )
     if objects is not upright:  # a turned object that no longer fits its wall stays upright
         scene.objects = _fitting_turns(scene, upright)
@@ -608,6 +633,36 @@ class _Reader:
             return ScannerSettings(**kwargs)
         except ValueError as exc:
             raise self.fail("scanner", str(exc)) from None
+
+
+    def realism_options(self, data: Mapping) -> dict:
+        """``realism``, ``clutter``, ``furniture`` and ``survey_frame`` (each optional)."""
+        out: dict[str, Any] = {}
+        if data.get("realism") is not None:
+            d = {} if data["realism"] is True else self.mapping(data["realism"], "realism")
+            known = {f.name for f in fields(ScanEffects)}
+            for key in d:
+                if key not in known:
+                    raise self.fail(f"realism.{key}", f"unknown setting (known: {', '.join(sorted(known))})")
+            try:
+                out["effects"] = ScanEffects(**{k: self.number(d, k, "realism") for k in d})
+            except ValueError as exc:
+                raise self.fail("realism", str(exc)) from None
+        for key, default in (("clutter", 0.4), ("furniture", 0.15)):
+            if data.get(key) is not None:
+                d = {} if data[key] is True else self.mapping(data[key], key)
+                self.known_keys(d, key, {"per_metre"})
+                out[f"{key}_per_metre"] = self.number(d, "per_metre", key, default=default, lo=0.0, hi=5.0)
+        if data.get("survey_frame") is not None:
+            d = self.mapping(data["survey_frame"], "survey_frame")
+            self.known_keys(d, "survey_frame", {"offset", "rotation_deg"})
+            off = d.get("offset", [0, 0, 0])
+            if not isinstance(off, list | tuple) or len(off) != 3 or not all(_is_num(x) and abs(x) < 1e8 for x in off):
+                raise self.fail("survey_frame.offset", "expected [x, y, z] with |values| < 1e8")
+            out["survey_frame"] = SurveyFrameSpec(tuple(float(x) for x in off),
+                                                  self.number(d, "rotation_deg", "survey_frame", default=0.0,
+                                                              lo=-360.0, hi=360.0))
+        return out
 
 
 def _is_num(x: Any) -> bool:
