@@ -8,7 +8,7 @@ PLY per station, kept in the run dir) and detected twice over:
 
 * whole: ``sbsc detect`` on every station file of the building;
 * alone: ``sbsc detect`` on the station files of one storey only (the same floor scanned
-  alone: exactly the same points).
+  alone: exactly the same points), with the expected counts of that storey's objects.
 
 Both are evaluated per storey against the building's ground truth (objects of that storey;
 a detection of the whole run counts for the storey of its wall), with
@@ -45,10 +45,10 @@ def _run(cmd: list[str]) -> tuple[float, float]:
     return time.perf_counter() - t, rss_kb / 2**20
 
 
-def _detect(scans: list[Path], sim: Path, out: Path, redo: bool) -> tuple[dict, float, float]:
+def _detect(scans: list[Path], sim: Path, expected: Path, out: Path, redo: bool) -> tuple[dict, float, float]:
     if redo or not (out / "detections.json").exists():
         secs, rss = _run([*SBSC, "-q", "detect", *map(str, scans), "--models", str(sim / "models"),
-                          "--expected", str(sim / "expected.json"), "--out", str(out)])
+                          "--expected", str(expected), "--out", str(out)])
         (out / "run.json").write_text(json.dumps({"seconds": secs, "rss_gib": rss}))
     run = json.loads((out / "run.json").read_text())
     return json.loads((out / "detections.json").read_text()), run["seconds"], run["rss_gib"]
@@ -72,12 +72,18 @@ def bench(n: int, scene: str, step: float, run_dir: Path, redo: bool) -> dict:
         print(f"simulated {sim.name} in {secs:.0f} s, peak {rss:.2f} GiB", flush=True)
     truth = json.loads((sim / "ground_truth.json").read_text())
     files = sorted((sim / "stations").iterdir())
-    whole, w_secs, w_rss = _detect(files, sim, run_dir / f"{sim.name}_whole", redo)
+    whole, w_secs, w_rss = _detect(files, sim, sim / "expected.json", run_dir / f"{sim.name}_whole", redo)
     rows = []
     found = {s["id"]: s for s in whole.get("storeys", [])}
     for st in truth["storeys"]:
         sid = st["id"]
-        alone, a_secs, a_rss = _detect([f for f in files if f.name.startswith(sid + "_")], sim,
+        counts: dict[str, int] = {}
+        for o in truth["objects"]:
+            if o["storey"] == sid:
+                counts[o["class"]] = counts.get(o["class"], 0) + 1
+        expected = run_dir / f"{sim.name}_{sid}_expected.json"  # the floor alone holds its own objects
+        expected.write_text(json.dumps({"schema": "sbsc.expected/1", "counts": counts}))
+        alone, a_secs, a_rss = _detect([f for f in files if f.name.startswith(sid + "_")], sim, expected,
                                        run_dir / f"{sim.name}_{sid}_alone", redo)
         walls = {w["id"] for w in whole["walls"] if w.get("storey") == sid}
         got = found.get(sid)

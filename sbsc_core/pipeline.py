@@ -85,6 +85,7 @@ from .types import (
 from .wall_area import find_wall_area
 
 Progress = Callable[[str, float], None]
+_TALL_STOREY_M = 5.0  # a storey higher than this is named in a warning (several storeys taken as one?)
 
 
 @dataclass
@@ -494,6 +495,9 @@ def detect_to_dir(
         found = sum(1 for d in result.detections if d.wall_id in {w.id for w in walls})
         log(f"storey {st.id}: floor z = {st.floor_z:.2f} m, ceiling z = {st.ceiling_z:.2f} m, "
             f"{len(walls)} walls, {found} objects")
+        if st.ceiling_z - st.floor_z > _TALL_STOREY_M:
+            log(f"warning: storey {st.id} is {st.ceiling_z - st.floor_z:.1f} m high; if it is several storeys, "
+                "no slab between them was seen (check the scan)")
     log(f"{len(seg.walls)} walls, {len(result.openings)} openings, "
         f"{len(result.detections)} objects in {result.timings['total']:.1f} s")
     progress("writing", 0.0)

@@ -167,9 +167,11 @@ def find_storeys(z: np.ndarray, settings: SegmentationSettings | None = None,
     Storeys are separated by slabs: Z ranges of at least ``min_slab_m`` where the histogram
     of Z (``storey_bin_m`` bins) holds less than ``slab_gap_fraction`` of its median bin
     between the lowest and the highest point (a floor's walls fill every bin between its
-    floor and its ceiling; inside a slab there is nothing to see). A part lower than
-    ``min_room_height_m`` is no storey of its own: it joins its neighbour across the thinner
-    slab. Each part's floor and ceiling are then found by :func:`find_floor_ceiling`. The
+    floor and its ceiling; inside a slab there is nothing to see but a stairwell), with a
+    horizontal surface (a bin of ``slab_level_factor`` times the median) within
+    ``slab_level_reach_m`` below (a ceiling) and above (a floor). A part lower than
+    ``min_room_height_m`` is no storey of its own: it joins the part below it (the lowest
+    part joins the one above). Each part's floor and ceiling are then found by :func:`find_floor_ceiling`. The
     thresholds are fractions, so a regular subsample gives the same storeys.
     """
     s = settings or SegmentationSettings()
@@ -183,30 +185,31 @@ def find_storeys(z: np.ndarray, settings: SegmentationSettings | None = None,
     xs = None if xy is None else np.asarray(xy)[::step][keep]
     lo, b = float(zs.min()), s.storey_bin_m
     counts = np.bincount(((zs - lo) / b).astype(np.int64)).astype(np.float64)
-    empty = counts < s.slab_gap_fraction * float(np.median(counts))
-    # runs of empty bins: (first, end) bin numbers
+    median = float(np.median(counts))
+    empty = np.convolve(counts, np.ones(3) / 3, mode="same") < s.slab_gap_fraction * median
+    level = counts >= s.slab_level_factor * median  # bins of a horizontal surface
+    near = max(1, int(round(s.slab_level_reach_m / b)))
+    # runs of (almost) empty bins, (first, end) bin numbers, with a ceiling just below and a
+    # floor just above (a stairwell's walls go on through the slab, a sparse band in a wall does not)
     edges = np.diff(np.concatenate(([0], empty.astype(np.int8), [0])))
-    runs = [(a, e) for a, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True)
-            if (e - a) * b >= s.min_slab_m]
+    cuts = [(a, e) for a, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True)
+            if (e - a) * b >= s.min_slab_m and 0 < a and e < len(counts)
+            and level[max(0, a - near): a].any() and level[e: e + near].any()]
     # parts between the slabs: [start, end) bins, merged while one is too low for a storey
-    cuts = [(a, e) for a, e in runs if 0 < a and e < len(counts)]
     parts = [[0, len(counts)]]
     for a, e in cuts:
         parts[-1][1] = a
         parts.append([e, len(counts)])
-    gaps = [e - a for a, e in cuts]
     while len(parts) > 1:
         heights = [(p1 - p0) * b for p0, p1 in parts]
         k = int(np.argmin(heights))
         if heights[k] >= s.min_room_height_m:
             break
-        # join with the neighbour across the thinner slab
-        if k == 0 or (k < len(parts) - 1 and gaps[k] < gaps[k - 1]):
-            j = k
-        else:
-            j = k - 1
+        # a part too low for a storey is the top of the one below (the ceiling of a higher
+        # room over a void above its neighbours' lower ceilings), the lowest one joins the next
+        j = max(0, k - 1)
         parts[j] = [parts[j][0], parts[j + 1][1]]
-        del parts[j + 1], gaps[j]
+        del parts[j + 1]
     out = []
     for p0, p1 in parts:
         z_a, z_b = lo + p0 * b, lo + p1 * b
@@ -227,7 +230,8 @@ def find_floor_ceiling(z: np.ndarray, settings: SegmentationSettings | None = No
     coordinates, aligned with ``z``) a level must also cover at least ``min_level_area``
     of the plan area of the largest level; without a ceiling that wide (a scan without
     ceiling points, where door and window heads form small levels) the ceiling is the top
-    of the cloud. Each level is refined as the median Z within 1.5 bins of its peak. Works
+    of the cloud. A smaller level (at least ``min_ceiling_area_m2``) above the wide ceiling is
+    the ceiling of a higher room: the highest such is the ceiling. Each level is refined as the median Z within 1.5 bins of its peak. Works
     in whatever frame ``z`` is given. Raises NoWallsError without a floor and a ceiling.
     """
     s = settings or SegmentationSettings()
@@ -244,16 +248,25 @@ def find_floor_ceiling(z: np.ndarray, settings: SegmentationSettings | None = No
     padded = np.concatenate(([0.0], smooth, [0.0]))  # a level in the first or last bin is a peak too
     peaks, props = find_peaks(padded, prominence=s.min_level_fraction * float(smooth.max()))
     peaks = peaks - 1
+    small = np.zeros(0, np.int64)
     if len(peaks) and xy is not None:
         areas = _level_areas(zs, np.asarray(xy)[::step][keep], lo + (peaks + 0.5) * b, b, s)
-        peaks = peaks[areas >= s.min_level_area * areas.max()]
+        wide = areas >= s.min_level_area * areas.max()
+        small = peaks[~wide & (areas >= s.min_ceiling_area_m2)]
+        peaks = peaks[wide]
     if len(peaks) == 0:
         raise NoWallsError("no walls found: the Z histogram has no level")
-    levels = [float(np.median(zs[np.abs(zs - (lo + (p + 0.5) * b)) <= 1.5 * b])) for p in sorted(peaks)]
+
+    def refined(p: int) -> float:
+        return float(np.median(zs[np.abs(zs - (lo + (p + 0.5) * b)) <= 1.5 * b]))
+
+    levels = [refined(p) for p in sorted(peaks)]
     floor = levels[0]
     above = [v for v in levels if v >= floor + s.min_room_height_m]
     if above:
-        return floor, above[-1]
+        # a room higher than the others: its smaller ceiling above the wide ones is the top
+        higher = [refined(p) for p in small if lo + (p + 0.5) * b > above[-1] + 2 * b]
+        return floor, max([above[-1], *higher])
     top = float(np.quantile(zs, s.top_quantile))
     if xy is None or top < floor + s.min_room_height_m:
         raise NoWallsError("no walls found: the Z histogram has no floor and ceiling pair "
@@ -787,28 +800,59 @@ def assign_points_to_walls(xyz: np.ndarray, origin: np.ndarray, walls: list[Wall
     indices). A point belongs to a wall when it lies over the wall's frame (``u`` within
     ``wall_plane_tolerance_m`` of ``0..width``, ``slab_tolerance_m`` above its floor and
     below its top) between ``behind_depth_m`` behind and ``object_depth_m`` in front of the
-    plane; of several such walls the one whose plane is nearest gets it.
+    plane; of several such walls the one whose plane is nearest gets it. Points are
+    bucketed on an XY grid (``assign_cell_m``) spanning the walls, not the points, so that
+    each wall only looks at the buckets its slab covers and stray points cost nothing.
     """
     s = settings or SegmentationSettings()
     n = len(xyz)
+    if n == 0 or not walls:
+        return [np.zeros(0, np.int64) for _ in walls]
+    tol, sl, cell = s.wall_plane_tolerance_m, s.slab_tolerance_m, s.assign_cell_m
+    org = np.asarray(origin, np.float64)
+    corners = []
+    for wall in walls:
+        f = wall.frame
+        for u in (-tol, f.width_m + tol):
+            for d in (-s.behind_depth_m, s.object_depth_m):
+                corners.append((f.origin - org + u * f.axis_u + d * f.normal)[:2])
+    lo = np.min(corners, axis=0) - cell
+    hi = np.max(corners, axis=0) + cell
+    nx, ny = int((hi[0] - lo[0]) / cell) + 1, int((hi[1] - lo[1]) / cell) + 1
+    key = np.full(n, nx * ny, np.int64)  # nx * ny: outside every wall's slab
+    for a in range(0, n, _CHUNK):
+        c = xyz[a: a + _CHUNK]
+        fx = (c[:, 0] - np.float32(lo[0])) / np.float32(cell)
+        fy = (c[:, 1] - np.float32(lo[1])) / np.float32(cell)
+        ok = (fx >= 0) & (fx < nx) & (fy >= 0) & (fy < ny)
+        key[a: a + _CHUNK][ok] = fy[ok].astype(np.int64) * nx + fx[ok].astype(np.int64)
+    order = np.argsort(key, kind="stable")
+    starts = np.concatenate([[0], np.cumsum(np.bincount(key, minlength=nx * ny + 1))])
+    del key
     best = np.full(n, np.inf, np.float32)
     owner = np.full(n, -1, np.int32)
-    tol, sl = s.wall_plane_tolerance_m, s.slab_tolerance_m
+    step = cell / 2
     for w, wall in enumerate(walls):
         f = wall.frame
-        o = (f.origin - np.asarray(origin, np.float64)).astype(np.float32)
-        for a in range(0, n, _CHUNK):
-            c = xyz[a: a + _CHUNK] - o
-            v = c[:, 2]
-            u = c[:, 0] * np.float32(f.axis_u[0]) + c[:, 1] * np.float32(f.axis_u[1])
-            d = c[:, 0] * np.float32(f.normal[0]) + c[:, 1] * np.float32(f.normal[1])
-            ok = ((d >= -s.behind_depth_m) & (d <= s.object_depth_m) & (u >= -tol) & (u <= f.width_m + tol)
-                  & (v > sl) & (v < f.height_m - sl))
-            ad = np.abs(d)
-            ok &= ad < best[a: a + _CHUNK]
-            sel = np.flatnonzero(ok)
-            best[a + sel] = ad[sel]
-            owner[a + sel] = w
+        o = f.origin - org
+        us = np.arange(-tol, f.width_m + tol + step, step)
+        ds = np.arange(-s.behind_depth_m, s.object_depth_m + step, step)
+        uu, dd = np.meshgrid(us, ds)
+        pts = o[:2] + uu.ravel()[:, None] * f.axis_u[:2] + dd.ravel()[:, None] * f.normal[:2]
+        ij = np.clip(np.floor((pts - lo) / cell).astype(np.int64), 0, [nx - 1, ny - 1])
+        buckets = np.unique(ij[:, 1] * nx + ij[:, 0])
+        cand = np.concatenate([order[starts[b]: starts[b + 1]] for b in buckets])
+        if len(cand) == 0:
+            continue
+        c = xyz[cand] - o.astype(np.float32)
+        u = c[:, 0] * np.float32(f.axis_u[0]) + c[:, 1] * np.float32(f.axis_u[1])
+        d = c[:, 0] * np.float32(f.normal[0]) + c[:, 1] * np.float32(f.normal[1])
+        v = c[:, 2]
+        ad = np.abs(d)
+        ok = ((d >= -s.behind_depth_m) & (d <= s.object_depth_m) & (u >= -tol) & (u <= f.width_m + tol)
+              & (v > sl) & (v < f.height_m - sl) & (ad < best[cand]))
+        best[cand[ok]] = ad[ok]
+        owner[cand[ok]] = w
     grouped = np.argsort(owner, kind="stable")
     bounds = np.concatenate([[0], np.cumsum(np.bincount(owner.astype(np.int64) + 1, minlength=len(walls) + 1))])
     return [grouped[bounds[w + 1]: bounds[w + 2]].astype(np.int64) for w in range(len(walls))]

@@ -26,6 +26,7 @@ class SegmentationSettings:
     min_level_fraction: float = 0.05  # a level stands out by at least this x the largest one
     min_level_area: float = 0.25  # ... and covers at least this x the plan area of the widest level
     level_cell_m: float = 0.1  # plan cells for that area
+    min_ceiling_area_m2: float = 2.0  # a smaller level above the wide ceiling is a higher room's ceiling
     level_dominance: float = 2.0  # a cell is level there with this x the points of the slabs beside
     top_quantile: float = 0.999  # without a ceiling level the walls end at this quantile of Z
     histogram_max_points: int = 2_000_000  # the histogram uses a regular subsample of this size
@@ -66,8 +67,10 @@ class SegmentationSettings:
     max_extent_m: float = 2000.0  # a dense part wider than this is not a building
     # storeys: parts of the Z range separated by slabs (Z bins with almost no points)
     storey_bin_m: float = 0.02  # Z histogram bin of the storey profile
-    slab_gap_fraction: float = 0.03  # a bin is in a slab with less than this x the median bin count
+    slab_gap_fraction: float = 0.25  # a bin is in a slab with less than this x the median bin count (3 bins smoothed)
     min_slab_m: float = 0.08  # a slab between two storeys is at least this thick
+    slab_level_factor: float = 5.0  # ... and has a level (a bin of this x the median) below and above it
+    slab_level_reach_m: float = 0.1  # ... this close
 
 
 @dataclass

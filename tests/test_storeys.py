@@ -52,6 +52,31 @@ def test_two_storeys_are_found_with_their_walls(two_storeys: PointCloud) -> None
         assert st.floor_z < z[w.point_index].min() and z[w.point_index].max() < st.ceiling_z
 
 
+def test_storeys_joined_by_a_stairwell_are_still_two(two_storeys: PointCloud) -> None:
+    # a 2 x 3.5 m stairwell beside the rooms, its walls going on through the slab
+    shaft = Room([(8.15, 0), (9.65, 0), (9.65, 2.5), (8.15, 2.5)], {3: [Hole("door", 0.5, 1.4, 0, 2.1)]})
+    well = make_scene([shaft], height=5.75, spacing=0.03, noise_m=0.002, see_through_m=0.0, origin=ORIGIN, seed=20)[0]
+    cloud = _stack(two_storeys, well)
+    seg = segment_floor_ceiling_walls(cloud)
+    assert [(st.id, round(st.floor_z, 2), round(st.ceiling_z, 2)) for st in seg.storeys] == [
+        ("S1", 0.0, 2.9), ("S2", 3.15, 5.75)]
+    assert len([w for w in seg.walls if w.storey == "S1"]) >= 8
+
+
+def test_one_higher_room_among_lower_ones_is_no_storey_of_its_own() -> None:
+    # storey 1: a small room 3.0 m high beside two rooms 2.6 m high; then a slab and storey 2
+    rooms = [Room([(0, 0), (2, 0), (2, 3), (0, 3)]), Room([(2.15, 0), (7, 0), (7, 3), (2.15, 3)]),
+             Room([(7.15, 0), (12, 0), (12, 3), (7.15, 3)])]
+    parts = [make_scene([r], height=h, spacing=0.03, see_through_m=0.0, origin=ORIGIN, seed=30 + i)[0]
+             for i, (r, h) in enumerate(zip(rooms, (3.0, 2.6, 2.6), strict=True))]
+    parts += [make_scene(rooms, height=2.7, floor_z=3.3, spacing=0.03, see_through_m=0.0, origin=ORIGIN, seed=40)[0]]
+    seg = segment_floor_ceiling_walls(_stack(*parts))
+    assert [(st.id, round(st.floor_z, 2), round(st.ceiling_z, 2)) for st in seg.storeys] == [
+        ("S1", 0.0, 3.0), ("S2", 3.3, 6.0)]
+    heights = sorted(round(w.frame.height_m, 2) for w in seg.walls if w.storey == "S1")
+    assert heights == [2.6] * 8 + [3.0] * 4
+
+
 def test_each_wall_takes_the_height_of_its_own_room(two_storeys: PointCloud) -> None:
     seg = segment_floor_ceiling_walls(two_storeys)
     s1 = [w for w in seg.walls if w.storey == "S1"]
