@@ -434,9 +434,13 @@ def detect_scans(
     templates = make_templates(library, s.orthoimage.pixel_m, classes)
     prototypes = learn_prototypes(templates, s.colour)
     timings["templates"] = time.perf_counter() - t
-    wall_jobs = [(str(scratch), w, wall.id, wall.frame, templates, prototypes, s) for w, wall in enumerate(seg.walls)]
-    walls = _collect_walls(_in_order(executor, wall_jobs, _partition_wall_job, 2 * workers), len(seg.walls),
-                           progress, timings)
+    # the biggest walls first, so that no worker is left with a big one at the end; the
+    # results are put back in the walls' order (the consensus sees them as in memory)
+    order = sorted(range(len(seg.walls)), key=lambda w: -int(kept[w]))
+    wall_jobs = [(str(scratch), w, seg.walls[w].id, seg.walls[w].frame, templates, prototypes, s) for w in order]
+    done = _collect_walls(_in_order(executor, wall_jobs, _partition_wall_job, 2 * workers), len(seg.walls),
+                          progress, timings)
+    walls = {wall.id: done[wall.id] for wall in seg.walls}
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
     timings["total"] = time.perf_counter() - t0
     return result, points
