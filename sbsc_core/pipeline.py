@@ -23,6 +23,7 @@ import itertools
 import json
 import multiprocessing
 import os
+import re
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -177,6 +178,57 @@ def _ready() -> bool:
     return True
 
 
+def _environ(name: str) -> str | None:
+    """An environment variable as a worker sees it."""
+    return os.environ.get(name)
+
+
+def _is_amd_zen4() -> bool:
+    """True on an AMD family 19h CPU with AVX-512 (Zen 4), read from /proc/cpuinfo (Linux)."""
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
+            head = fh.read(1 << 14)
+    except OSError:
+        return False
+    family = re.search(r"^cpu family\s*:\s*(\d+)", head, re.M)
+    return ("AuthenticAMD" in head and family is not None and int(family.group(1)) == 0x19
+            and re.search(r"^flags\s*:.*\bavx512f\b", head, re.M) is not None)
+
+
+def worker_environment() -> dict[str, str]:
+    """Environment variables for new worker processes.
+
+    On AMD Zen 4, numpy's AVX-512 sort (x86-simd-sort) is several times slower than its
+    AVX2 one: the memory-destination compress stores it relies on are microcoded there
+    (numpy/x86-simd-sort#6; OpenJDK turns its AVX-512 sort off on that family for the same
+    reason). The orthoimage medians are sorts, so there the workers start with numpy's
+    AVX-512 kernels off, unless ``NPY_DISABLE_CPU_FEATURES`` is already set.
+    """
+    if "NPY_DISABLE_CPU_FEATURES" in os.environ or not _is_amd_zen4():
+        return {}
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as found
+    except ImportError:  # pragma: no cover - numpy < 2
+        return {}
+    off = [k for k in ("X86_V4", "AVX512_ICL", "AVX512_SPR") if found.get(k)]
+    return {"NPY_DISABLE_CPU_FEATURES": " ".join(off)} if off else {}
+
+
+@contextlib.contextmanager
+def _environment(extra: dict[str, str]) -> Iterator[None]:
+    """``extra`` in os.environ while processes are started (they copy it), then as before."""
+    saved = {k: os.environ.get(k) for k in extra}
+    os.environ.update(extra)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
 def wall_pool(settings: DetectionSettings, n_walls: int | None = None) -> ProcessPoolExecutor | None:
     """The worker processes for the per-wall stages (None when they run in this process).
 
@@ -188,8 +240,9 @@ def wall_pool(settings: DetectionSettings, n_walls: int | None = None) -> Proces
     if workers <= 1 or (n_walls is not None and n_walls <= 1):
         return None
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-    for _ in range(workers):
-        pool.submit(_ready)
+    with _environment(worker_environment()):  # each submit below starts one worker (a copy of the environment)
+        for _ in range(workers):
+            pool.submit(_ready)
     return pool
 
 

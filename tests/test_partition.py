@@ -125,3 +125,33 @@ def test_spilled_formats_are_decoded_once(scene, tmp_path):
     spill = list(Path(tmp_path).glob("spill-*"))
     assert sorted(p.suffix for p in spill) == [".rgb", ".xyz"]
     assert (tmp_path / f"spill-{parts[0].key}.xyz").stat().st_size == 20_000 * 12
+
+
+def test_pool_workers_start_with_the_worker_environment(monkeypatch):
+    from sbsc_core import pipeline
+
+    monkeypatch.setattr(pipeline, "worker_environment", lambda: {"SBSC_TEST_WORKER_MARK": "set"})
+    pool = pipeline.wall_pool(DetectionSettings(workers=2))
+    try:
+        assert [pool.submit(pipeline._environ, "SBSC_TEST_WORKER_MARK").result() for _ in range(4)] == ["set"] * 4
+    finally:
+        pool.shutdown()
+    import os
+
+    assert "SBSC_TEST_WORKER_MARK" not in os.environ
+
+
+def test_worker_environment_only_on_amd_zen4(monkeypatch):
+    from sbsc_core import pipeline
+
+    monkeypatch.delenv("NPY_DISABLE_CPU_FEATURES", raising=False)
+    monkeypatch.setattr(pipeline, "_is_amd_zen4", lambda: False)
+    assert pipeline.worker_environment() == {}
+    monkeypatch.setattr(pipeline, "_is_amd_zen4", lambda: True)
+    env = pipeline.worker_environment()
+    from numpy._core._multiarray_umath import __cpu_features__ as found
+
+    if found.get("X86_V4"):
+        assert "X86_V4" in env["NPY_DISABLE_CPU_FEATURES"]
+    monkeypatch.setenv("NPY_DISABLE_CPU_FEATURES", "")  # the user's own choice wins
+    assert pipeline.worker_environment() == {}
