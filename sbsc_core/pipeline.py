@@ -23,7 +23,6 @@ import itertools
 import json
 import multiprocessing
 import os
-import re
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -43,6 +42,7 @@ from .colour_recognition import (
     match_colour,
 )
 from .consensus import consensus_all
+from .cpu_features import numpy_environment
 from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
@@ -183,35 +183,9 @@ def _environ(name: str) -> str | None:
     return os.environ.get(name)
 
 
-def _is_amd_zen4() -> bool:
-    """True on an AMD family 19h CPU with AVX-512 (Zen 4), read from /proc/cpuinfo (Linux)."""
-    try:
-        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
-            head = fh.read(1 << 14)
-    except OSError:
-        return False
-    family = re.search(r"^cpu family\s*:\s*(\d+)", head, re.M)
-    return ("AuthenticAMD" in head and family is not None and int(family.group(1)) == 0x19
-            and re.search(r"^flags\s*:.*\bavx512f\b", head, re.M) is not None)
-
-
 def worker_environment() -> dict[str, str]:
-    """Environment variables for new worker processes.
-
-    On AMD Zen 4, numpy's AVX-512 sort (x86-simd-sort) is several times slower than its
-    AVX2 one: the memory-destination compress stores it relies on are microcoded there
-    (numpy/x86-simd-sort#6; OpenJDK turns its AVX-512 sort off on that family for the same
-    reason). The orthoimage medians are sorts, so there the workers start with numpy's
-    AVX-512 kernels off, unless ``NPY_DISABLE_CPU_FEATURES`` is already set.
-    """
-    if "NPY_DISABLE_CPU_FEATURES" in os.environ or not _is_amd_zen4():
-        return {}
-    try:
-        from numpy._core._multiarray_umath import __cpu_features__ as found
-    except ImportError:  # pragma: no cover - numpy < 2
-        return {}
-    off = [k for k in ("X86_V4", "AVX512_ICL", "AVX512_SPR") if found.get(k)]
-    return {"NPY_DISABLE_CPU_FEATURES": " ".join(off)} if off else {}
+    """Environment variables for new worker processes (see :mod:`sbsc_core.cpu_features`)."""
+    return numpy_environment()
 
 
 @contextlib.contextmanager

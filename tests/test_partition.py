@@ -141,17 +141,19 @@ def test_pool_workers_start_with_the_worker_environment(monkeypatch):
     assert "SBSC_TEST_WORKER_MARK" not in os.environ
 
 
-def test_worker_environment_only_on_amd_zen4(monkeypatch):
-    from sbsc_core import pipeline
+def test_numpy_environment_only_on_amd_zen4(monkeypatch):
+    from sbsc_core import cpu_features
 
+    zen4 = "vendor_id\t: AuthenticAMD\ncpu family\t: 25\nmodel\t\t: 17\nflags\t\t: fpu avx2 avx512f avx512dq\n"
+    zen3 = zen4.replace(" avx512f avx512dq", "")
+    intel = zen4.replace("AuthenticAMD", "GenuineIntel").replace(": 25", ": 6")
+    assert cpu_features.is_amd_zen4(zen4)
+    assert not cpu_features.is_amd_zen4(zen3) and not cpu_features.is_amd_zen4(intel)
     monkeypatch.delenv("NPY_DISABLE_CPU_FEATURES", raising=False)
-    monkeypatch.setattr(pipeline, "_is_amd_zen4", lambda: False)
-    assert pipeline.worker_environment() == {}
-    monkeypatch.setattr(pipeline, "_is_amd_zen4", lambda: True)
-    env = pipeline.worker_environment()
-    from numpy._core._multiarray_umath import __cpu_features__ as found
-
-    if found.get("X86_V4"):
-        assert "X86_V4" in env["NPY_DISABLE_CPU_FEATURES"]
+    monkeypatch.setattr(cpu_features, "is_amd_zen4", lambda: False)
+    assert cpu_features.numpy_environment() == {}
+    monkeypatch.setattr(cpu_features, "is_amd_zen4", lambda: True)
+    assert "X86_V4" in cpu_features.numpy_environment()["NPY_DISABLE_CPU_FEATURES"]
+    assert not cpu_features.prefer_fast_sort()  # numpy is imported here: too late, nothing set
     monkeypatch.setenv("NPY_DISABLE_CPU_FEATURES", "")  # the user's own choice wins
-    assert pipeline.worker_environment() == {}
+    assert cpu_features.numpy_environment() == {}
