@@ -48,8 +48,8 @@ log = logging.getLogger("sbsc.jobs")
 
 # Overall progress: the span of 0..1 each stage of the pipeline covers.
 STAGE_SPANS: dict[str, tuple[float, float]] = {
-    "starting": (0.0, 0.02), "reading": (0.02, 0.15), "segmentation": (0.15, 0.25),
-    "walls": (0.25, 0.85), "consensus": (0.85, 0.92), "writing": (0.92, 0.96),
+    "starting": (0.0, 0.02), "reading": (0.02, 0.15), "segmentation": (0.15, 0.22),
+    "partition": (0.22, 0.3), "walls": (0.3, 0.85), "consensus": (0.85, 0.92), "writing": (0.92, 0.96),
     "done": (0.96, 0.96), "importing": (0.96, 1.0),
 }
 TERMINAL = ("succeeded", "failed", "cancelled")

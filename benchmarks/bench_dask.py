@@ -26,7 +26,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def start_cluster(n: int, tmp: Path) -> tuple[str, list[subprocess.Popen]]:
     dask = str(Path(sys.executable).with_name("dask"))
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    from sbsc_core.pipeline import worker_environment
+
+    env = {**os.environ, **worker_environment(), "PYTHONPATH": str(ROOT)}
     info = tmp / f"scheduler-{n}.json"
     info.unlink(missing_ok=True)
     log = open(tmp / f"cluster-{n}.log", "w")

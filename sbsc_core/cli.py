@@ -404,6 +404,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_detect(args: argparse.Namespace) -> int:
+    from .cpu_features import prefer_fast_sort
+
+    prefer_fast_sort()  # before numpy is imported (AMD Zen 4: numpy's AVX2 sort is the fast one)
     from .pipeline import detect_to_dir
 
     con = console()

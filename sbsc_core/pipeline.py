@@ -46,6 +46,7 @@ from .colour_recognition import (
 )
 from .confidence import screen_hits, unexplained_regions
 from .consensus import consensus_all
+from .cpu_features import numpy_environment
 from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
@@ -186,6 +187,31 @@ def _ready() -> bool:
     return True
 
 
+def _environ(name: str) -> str | None:
+    """An environment variable as a worker sees it."""
+    return os.environ.get(name)
+
+
+def worker_environment() -> dict[str, str]:
+    """Environment variables for new worker processes (see :mod:`sbsc_core.cpu_features`)."""
+    return numpy_environment()
+
+
+@contextlib.contextmanager
+def _environment(extra: dict[str, str]) -> Iterator[None]:
+    """``extra`` in os.environ while processes are started (they copy it), then as before."""
+    saved = {k: os.environ.get(k) for k in extra}
+    os.environ.update(extra)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
 def wall_pool(settings: DetectionSettings, n_walls: int | None = None) -> ProcessPoolExecutor | None:
     """The worker processes for the per-wall stages (None when they run in this process).
 
@@ -197,8 +223,9 @@ def wall_pool(settings: DetectionSettings, n_walls: int | None = None) -> Proces
     if workers <= 1 or (n_walls is not None and n_walls <= 1):
         return None
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-    for _ in range(workers):
-        pool.submit(_ready)
+    with _environment(worker_environment()):  # each submit below starts one worker (a copy of the environment)
+        for _ in range(workers):
+            pool.submit(_ready)
     return pool
 
 
@@ -448,9 +475,13 @@ def detect_scans(
     templates = make_templates(library, s.orthoimage.pixel_m, classes)
     prototypes = learn_prototypes(templates, s.colour)
     timings["templates"] = time.perf_counter() - t
-    wall_jobs = [(str(scratch), w, wall.id, wall.frame, templates, prototypes, s) for w, wall in enumerate(seg.walls)]
-    walls = _collect_walls(_in_order(executor, wall_jobs, _partition_wall_job, 2 * workers), len(seg.walls),
-                           progress, timings)
+    # the biggest walls first, so that no worker is left with a big one at the end; the
+    # results are put back in the walls' order (the consensus sees them as in memory)
+    order = sorted(range(len(seg.walls)), key=lambda w: -int(kept[w]))
+    wall_jobs = [(str(scratch), w, seg.walls[w].id, seg.walls[w].frame, templates, prototypes, s) for w in order]
+    done = _collect_walls(_in_order(executor, wall_jobs, _partition_wall_job, 2 * workers), len(seg.walls),
+                          progress, timings)
+    walls = {wall.id: done[wall.id] for wall in seg.walls}
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
     timings["total"] = time.perf_counter() - t0
     return result, points

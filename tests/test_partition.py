@@ -125,3 +125,35 @@ def test_spilled_formats_are_decoded_once(scene, tmp_path):
     spill = list(Path(tmp_path).glob("spill-*"))
     assert sorted(p.suffix for p in spill) == [".rgb", ".xyz"]
     assert (tmp_path / f"spill-{parts[0].key}.xyz").stat().st_size == 20_000 * 12
+
+
+def test_pool_workers_start_with_the_worker_environment(monkeypatch):
+    from sbsc_core import pipeline
+
+    monkeypatch.setattr(pipeline, "worker_environment", lambda: {"SBSC_TEST_WORKER_MARK": "set"})
+    pool = pipeline.wall_pool(DetectionSettings(workers=2))
+    try:
+        assert [pool.submit(pipeline._environ, "SBSC_TEST_WORKER_MARK").result() for _ in range(4)] == ["set"] * 4
+    finally:
+        pool.shutdown()
+    import os
+
+    assert "SBSC_TEST_WORKER_MARK" not in os.environ
+
+
+def test_numpy_environment_only_on_amd_zen4(monkeypatch):
+    from sbsc_core import cpu_features
+
+    zen4 = "vendor_id\t: AuthenticAMD\ncpu family\t: 25\nmodel\t\t: 17\nflags\t\t: fpu avx2 avx512f avx512dq\n"
+    zen3 = zen4.replace(" avx512f avx512dq", "")
+    intel = zen4.replace("AuthenticAMD", "GenuineIntel").replace(": 25", ": 6")
+    assert cpu_features.is_amd_zen4(zen4)
+    assert not cpu_features.is_amd_zen4(zen3) and not cpu_features.is_amd_zen4(intel)
+    monkeypatch.delenv("NPY_DISABLE_CPU_FEATURES", raising=False)
+    monkeypatch.setattr(cpu_features, "is_amd_zen4", lambda: False)
+    assert cpu_features.numpy_environment() == {}
+    monkeypatch.setattr(cpu_features, "is_amd_zen4", lambda: True)
+    assert "X86_V4" in cpu_features.numpy_environment()["NPY_DISABLE_CPU_FEATURES"]
+    assert not cpu_features.prefer_fast_sort()  # numpy is imported here: too late, nothing set
+    monkeypatch.setenv("NPY_DISABLE_CPU_FEATURES", "")  # the user's own choice wins
+    assert cpu_features.numpy_environment() == {}
