@@ -296,6 +296,9 @@ def bulk_decide(s: Session, pid: int, status: str, user: Principal, *,
                 continue
             if did in seen:
                 continue
+            if not 0 < did < 2**62:
+                skipped.append({"id": str(raw), "reason": "not found in this project"})
+                continue
             seen.add(did)
             d = s.get(DetectionRow, did, with_for_update=True)
             if d is None or d.project_id != pid:

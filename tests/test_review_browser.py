@@ -28,7 +28,8 @@ WS_TRY = """([url, proto]) => new Promise(res => {
     const ws = new WebSocket(url, proto);
     ws.onopen = () => { ws.close(); res("open"); };
     ws.onclose = () => res("refused");
-    setTimeout(() => res("timeout"), 10000); })"""
+    ws.onerror = () => res("refused");
+    setTimeout(() => res("timeout"), 40000); })"""
 
 
 @pytest.fixture(scope="module")

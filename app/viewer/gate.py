@@ -21,6 +21,7 @@ import json
 import secrets
 import threading
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from http.cookies import CookieError, SimpleCookie
@@ -47,7 +48,8 @@ class ViewerGate:
     def __init__(self, ttl_s: float = TICKET_TTL_S, secret: bytes | None = None) -> None:
         self.ttl_s = ttl_s
         self._secret = secret or secrets.token_bytes(32)
-        self._users: dict[int, Ticket] = {}  # id(websocket connection) -> who opened it
+        # websocket connection -> who opened it (forgotten with the connection)
+        self._users: weakref.WeakKeyDictionary[Any, Ticket] = weakref.WeakKeyDictionary()
         self._lock = threading.Lock()
 
     # -- tickets -------------------------------------------------------------------------
@@ -97,17 +99,15 @@ class ViewerGate:
             if origin is not None and origin not in (f"http://{host}", f"https://{host}"):
                 return connection.respond(403, "websocket refused: foreign origin\n")
             with self._lock:
-                self._users[id(connection)] = ticket
+                self._users[connection] = ticket
         return None
 
     def user_of(self, connection: Any) -> Ticket | None:
         """Who opened an accepted websocket connection (None when unknown)."""
+        if connection is None:
+            return None
         with self._lock:
-            return self._users.get(id(connection))
-
-    def forget(self, connection: Any) -> None:
-        with self._lock:
-            self._users.pop(id(connection), None)
+            return self._users.get(connection)
 
     # -- servers -------------------------------------------------------------------------
     def server(self, **kwargs: Any) -> viser.ViserServer:
