@@ -1,4 +1,12 @@
-"""Floor, ceiling and walls of a registered scan (paper, section 3.1).
+"""Storeys, floor, ceiling and walls of a registered scan (paper, section 3.1).
+
+Stray points far from the building are set aside first (:mod:`~sbsc_core.stray_points`):
+every grid below is sized by the dense part of the scan. A scan may hold several storeys:
+they are the parts of the Z range between slabs (thin Z ranges with almost no points
+between a ceiling level and a floor level, :func:`find_storeys`), and everything below
+runs on each storey as on a floor; the walls of all storeys are one list, each wall naming
+its storey. Within a storey rooms may have different ceilings: the storey's ceiling is the
+highest, and each wall's height is the top of its own points (its room's ceiling).
 
 The floor and the ceiling are the two maxima of the Z histogram. Walls are found among
 the points between them: a regular subsample is cut into voxels, each voxel holding a
@@ -15,7 +23,10 @@ junction or a corner is the crossing of the two planes. Every point between floo
 ceiling is then given to the wall whose plane it is closest to, among the walls whose slab
 (``behind_depth_m`` behind to ``object_depth_m`` in front, over the wall's length) holds
 it, and each wall is refitted by trimmed least squares on its own points; a free end (no
-wall met there) is where the wall's points stop. The frame follows contract 4.
+wall met there) is where the wall's points stop. The frame follows contract 4. A plane set
+back in an opening of a wall of the same facing that does not reach that wall's top (a
+door leaf recessed in its frame) is no wall. :func:`assign_points_to_walls` gives points
+to walls from the final frames alone, chunk by chunk, for clouds streamed from disk.
 
 Everything is vectorized with numpy; the whole-floor cost is a few passes over the points
 plus one radix sort of 16-bit bucket numbers.
