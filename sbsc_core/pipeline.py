@@ -26,6 +26,7 @@ import itertools
 import json
 import multiprocessing
 import os
+import shutil
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -421,7 +422,10 @@ def detect_scans(
     Every part of the files is read by a task of ``executor``: once for a bounded regular
     sample that segmentation runs on, once more (or from its spill) to write each wall's
     binned points to its partition in ``scratch``; each wall's stages then run as a task on
-    its partition. Returns the result and the number of points read.
+    its partition. Each wall's images are written to ``scratch/images`` as its result comes
+    in (:func:`park_wall`), so the result holds no orthoimage: write it with
+    ``write_outputs(..., parked=scratch / "images")``. Returns the result and the number of
+    points read.
     """
     s = settings or DetectionSettings()
     progress = progress or _noop_progress
@@ -479,8 +483,11 @@ def detect_scans(
     # results are put back in the walls' order (the consensus sees them as in memory)
     order = sorted(range(len(seg.walls)), key=lambda w: -int(kept[w]))
     wall_jobs = [(str(scratch), w, seg.walls[w].id, seg.walls[w].frame, templates, prototypes, s) for w in order]
-    done = _collect_walls(_in_order(executor, wall_jobs, _partition_wall_job, 2 * workers), len(seg.walls),
-                          progress, timings)
+    parked = Path(scratch) / "images"
+    parked.mkdir(exist_ok=True)
+    results = ((wid, park_wall(res, parked), t_wall)
+               for wid, res, t_wall in _in_order(executor, wall_jobs, _partition_wall_job, 2 * workers))
+    done = _collect_walls(results, len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
     timings["total"] = time.perf_counter() - t0
@@ -516,24 +523,24 @@ def detect_to_dir(
     if not paths:
         raise InputError("scans", "no scan files given")
     georef = georeference_fields(scan_crs(paths), scan_origin(paths[0]))
-    with wall_executor(s, scheduler) as ex, scratch_folder(Path(out), scratch) as tmp:
-        result, points = detect_scans(paths, library, counts, s, progress, executor=ex, scratch=tmp, log=log)
-    seg = result.segmentation
-    if seg.stray_points:
-        log(f"ignored about {seg.stray_points:,} stray points outside the dense part of the scan")
-    for st in seg.storeys:
-        walls = [w for w in seg.walls if w.storey == st.id]
-        found = sum(1 for d in result.detections if d.wall_id in {w.id for w in walls})
-        log(f"storey {st.id}: floor z = {st.floor_z:.2f} m, ceiling z = {st.ceiling_z:.2f} m, "
-            f"{len(walls)} walls, {found} objects")
-        if st.ceiling_z - st.floor_z > _TALL_STOREY_M:
-            log(f"warning: storey {st.id} is {st.ceiling_z - st.floor_z:.1f} m high; if it is several storeys, "
-                "no slab between them was seen (check the scan)")
-    log(f"{len(seg.walls)} walls, {len(result.openings)} openings, "
-        f"{len(result.detections)} objects in {result.timings['total']:.1f} s")
-    progress("writing", 0.0)
-    with atomic_output_dir(out) as tmp:
-        write_outputs(result, tmp, s.orthoimage.pixel_m, extra=georef)
+    with wall_executor(s, scheduler) as ex, scratch_folder(Path(out), scratch) as work:
+        result, points = detect_scans(paths, library, counts, s, progress, executor=ex, scratch=work, log=log)
+        seg = result.segmentation
+        if seg.stray_points:
+            log(f"ignored about {seg.stray_points:,} stray points outside the dense part of the scan")
+        for st in seg.storeys:
+            walls = [w for w in seg.walls if w.storey == st.id]
+            found = sum(1 for d in result.detections if d.wall_id in {w.id for w in walls})
+            log(f"storey {st.id}: floor z = {st.floor_z:.2f} m, ceiling z = {st.ceiling_z:.2f} m, "
+                f"{len(walls)} walls, {found} objects")
+            if st.ceiling_z - st.floor_z > _TALL_STOREY_M:
+                log(f"warning: storey {st.id} is {st.ceiling_z - st.floor_z:.1f} m high; if it is several "
+                    "storeys, no slab between them was seen (check the scan)")
+        log(f"{len(seg.walls)} walls, {len(result.openings)} openings, "
+            f"{len(result.detections)} objects in {result.timings['total']:.1f} s")
+        progress("writing", 0.0)
+        with atomic_output_dir(out) as tmp:
+            write_outputs(result, tmp, s.orthoimage.pixel_m, extra=georef, parked=work / "images")
     progress("done", 1.0)
     return {
         "points": points,
@@ -560,9 +567,12 @@ def depth_visualisation(depth: np.ndarray, scale_m: float = 0.10) -> np.ndarray:
     return img
 
 
-def overlay_image(w: WallResult, detections: Sequence[Detection]) -> np.ndarray:
-    """The colour orthoimage with depth RoIs (cyan), colour RoIs (magenta) and red spots (BGR)."""
-    img = cv2.cvtColor(w.ortho.colour, cv2.COLOR_RGB2BGR).copy()
+def overlay_image(w: WallResult, detections: Sequence[Detection], colour_bgr: np.ndarray | None = None) -> np.ndarray:
+    """The colour orthoimage with depth RoIs (cyan), colour RoIs (magenta) and red spots (BGR).
+
+    ``colour_bgr`` is the colour orthoimage when ``w`` no longer holds it (see :func:`park_wall`).
+    """
+    img = cv2.cvtColor(w.ortho.colour, cv2.COLOR_RGB2BGR).copy() if colour_bgr is None else colour_bgr.copy()
     for b in w.depth_rois:
         cv2.rectangle(img, (b.c0, b.r0), (b.c1 - 1, b.r1 - 1), (255, 255, 0), 1)
     for b in w.colour_rois:
@@ -573,21 +583,54 @@ def overlay_image(w: WallResult, detections: Sequence[Detection]) -> np.ndarray:
     return img
 
 
-def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dict | None = None) -> None:
+def _write_wall_images(ortho: Orthoimage, images: Path) -> None:
+    """The colour and depth images of one wall (``<wall>_colour.png``, ``_depth.png``, ``_depth.npy``)."""
+    wid = ortho.wall_id
+    if not cv2.imwrite(str(images / f"{wid}_colour.png"), cv2.cvtColor(ortho.colour, cv2.COLOR_RGB2BGR)):
+        raise SbscError(f"{images}: cannot write images")
+    cv2.imwrite(str(images / f"{wid}_depth.png"), depth_visualisation(ortho.depth))
+    np.save(images / f"{wid}_depth.npy", ortho.depth.astype(np.float32))
+
+
+_PARKED = np.zeros((0, 0), bool)
+
+
+def park_wall(res: WallResult, images: Path) -> WallResult:
+    """Write a wall's images now and keep only what the consensus and the documents need.
+
+    The orthoimages and masks (about 10 bytes a pixel) are the part of a wall's result that
+    grows with the building; :func:`write_outputs` with ``parked=images`` moves the images
+    into the output and draws the overlays from the colour images on disk.
+    """
+    _write_wall_images(res.ortho, images)
+    o = res.ortho
+    ortho = Orthoimage(wall_id=o.wall_id, frame=o.frame, pixel_m=o.pixel_m, colour=np.zeros((0, 0, 3), np.uint8),
+                       depth=np.zeros((0, 0), np.float32), mask=_PARKED)
+    area = WallArea(visible=_PARKED, openings=res.area.openings, opening_mask=_PARKED,
+                    wall_colour=res.area.wall_colour)
+    return WallResult(ortho, area, res.depth_rois, res.colour_rois, res.depth_candidates, res.colour_candidates)
+
+
+def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dict | None = None,
+                  parked: Path | None = None) -> None:
     """Write detections.json, rois.json and the per-wall images into ``out``.
 
-    ``extra`` adds top-level keys to detections.json (the scan's ``crs`` and ``origin``).
+    ``extra`` adds top-level keys to detections.json (the scan's ``crs`` and ``origin``);
+    ``parked``: the folder where :func:`park_wall` wrote the walls' images.
     """
     images = out / "orthoimages"
     images.mkdir(parents=True, exist_ok=True)
     rois: dict[str, dict] = {}
     for wid, w in result.walls.items():
         dets = [d for d in result.detections if d.wall_id == wid]
-        if not cv2.imwrite(str(images / f"{wid}_colour.png"), cv2.cvtColor(w.ortho.colour, cv2.COLOR_RGB2BGR)):
-            raise SbscError(f"{images}: cannot write images")
-        cv2.imwrite(str(images / f"{wid}_depth.png"), depth_visualisation(w.ortho.depth))
-        np.save(images / f"{wid}_depth.npy", w.ortho.depth.astype(np.float32))
-        cv2.imwrite(str(images / f"{wid}_overlay.png"), overlay_image(w, dets))
+        if parked is None:
+            _write_wall_images(w.ortho, images)
+            overlay = overlay_image(w, dets)
+        else:
+            for suffix in ("colour.png", "depth.png", "depth.npy"):
+                shutil.move(parked / f"{wid}_{suffix}", images / f"{wid}_{suffix}")
+            overlay = overlay_image(w, dets, cv2.imread(str(images / f"{wid}_colour.png"), cv2.IMREAD_COLOR))
+        cv2.imwrite(str(images / f"{wid}_overlay.png"), overlay)
         rois[wid] = {"depth": [_box_uv(w.ortho, b) for b in w.depth_rois],
                      "colour": [_box_uv(w.ortho, b) for b in w.colour_rois]}
     seg = result.segmentation
