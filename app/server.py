@@ -46,6 +46,15 @@ def _sweep(settings: AppSettings, db: Database) -> list:
     return sweep_orphans(settings.projects_dir, settings.data_dir, scans, models, jobs)
 
 
+def reap_orphans(settings: AppSettings) -> None:
+    """Kill the job processes a crashed server left behind (``<data>/run/*.pgid``)."""
+    from .jobs import GroupFiles
+
+    killed = GroupFiles(settings.data_dir).reap_all()
+    if killed:
+        log.warning("killed %d orphaned job process(es) left by a previous server", killed)
+
+
 def _validation_detail(exc: RequestValidationError) -> str:
     """A one-line message from pydantic's error list: ``body.status: Input should be ...``."""
     parts = []
@@ -65,6 +74,7 @@ def create_app(settings: AppSettings | None = None, *, start_jobs: bool = True) 
         # fewer runnable threads means the one holding the write lock gets the GIL sooner.
         anyio.to_thread.current_default_thread_limiter().total_tokens = settings.threads
         settings.ensure_dirs()
+        reap_orphans(settings)  # before the database: a frozen orphan may hold its lock
         db = Database(settings.db_url)
         upgrade(db)
         removed = clean_tmp(settings.tmp_dir)
@@ -207,6 +217,7 @@ def serve(host: str = "127.0.0.1", port: int = 8000, open_browser: bool = False)
 
     settings = AppSettings()
     settings.ensure_dirs()
+    reap_orphans(settings)
     base = f"http://{'localhost' if host in ('127.0.0.1', '0.0.0.0', '::') else host}:{port}"
     token = first_run(settings)
     page = start_page(settings)

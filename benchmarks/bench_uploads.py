@@ -59,15 +59,16 @@ def write_ply(path: Path, gb: float) -> int:
     head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty float x\nproperty float y\n"
             "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n")
     rng = np.random.default_rng(1)
+    block = np.zeros(2_000_000, PLY_DTYPE)  # one random block, written again and again
+    block["x"], block["y"], block["z"] = rng.uniform(0, 10, (3, len(block))).astype(np.float32)
+    block["r"] = 128
+    data = block.tobytes()
     with open(path, "wb") as fh:
         fh.write(head.encode())
         left = n
         while left:
-            k = min(left, 2_000_000)
-            a = np.zeros(k, PLY_DTYPE)
-            a["x"], a["y"], a["z"] = rng.uniform(0, 10, (3, k)).astype(np.float32)
-            a["r"] = 128
-            fh.write(a.tobytes())
+            k = min(left, len(block))
+            fh.write(data[:k * PLY_DTYPE.itemsize])
             left -= k
     return n
 

@@ -174,7 +174,7 @@ def test_schemathesis_finds_no_server_error_and_no_schema_violation(live, tmp_pa
          "--checks", "not_a_server_error,status_code_conformance,content_type_conformance,"
                      "response_schema_conformance",
          "--generation-deterministic", "--request-timeout", "60", "--no-color"],
-        capture_output=True, text=True, timeout=600)
+        capture_output=True, text=True, timeout=600, cwd=tmp_path)  # its cache stays out of the tree
     out = res.stdout + res.stderr
     m = re.search(r"(\d+) generated, (\d+) passed", out)
     print(f"schemathesis: {m.group(0) if m else '?'} in {time.monotonic() - t0:.0f} s")
