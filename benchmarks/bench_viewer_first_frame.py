@@ -60,8 +60,17 @@ def main() -> int:
         settings = AppSettings(data_dir=data)
         pid = ensure_sample_project(args.scan, args.detect_out, settings=settings, name="first frame",
                                     points=1)
+        from sqlalchemy import select
+
+        from app.db import Database
+        from app.models import Scan
+
+        db = Database(settings.db_url)
+        with db.read() as s:  # the project's own copy of the scan, as a job reads it
+            scans = [settings.data_dir / p for p in s.scalars(select(Scan.path).where(Scan.project_id == pid))]
+        db.dispose()
         t = time.perf_counter()
-        _prepare_viewer(settings, pid, [args.scan], lambda m: print(m, flush=True))
+        _prepare_viewer(settings, pid, scans, lambda m: print(m, flush=True))
         res["prepare_at_job_end_s"] = round(time.perf_counter() - t, 1)
         token = add_user(settings, "rita", "reviewer")
         srv = ServerProcess(data, {"SBSC_VIEWER_IDLE_S": str(args.idle_s)}).start()
