@@ -143,7 +143,8 @@ def truthful_openapi(app: FastAPI) -> dict:
             if route is None:
                 continue
             responses = op.setdefault("responses", {})
-            for code in sorted(error_codes(route, op)):
+            declared = {int(c) for c in responses if c[:1] in "45" and c.isdigit()}  # by the route itself
+            for code in sorted(set(error_codes(route, op)) | declared):
                 prev = responses.get(str(code), {})
                 responses[str(code)] = {"description": prev.get("description") or DESCRIPTIONS.get(code, "Error"),
                                         "content": error}

@@ -21,6 +21,7 @@ from app.config import AppSettings
 from app.snap import snap_to_relief
 from app.users import add_user
 
+from .test_app_api import worker_pid
 from .test_app_support import (
     _fake_output,
     auth,
@@ -231,16 +232,18 @@ def test_a_second_job_keeps_decisions_cancel_and_cap(c, srv):
     fake_control(srv.data_dir, delay_s=30.0, detections=8)
     j3 = c.post(f"/api/projects/{pid}/jobs", json={}, headers=boss).json()
     running = wait_job(c, j3["id"], srv.tokens["max"], until=("running",))
+    assert "worker_pid" not in running  # no process ids in the API: read it from the database
     deadline = time.monotonic() + 10
-    while running.get("worker_pid") is None and time.monotonic() < deadline:
+    while not worker_pid(srv.data_dir, j3["id"]) and time.monotonic() < deadline:
         time.sleep(0.1)
-        running = c.get(f"/api/jobs/{j3['id']}", headers=boss).json()
+    pid = worker_pid(srv.data_dir, j3["id"])
+    assert pid
     r = c.delete(f"/api/jobs/{j3['id']}", headers=boss)
     assert r.status_code == 200 and r.json()["status"] == "cancelled"
     deadline = time.monotonic() + 15
-    while pid_alive(running["worker_pid"]) and time.monotonic() < deadline:
+    while pid_alive(pid) and time.monotonic() < deadline:
         time.sleep(0.2)
-    assert not pid_alive(running["worker_pid"])
+    assert not pid_alive(pid)
     fake_control(srv.data_dir, delay_s=0.2, detections=8)
     assert c.get(f"/api/projects/{pid}/detections", headers=rita).json()["job"] == j1.json()["id"]
 
