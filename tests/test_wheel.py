@@ -135,7 +135,7 @@ def test_every_command_works_from_the_wheel(installed) -> None:
     assert summary["walls"] == 4 and summary["detections"] >= 8  # 9 of 13 at this coarse 0.3 deg step
     table = json.loads(_sbsc(installed, "evaluate", "--detections", str(det / "detections.json"),
                              "--truth", str(sim / "ground_truth.json"), "--json", "-").stdout)
-    assert table["total"]["tp"] >= 8
+    assert table["total"]["instances"] == 13 and table["total"]["tp"] >= 8
     res = _sbsc(installed, "export-ifc", str(det / "detections.json"), "--out", str(work / "as_is.ifc"))
     assert res.stderr.startswith("wrote ") and (work / "as_is.ifc").stat().st_size > 0
     shutil.rmtree(work / "cmp", ignore_errors=True)
@@ -164,10 +164,10 @@ def test_serve_pages_and_a_job_with_the_bundled_library(installed) -> None:
             port = int(m.group(1)) if m else 0
             time.sleep(0.2)
         h = {"Authorization": f"Bearer {token}"}
-        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=60, follow_redirects=True) as c:
-            r = c.get("/")
+        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=60) as c:
+            r = c.get("/", follow_redirects=True)  # the start page
             assert r.status_code == 200 and "<html" in r.text.lower()
-            assert c.get("/app.css").status_code == 200
+            assert c.get("/app.css").status_code == 200 and c.get("/favicon.ico").status_code == 200
             r = c.post("/api/projects", json={"name": "from the wheel"}, headers=h)
             assert r.status_code == 201, r.text
             pid = r.json()["id"]
