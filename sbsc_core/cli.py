@@ -26,6 +26,7 @@ import dataclasses
 import json
 import logging
 import os
+import re
 import sys
 import traceback
 import warnings
@@ -244,6 +245,17 @@ class Console:
     def info(self, msg: str) -> None:
         self.logger.info(msg)
 
+    def step(self, msg: str) -> None:
+        """A line per item of a long loop (a scanner station): shown on a terminal, else only with -v."""
+        if self.progress_enabled:
+            self.logger.info(msg)
+        else:
+            self.logger.debug(msg)
+
+    def simulation_log(self, msg: str) -> None:
+        """The simulator's messages: its per-station lines are progress (:meth:`step`)."""
+        (self.step if _STATION_LINE.match(msg) else self.info)(msg)
+
     def progress(self, stage: str, fraction: float) -> None:
         """A bar per stage; the ``walls`` stage counts walls (``Progress`` of the pipeline)."""
         if not self.progress_enabled:
@@ -277,6 +289,9 @@ class Console:
     def result(self, data: Any) -> None:
         """The ``--json`` summary on stdout."""
         print(json.dumps(_jsonable(data), indent=2), flush=True)
+
+
+_STATION_LINE = re.compile(r"^(S\d+ )?station \d+/\d+")
 
 
 def _isatty(stream) -> bool:
@@ -390,14 +405,14 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         from .simulate.building_scenario import simulate_building
 
         summary = simulate_building(out, args.storeys, scene=args.scene or "scenario", fmt=args.format,
-                                    seed=args.seed, angular_step_deg=args.step, log=con.info,
+                                    seed=args.seed, angular_step_deg=args.step, log=con.simulation_log,
                                     object_builder=builder)
     elif args.scene:
         summary = simulate_scene(scene_path(args.scene), out, seed=args.seed, angular_step_deg=args.step,
-                                 log=con.info, object_builder=builder, library_builder=library, **realism)
+                                 log=con.simulation_log, object_builder=builder, library_builder=library, **realism)
     else:
         summary = simulate_scenario(args.scenario, out, seed=args.seed, angular_step_deg=args.step,
-                                    log=con.info, object_builder=builder, library_builder=library, **realism)
+                                    log=con.simulation_log, object_builder=builder, library_builder=library, **realism)
     if args.json:
         con.result({"out": out, **_jsonable(summary)})
     return 0
