@@ -17,6 +17,7 @@ while [ $# -gt 0 ]; do
 done
 bash scripts/setup.sh
 run="runs/scenario_${scenario}"
+mkdir -p "$run"  # sbsc refuses an output folder whose parent does not exist
 sbsc=.venv/bin/sbsc
 if [ ! -f "$run/scan/scan.ply" ]; then
   "$sbsc" simulate --scenario "$scenario" --out "$run/scan"
