@@ -16,6 +16,7 @@ from ..config import AppSettings
 from ..db import Database
 from ..jobs import JobManager
 from ..models import ROLES, Project
+from ..review_service import bundled_classes
 from ..thumbnails import ImageCache
 
 
@@ -153,19 +154,3 @@ def library_classes(request: Request, session: Session, models_id: int | None) -
     if getattr(state, "bundled_classes", None) is None:
         state.bundled_classes = bundled_classes()
     return state.bundled_classes
-
-
-def bundled_classes() -> dict:
-    """The bundled library's classes; the simulator's catalogue while the library is missing."""
-    from sbsc_core.errors import SbscError
-
-    from ..storage import bundled_library_summary
-
-    try:
-        return bundled_library_summary()
-    except SbscError:
-        from sbsc_core.simulate.catalogue import CATALOGUE
-
-        return {c.class_id: {"name": c.name, "ifc_class": c.ifc_class,
-                             "predefined_type": c.predefined_type, "width_m": c.width_m,
-                             "height_m": c.height_m} for c in CATALOGUE.values()}
