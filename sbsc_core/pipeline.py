@@ -416,6 +416,7 @@ def detect_scans(
     executor: Executor,
     scratch: Path,
     log: Callable[[str], None] | None = None,
+    origin: np.ndarray | None = None,
 ) -> tuple[DetectionResult, int]:
     """:func:`detect` on scan files, out of core (see :mod:`sbsc_core.partition`).
 
@@ -424,8 +425,9 @@ def detect_scans(
     binned points to its partition in ``scratch``; each wall's stages then run as a task on
     its partition. Each wall's images are written to ``scratch/images`` as its result comes
     in (:func:`park_wall`), so the result holds no orthoimage: write it with
-    ``write_outputs(..., parked=scratch / "images")``. Returns the result and the number of
-    points read.
+    ``write_outputs(..., parked=scratch / "images")``. ``origin`` is the recentring origin
+    (default: :func:`~sbsc_core.partition.scan_origin` of the first file). Returns the result
+    and the number of points read.
     """
     s = settings or DetectionSettings()
     progress = progress or _noop_progress
@@ -437,7 +439,7 @@ def detect_scans(
 
     progress("reading", 0.0)
     parts, estimate = plan_parts([Path(p) for p in scans])
-    origin = scan_origin(scans[0])
+    origin = scan_origin(scans[0]) if origin is None else np.asarray(origin, np.float64)
     step = sample_step(estimate, s)
     sample_jobs = [(part, origin, step, str(scratch)) for part in parts]
     samples = []
@@ -522,9 +524,11 @@ def detect_to_dir(
     paths = [Path(p) for p in scans]
     if not paths:
         raise InputError("scans", "no scan files given")
-    georef = georeference_fields(scan_crs(paths), scan_origin(paths[0]))
+    origin = scan_origin(paths[0])  # read once: the recentring origin and the georeference
+    georef = georeference_fields(scan_crs(paths), origin)
     with wall_executor(s, scheduler) as ex, scratch_folder(Path(out), scratch) as work:
-        result, points = detect_scans(paths, library, counts, s, progress, executor=ex, scratch=work, log=log)
+        result, points = detect_scans(paths, library, counts, s, progress, executor=ex, scratch=work, log=log,
+                                      origin=origin)
         seg = result.segmentation
         if seg.stray_points:
             log(f"ignored about {seg.stray_points:,} stray points outside the dense part of the scan")
