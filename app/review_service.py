@@ -88,19 +88,14 @@ class Locked(ServiceError):
 
 @functools.lru_cache(maxsize=1)
 def bundled_classes() -> dict:
-    """The bundled library's classes; the simulator's catalogue while the library is missing."""
-    from sbsc_core.errors import SbscError
+    """The bundled model library's classes (contract 2): class id -> name, IFC class, predefined
+    type and footprint, by class id as for an uploaded library; read from its ``model.json`` files."""
+    from sbsc_core.io.models import read_library_metadata
+    from sbsc_core.paths import bundled_models_dir
 
-    from .storage import bundled_library_summary
-
-    try:
-        return bundled_library_summary()
-    except SbscError:
-        from sbsc_core.simulate.catalogue import CATALOGUE
-
-        return {c.class_id: {"name": c.name, "ifc_class": c.ifc_class,
-                             "predefined_type": c.predefined_type, "width_m": c.width_m,
-                             "height_m": c.height_m} for c in CATALOGUE.values()}
+    keys = ("name", "ifc_class", "predefined_type", "width_m", "height_m")
+    meta = read_library_metadata(bundled_models_dir())
+    return {cid: {k: meta[cid].get(k) for k in keys} for cid in sorted(meta)}
 
 
 def library_classes(s: Session, models_id: int | None) -> dict:

@@ -164,6 +164,8 @@ def _add_evaluate(cmds: Commands) -> None:
                    help="also write the table as JSON to FILE; '-' prints only the JSON on stdout")
     e.add_argument("--max-distance", type=float, default=0.10, metavar="M",
                    help="match radius in metres (default: 0.10)")
+    e.add_argument("--models", metavar="DIR",
+                   help="model library whose class order and names the table uses (default: the bundled one)")
 
 
 def _add_export_ifc(cmds: Commands) -> None:
@@ -446,8 +448,13 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         raise InputError("--max-distance", f"must be > 0, got {args.max_distance}")
     to_stdout = args.json == "-"
     json_out = output_parent(args.json, "--json") if args.json and not to_stdout else None
+    library = None
+    if args.models:
+        from .io.models import read_library_metadata
+
+        library = read_library_metadata(Path(args.models))
     table = evaluate(read_detections(Path(args.detections)), read_truth(Path(args.truth)),
-                     args.max_distance)
+                     args.max_distance, library=library)
     if to_stdout:
         console().result(table.to_dict())
         return 0

@@ -5,7 +5,8 @@ class whose centre lies within ``max_distance_m`` (default 0.10 m). Matching is 
 and one-to-one over all same-class pairs, closest first. Unmatched truth objects are
 false negatives, unmatched detections false positives.
 
-Per class (catalogue order first, then other classes alphabetically) and in total the
+Per class (in the model library's order, then other classes alphabetically; the names are
+the library's, by default the bundled library's) and in total the
 table gives, like Table 1: instances, TP %, FN %, FP % (all over the number of
 instances: 10 FP among 116 instances read 8.6 %), the share of true positives with
 recognition coherence level alpha > 0.9, and the mean and maximum horizontal (XY
@@ -19,6 +20,7 @@ share of distractors, wall clutter and furniture separately, that carry at least
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -27,7 +29,8 @@ import numpy as np
 from .errors import InputError
 from .io.atomic import write_json_atomic
 from .io.documents import TruthDocument, read_detections, read_truth
-from .simulate.catalogue import CATALOGUE, CLASS_ORDER
+from .io.models import read_library_metadata
+from .paths import bundled_models_dir
 
 EVALUATION_SCHEMA = "sbsc.evaluation/1"
 ALPHA_HIGH = 0.9  # Table 1, sixth column: TPs with alpha above this
@@ -180,12 +183,26 @@ def _row(class_id: str, name: str, instances: int, fp: int, matches: list[Match]
     )
 
 
-def evaluate(detections_doc: dict, truth: TruthDocument, max_distance_m: float = 0.10) -> EvaluationTable:
-    """Table 1 for a detections document (contract 4) against a ground truth (contract 5)."""
+def evaluate(detections_doc: dict, truth: TruthDocument, max_distance_m: float = 0.10, *,
+             library: Mapping[str, Mapping] | None = None) -> EvaluationTable:
+    """Table 1 for a detections document (contract 4) against a ground truth (contract 5).
+
+    Parameters
+    ----------
+    detections_doc, truth
+        What is scored against what.
+    max_distance_m
+        The match radius.
+    library
+        Class id -> ``model.json`` fields, in the library's order
+        (:func:`~sbsc_core.io.models.read_library_metadata`): the rows' order and names.
+        Default: the bundled library's.
+    """
+    meta = read_library_metadata(bundled_models_dir()) if library is None else library
     dets = detections_doc["detections"]
     truth_classes = {o.class_id for o in truth.objects}
     classes = {o.class_id for o in truth.objects} | {d["class"] for d in dets}
-    ordered = [c for c in CLASS_ORDER if c in classes] + sorted(classes - set(CLASS_ORDER))
+    ordered = [c for c in meta if c in classes] + sorted(classes - set(meta))
     rows: list[EvaluationRow] = []
     all_matches: list[Match] = []
     total_fp = 0
@@ -207,7 +224,7 @@ def evaluate(detections_doc: dict, truth: TruthDocument, max_distance_m: float =
         false_positives += [dets[j] for k, j in enumerate(d_idx) if k not in matched]
         fp = len(d_idx) - len(matches)
         total_fp += fp
-        name = CATALOGUE[cls].name if cls in CATALOGUE else cls
+        name = str(meta[cls].get("name", cls)) if cls in meta else cls
         rows.append(_row(cls, name, len(t_idx), fp, matches))
         all_matches.extend(matches)
     total = _row("TOTAL", "TOTAL", len(truth.objects), total_fp, all_matches)
@@ -272,11 +289,15 @@ def format_table(table: EvaluationTable) -> str:
 
 
 def evaluate_files(detections: Path, truth: Path, json_out: Path | None = None,
-                   max_distance_m: float = 0.10) -> str:
-    """``sbsc evaluate``: read both files, return the text table, optionally write the JSON."""
+                   max_distance_m: float = 0.10, *, models: Path | None = None) -> str:
+    """``sbsc evaluate``: read both files, return the text table, optionally write the JSON.
+
+    ``models``: the model library whose order and names the table uses (default: the bundled one).
+    """
     if not (max_distance_m > 0):
         raise InputError("--max-distance", f"must be > 0, got {max_distance_m}")
-    table = evaluate(read_detections(detections), read_truth(truth), max_distance_m)
+    library = read_library_metadata(models) if models is not None else None
+    table = evaluate(read_detections(detections), read_truth(truth), max_distance_m, library=library)
     if json_out is not None:
         write_json_atomic(json_out, table.to_dict())
     return format_table(table)

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from lxml import etree
 
-from sbsc_core.bim import catalogue_typings
+from sbsc_core.bim import bundled_typings
 from sbsc_core.bim.design import write_as_designed_ifc
 from sbsc_core.cli import main
 from tests.shared_data import shared_data
@@ -63,7 +63,7 @@ def test_bcf_of_every_kind_of_finding_is_valid_bcf_2_1(tmp_path, xsd, with_image
                         np.full((300, 600, 3), 200, np.uint8))
     design = tmp_path / "design.ifc"
     write_as_designed_ifc(truth_document(), design, seed=2, n_moved=2, n_removed=2, n_added=2,
-                          typings=catalogue_typings())
+                          typings=bundled_typings())
     out = tmp_path / "cmp"
     assert main(["-q", "compare", "--as-designed", str(design), "--detections", str(det), "--out", str(out)]) == 0
     summary = json.loads((out / "comparison.json").read_text())["summary"]

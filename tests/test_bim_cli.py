@@ -7,7 +7,7 @@ import json
 import ifcopenshell
 import pytest
 
-from sbsc_core.bim import catalogue_typings
+from sbsc_core.bim import bundled_typings
 from sbsc_core.bim.design import write_as_designed_ifc
 from sbsc_core.cli import main
 from tests.test_bim_fixtures import detections_document, truth_document
@@ -70,7 +70,7 @@ def test_export_ifc_errors(tmp_path, detections, capsys, case):
 def test_compare_command(tmp_path, detections):
     design = tmp_path / "design.ifc"
     write_as_designed_ifc(truth_document(), design, seed=2, n_moved=1, n_removed=1, n_added=1,
-                          typings=catalogue_typings())
+                          typings=bundled_typings())
     out = tmp_path / "cmp"
     assert main(["-q", "compare", "--as-designed", str(design), "--detections", str(detections),
                  "--out", str(out), "--tolerance", "0.05"]) == 0
@@ -85,7 +85,7 @@ def test_compare_command(tmp_path, detections):
 def test_compare_errors(tmp_path, detections, capsys, case):
     design = tmp_path / "design.ifc"
     write_as_designed_ifc(truth_document(), design, n_moved=0, n_removed=0, n_added=0,
-                          typings=catalogue_typings())
+                          typings=bundled_typings())
     text = design.read_text()
     extra = []
     reason = ""

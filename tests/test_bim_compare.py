@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from bcf.v2.bcfxml import BcfXml
 
-from sbsc_core.bim import catalogue_typings
+from sbsc_core.bim import bundled_typings
 from sbsc_core.bim.compare import compare, compare_to_dir
 from sbsc_core.bim.design import read_as_designed, write_as_designed_ifc
 from tests.test_bim_fixtures import OBJECTS, detections_document, truth_document
 
-TYPINGS = catalogue_typings()
+TYPINGS = bundled_typings()
 
 
 def _design(tmp_path, truth=None, **kw):

@@ -14,13 +14,13 @@ import ifcopenshell.api.unit
 import numpy as np
 import pytest
 
-from sbsc_core.bim import catalogue_typings
+from sbsc_core.bim import bundled_typings
 from sbsc_core.bim.design import read_as_designed, write_as_designed_ifc
 from sbsc_core.errors import InputError
 from sbsc_core.types import WallFrame
 from tests.test_bim_fixtures import truth_document
 
-TYPINGS = catalogue_typings()
+TYPINGS = bundled_typings()
 
 
 def _foreign_design(path, *, storey: bool = True) -> dict[str, list[float]]:

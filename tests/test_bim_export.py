@@ -8,7 +8,7 @@ import ifcopenshell.validate
 import numpy as np
 import pytest
 
-from sbsc_core.bim import PSET_RECOGNITION, catalogue_typings
+from sbsc_core.bim import PSET_RECOGNITION, bundled_typings
 from sbsc_core.bim.design import read_as_designed
 from sbsc_core.bim.export import export_ifc, wall_thicknesses
 from sbsc_core.errors import InputError
@@ -22,7 +22,7 @@ STATUSES = {2: "pending", 6: "rejected", 7: "none"}
 
 def _export(tmp_path, schema: str, **kw):
     doc = detections_document(statuses=STATUSES)
-    model = export_ifc(doc, schema=schema, typings=catalogue_typings(), **kw)
+    model = export_ifc(doc, schema=schema, typings=bundled_typings(), **kw)
     path = tmp_path / f"asis_{schema}.ifc"
     model.write(str(path))
     return doc, path
@@ -54,7 +54,7 @@ def test_export_passes_validation_and_reads_back(tmp_path, schema):
         .RelatingBuildingElement.Name == "W2"
 
     # re-read: every written object with class, position (1 mm) and properties
-    design = read_as_designed(path, typings=catalogue_typings())
+    design = read_as_designed(path, typings=bundled_typings())
     written = [d for i, d in enumerate(doc["detections"]) if STATUSES.get(i) != "rejected"]
     assert len(design.objects) == len(written) == 7
     by_id = {f.by_guid(o.guid).Tag: o for o in design.objects}
@@ -123,8 +123,8 @@ def test_validator_catches_a_broken_rule(tmp_path):
 
 def test_accepted_only_and_rejected_never_written():
     doc = detections_document(statuses=STATUSES)
-    all_model = export_ifc(doc, typings=catalogue_typings())
-    acc_model = export_ifc(doc, accepted_only=True, typings=catalogue_typings())
+    all_model = export_ifc(doc, typings=bundled_typings())
+    acc_model = export_ifc(doc, accepted_only=True, typings=bundled_typings())
     tags = lambda m: sorted(e.Tag for e in m.by_type("IfcElement") if e.Tag and e.Tag.startswith("D"))  # noqa: E731
     assert tags(all_model) == ["D0000", "D0001", "D0002", "D0003", "D0004", "D0005", "D0007"]
     assert tags(acc_model) == ["D0000", "D0001", "D0003", "D0004", "D0005"]
@@ -132,7 +132,7 @@ def test_accepted_only_and_rejected_never_written():
 
 
 def test_geometry_of_walls_and_object_bodies():
-    f = export_ifc(detections_document(), typings=catalogue_typings())
+    f = export_ifc(detections_document(), typings=bundled_typings())
     import ifcopenshell.geom
     import ifcopenshell.util.shape
 
@@ -158,7 +158,7 @@ def test_geometry_of_walls_and_object_bodies():
 def test_unknown_class_becomes_a_proxy_and_bad_documents_are_refused():
     doc = detections_document()
     doc["detections"][0]["class"] = "fire_hose"
-    f = export_ifc(doc, typings=catalogue_typings())
+    f = export_ifc(doc, typings=bundled_typings())
     proxy = [e for e in f.by_type("IfcBuildingElementProxy") if e.Tag == "D0000"][0]
     assert proxy.ObjectType == "FIRE_HOSE"
     with pytest.raises(InputError, match=r"detections: walls\[0\]: missing key 'normal'"):

@@ -257,12 +257,12 @@ def test_export_ifc_prints_a_success_line(tmp_path, detections, capsys) -> None:
 
 
 def test_compare_prints_a_success_line(tmp_path, detections, capsys) -> None:
-    from sbsc_core.bim import catalogue_typings
+    from sbsc_core.bim import bundled_typings
     from sbsc_core.bim.design import write_as_designed_ifc
 
     design = tmp_path / "design.ifc"
     write_as_designed_ifc(truth_document(), design, seed=2, n_moved=1, n_removed=1, n_added=1,
-                          typings=catalogue_typings())
+                          typings=bundled_typings())
     assert main(["compare", "--as-designed", str(design), "--detections", str(detections),
                  "--out", str(tmp_path / "cmp")]) == 0
     err = capsys.readouterr().err.strip()

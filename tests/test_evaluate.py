@@ -60,7 +60,7 @@ def test_truth_against_itself_is_perfect():
     assert (t.instances, t.tp, t.fn, t.fp) == (12, 12, 0, 0)
     assert (t.tp_pct, t.fn_pct, t.fp_pct, t.tp_alpha_high_pct) == (100.0, 0.0, 0.0, 100.0)
     assert (t.h_mean_mm, t.v_mean_mm, t.h_max_mm, t.v_max_mm) == (0.0, 0.0, 0.0, 0.0)
-    # catalogue order first, then other classes alphabetically
+    # the bundled library's order (its model.json "order") first, then other classes alphabetically
     assert [r.class_id for r in table.rows] == ["socket_x1", "switch", "radiator", "extinguisher_sign", "custom_valve"]
     assert table.rows[0].name == "Socket x1" and table.unknown_class_detections == 0
 
@@ -166,6 +166,46 @@ def test_cli_evaluate(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"sbsc: error: {det}: detections[3].position: expected 3 numbers, got [1, 2]"]
     assert not (tmp_path / "f.json").exists()
+
+
+def _library(root: Path, classes: dict[str, dict]) -> Path:
+    """A model library of ``classes`` (class id -> extra model.json fields) with a tiny view each."""
+    import cv2
+
+    for cid, extra in classes.items():
+        (root / cid).mkdir(parents=True)
+        (root / cid / "model.json").write_text(json.dumps(
+            {"name": cid.title(), "ifc_class": "IfcOutlet", "width_m": 0.1, "height_m": 0.1, **extra}))
+        cv2.imwrite(str(root / cid / "colour.png"), np.zeros((8, 8, 3), np.uint8))
+    return root
+
+
+def test_rows_follow_the_library_order_and_names(tmp_path):
+    truth = _truth()
+    lib = _library(tmp_path / "models", {"switch": {"order": 2}, "radiator": {"order": 1, "name": "Heater"},
+                                         "socket_x1": {}, "extinguisher_sign": {}})
+    from sbsc_core.io.models import read_library_metadata
+
+    table = evaluate(_detections(truth), truth, library=read_library_metadata(lib))
+    # ordered classes first, then the library's others by id, then classes it does not hold
+    assert [r.class_id for r in table.rows] == ["radiator", "switch", "extinguisher_sign", "socket_x1",
+                                                 "custom_valve"]
+    assert [r.name for r in table.rows][:2] == ["Heater", "Switch"] and table.rows[-1].name == "custom_valve"
+    det, tru = _write_files(tmp_path)
+    text = evaluate_files(det, tru, models=lib)
+    assert text.splitlines()[2].startswith("Heater")
+    assert main(["evaluate", "--detections", str(det), "--truth", str(tru), "--models", str(lib)]) == 0
+
+
+def test_production_code_does_not_import_the_simulator():
+    """evaluate, bim and the review service read class metadata from the model library."""
+    code = ("import sys, sbsc_core.evaluate, sbsc_core.bim, sbsc_core.bim.design, sbsc_core.bim.export, "
+            "app.review_service as r; r.bundled_classes(); sbsc_core.bim.class_typings(); "
+            "sys.exit(any(m.startswith('sbsc_core.simulate') for m in sys.modules))")
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.run([sys.executable, "-c", code], cwd=root, env={"PYTHONPATH": str(root)},
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr or "sbsc_core.simulate was imported"
 
 
 @pytest.mark.skipif(not SBSC.exists(), reason="console script not installed")

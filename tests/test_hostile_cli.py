@@ -71,7 +71,7 @@ def _check(case: hc.Case, root: Path, before: set[Path]) -> str | None:
 def corpus(tmp_path_factory) -> tuple[Path, list[hc.Case]]:
     from sbsc_core.bim.design import write_as_designed_ifc
 
-    from .test_bim_compare import catalogue_typings
+    from .test_bim_compare import bundled_typings
 
     root = tmp_path_factory.mktemp("hostile")
     models = str(bundled_models_dir())
@@ -80,7 +80,7 @@ def corpus(tmp_path_factory) -> tuple[Path, list[hc.Case]]:
     good_scan.write_text("0 0 0 1 2 3\n1 0 0 1 2 3\n0 1 0 1 2 3\n")
     design = root / "good" / "design.ifc"
     write_as_designed_ifc(truth_document(), design, n_moved=0, n_removed=0, n_added=0,
-                          typings=catalogue_typings())
+                          typings=bundled_typings())
     good_det = root / "good" / "detections.json"
     good_det.write_text(__import__("json").dumps(hc.detections_document()))
     good_truth = root / "good" / "truth.json"

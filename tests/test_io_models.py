@@ -88,12 +88,30 @@ def test_error_names_class_and_file(tmp_path, monkeypatch):
     ({"name": "", "ifc_class": "IfcOutlet", "width_m": 0.1, "height_m": 0.08}, "'name' must be a non-empty string"),
     ({"name": "S", "ifc_class": "Outlet", "width_m": 0.1, "height_m": 0.08}, "'ifc_class' must be an IFC entity"),
     ({"name": "S", "ifc_class": "IfcOutlet", "predefined_type": 3, "width_m": 0.1, "height_m": 0.08}, "predefined_type"),
+    ({"name": "S", "ifc_class": "IfcOutlet", "width_m": 0.1, "height_m": 0.08, "order": "1"}, "'order' must be a number"),
     ([1, 2], "expected a JSON object"),
 ])
 def test_bad_model_json(tmp_path, meta, fragment):
     _write_class(tmp_path / "m", "socket_x1", meta)
     msg = _error(tmp_path / "m")
     assert msg.startswith(str(tmp_path / "m" / "socket_x1" / "model.json")) and fragment in msg, msg
+
+
+def test_library_order_and_metadata(tmp_path):
+    """``order`` in model.json places a class; the others follow by id; metadata without the views."""
+    meta = {"name": "S", "ifc_class": "IfcOutlet", "width_m": 0.1, "height_m": 0.08}
+    for cid, order in (("b", 2), ("a", None), ("c", 1), ("d", None), ("e", 1.5)):
+        _write_class(tmp_path / "m", cid, {**meta, **({"order": order} if order is not None else {})})
+    expected = ["c", "e", "b", "a", "d"]
+    assert list(models_mod.read_library_metadata(tmp_path / "m")) == expected
+    assert models_mod.ordered_class_ids(load_model_library(tmp_path / "m")) == expected
+    assert models_mod.read_library_metadata(tmp_path / "m")["b"] == {**meta, "order": 2}
+    (tmp_path / "m" / "a" / "colour.png").unlink()  # views are not read
+    assert list(models_mod.read_library_metadata(tmp_path / "m")) == expected
+    from sbsc_core.paths import bundled_models_dir
+
+    bundled = list(models_mod.read_library_metadata(bundled_models_dir()))
+    assert bundled[:3] == ["electrical_panel", "socket_x1", "socket_x2"] and len(bundled) == 13  # the paper's order
 
 
 def test_library_structure_errors(tmp_path):

@@ -18,6 +18,7 @@ holds that plus the box used as the object's body (footprint x depth).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,52 +61,46 @@ def normalise_schema(schema: str, where: str = "schema") -> str:
     raise InputError(where, f"unknown IFC schema '{schema}' (expected one of {', '.join(SCHEMAS)})")
 
 
-def _typing_from_model(model: ObjectModel) -> ClassTyping:
-    from ..simulate.catalogue import CATALOGUE
-
-    depth = model.extra.get("depth_m")
-    if not isinstance(depth, int | float) or not np.isfinite(depth) or depth <= 0:
+def _typing(class_id: str, meta: Mapping, relief: np.ndarray | None = None) -> ClassTyping:
+    """A class's typing from its ``model.json`` fields; the body depth is ``depth_m``, else the
+    highest point of the relief ``depth.npy``, else :data:`DEFAULT_DEPTH_M`."""
+    depth = meta.get("depth_m")
+    if not isinstance(depth, int | float) or isinstance(depth, bool) or not np.isfinite(depth) or depth <= 0:
         depth = None
-        if model.depth is not None and np.isfinite(model.depth).any():
-            relief = float(np.nanmax(model.depth))
-            depth = relief if relief > 0 else None
-        if depth is None and model.class_id in CATALOGUE:
-            depth = CATALOGUE[model.class_id].depth_m
-    object_type = model.extra.get("object_type")
+        if relief is not None and np.isfinite(relief).any():
+            top = float(np.nanmax(relief))
+            depth = top if top > 0 else None
+    object_type = meta.get("object_type")
     return ClassTyping(
-        class_id=model.class_id, name=model.name, ifc_class=model.ifc_class,
-        predefined_type=model.predefined_type,
+        class_id=class_id, name=str(meta["name"]), ifc_class=str(meta["ifc_class"]),
+        predefined_type=meta.get("predefined_type"),
         object_type=str(object_type) if object_type else None,
-        width_m=float(model.width_m), height_m=float(model.height_m),
+        width_m=float(meta["width_m"]), height_m=float(meta["height_m"]),
         depth_m=max(MIN_DEPTH_M, float(depth if depth is not None else DEFAULT_DEPTH_M)),
     )
 
 
-def catalogue_typings() -> dict[str, ClassTyping]:
-    """The 13 classes of :mod:`sbsc_core.simulate.catalogue` (used when no library exists)."""
-    from ..simulate.catalogue import CATALOGUE
+def _typing_from_model(model: ObjectModel) -> ClassTyping:
+    meta = {**model.extra, "name": model.name, "ifc_class": model.ifc_class,
+            "predefined_type": model.predefined_type, "width_m": model.width_m, "height_m": model.height_m}
+    return _typing(model.class_id, meta, model.depth)
 
-    return {
-        cid: ClassTyping(cid, s.name, s.ifc_class, s.predefined_type, s.object_type,
-                         s.width_m, s.height_m, max(MIN_DEPTH_M, s.depth_m))
-        for cid, s in CATALOGUE.items()
-    }
+
+def bundled_typings() -> dict[str, ClassTyping]:
+    """The classes of the bundled model library, in its order (read from its ``model.json`` files)."""
+    from ..io.models import read_library_metadata
+    from ..paths import bundled_models_dir
+
+    return {cid: _typing(cid, meta) for cid, meta in read_library_metadata(bundled_models_dir()).items()}
 
 
 def class_typings(library: ModelLibrary | None = None, models: Path | None = None) -> dict[str, ClassTyping]:
     """Typing of every class: from ``library``, else the directory ``models``, else the
-    bundled library (or, while that is absent, the simulator's catalogue)."""
+    bundled library."""
     if library is None and models is not None:
         from ..io.models import load_model_library
 
         library = load_model_library(models)
     if library is None:
-        from ..paths import bundled_models_dir
-
-        bundled = bundled_models_dir()
-        if not bundled.is_dir():
-            return catalogue_typings()
-        from ..io.models import load_model_library
-
-        library = load_model_library(bundled)
+        return bundled_typings()
     return {cid: _typing_from_model(m) for cid, m in library.models.items()}

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import re
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -47,6 +48,7 @@ HOST_MAX_DISTANCE_M = 0.60  # an object's centre may stand this far in front of 
 HOST_MARGIN_M = 0.10  # ... and this far beyond the face's edges
 SCAN_WALL_PLANE_TOL_M = 0.15  # a designed position is on a scanned wall within this distance
 SCAN_WALL_MARGIN_M = 0.10  # ... and this far beyond its edges
+DEFAULT_MOUNT_HEIGHT_M = 1.2  # an added designed object of a class that is not built, without a mount height
 _SKIP_CLASSES = ("IfcWall", "IfcFeatureElement", "IfcDoor", "IfcWindow", "IfcSlab", "IfcSpace",
                  "IfcCovering", "IfcRoof", "IfcStair", "IfcColumn", "IfcBeam")
 
@@ -499,22 +501,25 @@ def _rect(u: float, v: float, w: float, h: float) -> tuple[float, float, float, 
 def write_as_designed_ifc(truth_doc: dict, out: Path, *, seed: int = 0, n_moved: int = 3, n_removed: int = 2,
                           n_added: int = 2, library: ModelLibrary | None = None, schema: str = "IFC4",
                           shift_m: tuple[float, float] = (0.4, 0.8), separation_m: float = 1.2,
-                          typings: dict[str, ClassTyping] | None = None) -> dict:
+                          typings: dict[str, ClassTyping] | None = None,
+                          mount_heights: Mapping[str, float] | None = None) -> dict:
     """Write an as-designed IFC of a simulated scene with deliberate differences.
 
     Starting from what is built (the ground truth, contract 5 with ``walls`` and per-object
     ``wall``/``u``/``v``), ``n_removed`` built objects are left out of the design, ``n_moved``
     are designed ``shift_m`` metres away along their wall, and ``n_added`` objects that are
     not built are added. A moved or added designed position keeps ``separation_m`` from every
-    other built object of its class, so each difference has one unambiguous reading.
+    other built object of its class, so each difference has one unambiguous reading. An added
+    object stands at the median height of its class's built objects, else at its
+    ``mount_heights`` entry (the simulator passes its catalogue's), else at
+    :data:`DEFAULT_MOUNT_HEIGHT_M`.
 
     Returns ``{"as_designed": out.name, "design_differences": [...]}``, each difference
     ``{"kind": "moved"|"removed"|"added", "class", "wall", "designed_position",
     "built_position"}`` (null where it does not exist), to be stored in the ground truth.
     """
-    from ..simulate.catalogue import CATALOGUE
-
     out = Path(out)
+    mount_heights = dict(mount_heights or {})
     where = "ground truth"
     if not isinstance(truth_doc, dict):
         raise InputError(where, "expected a JSON object")
@@ -579,7 +584,7 @@ def write_as_designed_ifc(truth_doc: dict, out: Path, *, seed: int = 0, n_moved:
         wid = sorted(walls)[int(rng.integers(len(walls)))]
         w, h = size(cid)
         same = [o.v for o in built if o.class_id == cid]
-        v = float(np.median(same)) if same else (CATALOGUE[cid].mount_height_m if cid in CATALOGUE else 1.2)
+        v = float(np.median(same)) if same else float(mount_heights.get(cid, DEFAULT_MOUNT_HEIGHT_M))
         f = walls[wid]
         if f.width_m < w + 0.2:
             continue

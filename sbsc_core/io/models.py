@@ -6,6 +6,11 @@ A library is a directory with one sub-directory per class::
     models/socket_x1/colour.png      front views: colour.png, colour_1.png, ...
     models/socket_x1/depth.npy       optional 2-D relief over the footprint (metres)
 
+An optional number ``order`` in ``model.json`` sets the class's place in the library's
+order (:func:`library_order`: tables and lists name the classes in it); classes without it
+follow, alphabetically. :func:`read_library_metadata` reads only the ``model.json`` files:
+the class metadata (names, IFC classes, sizes, order) without the views.
+
 Every problem raises :class:`~sbsc_core.errors.InputError` naming the class directory
 or the file and what is wrong with it, e.g. ``models/socket_x1/model.json: missing key
 'width_m'``.
@@ -20,6 +25,7 @@ import shutil
 import stat
 import tempfile
 import zipfile
+from collections.abc import Mapping
 from pathlib import Path, PurePosixPath
 
 import numpy as np
@@ -67,6 +73,43 @@ def load_model_library(root: Path | str) -> ModelLibrary:
     return ModelLibrary(models=models, root=str(root))
 
 
+def library_order(metadata: Mapping[str, Mapping]) -> list[str]:
+    """The class ids of a library in its order: by ``order`` (``model.json``, a number), then
+    the classes without it, each group alphabetically by class id (stable)."""
+    def key(cid: str) -> tuple[int, float, str]:
+        order = metadata[cid].get("order")
+        ok = isinstance(order, int | float) and not isinstance(order, bool) and math.isfinite(order)
+        return (0, float(order), cid) if ok else (1, 0.0, cid)
+
+    return sorted(metadata, key=key)
+
+
+def ordered_class_ids(library: ModelLibrary) -> list[str]:
+    """The classes of a loaded library in its order (:func:`library_order`)."""
+    return library_order({cid: m.extra for cid, m in library.models.items()})
+
+
+def read_library_metadata(root: Path | str) -> dict[str, dict]:
+    """Class id -> the checked fields of its ``model.json``, in the library's order.
+
+    Reads only the ``model.json`` files (no front view, no depth), with the same checks and
+    errors as :func:`load_model_library`.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise InputError(root, "no such directory" if not root.exists() else "not a directory")
+    meta: dict[str, dict] = {}
+    for d in sorted(root.iterdir()):
+        if not d.is_dir() or d.name.startswith(".") or d.name in _ZIP_IGNORED:
+            continue
+        if not CLASS_ID_RE.match(d.name):
+            raise InputError(d, "class directory name must be lower case letters, digits and '_'")
+        meta[d.name] = _read_model_json(d / "model.json")
+    if not meta:
+        raise InputError(root, "no class directories (expected one sub-directory per object class)")
+    return {cid: meta[cid] for cid in library_order(meta)}
+
+
 def load_object_model(class_dir: Path) -> ObjectModel:
     """Read one class directory (``model.json``, ``colour*.png``, optional ``depth.npy``)."""
     class_dir = Path(class_dir)
@@ -100,6 +143,10 @@ def _read_model_json(path: Path) -> dict:
             raise InputError(path, f"'{key}' {why}")
     if not meta["ifc_class"].startswith("Ifc"):
         raise InputError(path, f"'ifc_class' must be an IFC entity name such as IfcOutlet, got '{meta['ifc_class']}'")
+    order = meta.get("order")
+    if order is not None and (isinstance(order, bool) or not isinstance(order, int | float)
+                              or not math.isfinite(order)):
+        raise InputError(path, f"'order' must be a number, got {json.dumps(order)}")
     pt = meta.get("predefined_type")
     if pt is not None and (not isinstance(pt, str) or not pt.strip()):
         raise InputError(path, "'predefined_type' must be a non-empty string or null")

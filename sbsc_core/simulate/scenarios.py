@@ -164,7 +164,8 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
         if design:
             from ..bim.design import write_as_designed_ifc
 
-            res = write_as_designed_ifc(truth, tmp / "as_designed.ifc", seed=seed)
+            res = write_as_designed_ifc(truth, tmp / "as_designed.ifc", seed=seed,
+                                        mount_heights={c: spec.mount_height_m for c, spec in CATALOGUE.items()})
             truth["as_designed"] = res["as_designed"]
             truth["design_differences"] = res["design_differences"]
         write_json_atomic(tmp / "ground_truth.json", truth)
