@@ -151,6 +151,7 @@ class Job(Base):
     worker_pid: Mapped[int | None] = mapped_column(Integer)
     out_dir: Mapped[str | None] = mapped_column(String(500))  # relative to the data dir
     cancelled_by: Mapped[str | None] = mapped_column(String(100))
+    storeys: Mapped[list[Any] | None] = mapped_column(JSON)  # contract 4's storeys block of the results
 
 
 class WallRow(Base):
@@ -169,6 +170,7 @@ class WallRow(Base):
     height_m: Mapped[float] = mapped_column(Float)
     pixel_m: Mapped[float] = mapped_column(Float)
     images: Mapped[dict[str, Any]] = mapped_column(JSON)  # kind -> {"path", "bytes", "sha256"}
+    storey: Mapped[str | None] = mapped_column(String(50))  # "S2" in a scan of several storeys
 
 
 class OpeningRow(Base):

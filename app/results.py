@@ -46,7 +46,11 @@ def import_results(session: Session, job: Job, out_dir: Path, data_dir: Path) ->
                             origin=list(w["origin"]), axis_u=list(w["axis_u"]),
                             axis_v=list(w["axis_v"]), normal=list(w["normal"]),
                             width_m=float(w["width_m"]), height_m=float(w["height_m"]),
-                            pixel_m=pixel_m, images=images))
+                            pixel_m=pixel_m, images=images,
+                            storey=str(w["storey"])[:50] if w.get("storey") else None))
+    if doc.get("storeys"):  # contract 4: several storeys, bottom up
+        job.storeys = [{"id": str(st["id"]), "floor_z": float(st["floor_z"]), "ceiling_z": float(st["ceiling_z"])}
+                       for st in doc["storeys"]]
     for o in doc["openings"]:
         session.add(OpeningRow(project_id=job.project_id, job_id=job.id, wall_key=o["wall"],
                                kind=o["kind"], u_min=o["u_min"], u_max=o["u_max"],
@@ -99,8 +103,11 @@ def import_suggestions(session: Session, job: Job, out_dir: Path) -> int:
 
 
 def wall_dict(w: WallRow) -> dict:
-    return {"id": w.key, "origin": w.origin, "axis_u": w.axis_u, "axis_v": w.axis_v,
-            "normal": w.normal, "width_m": w.width_m, "height_m": w.height_m}
+    out = {"id": w.key, "origin": w.origin, "axis_u": w.axis_u, "axis_v": w.axis_v,
+           "normal": w.normal, "width_m": w.width_m, "height_m": w.height_m}
+    if w.storey:
+        out["storey"] = w.storey
+    return out
 
 
 def review_dict(d: DetectionRow) -> dict:
@@ -133,6 +140,9 @@ def project_document(session: Session, project: Project, *, id_is_ref: bool = Fa
         return doc
     walls = session.scalars(select(WallRow).where(WallRow.job_id == jid).order_by(WallRow.key)).all()
     doc["pixel_m"] = walls[0].pixel_m if walls else DEFAULT_PIXEL_M
+    job = session.get(Job, jid)
+    if job is not None and job.storeys:
+        doc["storeys"] = list(job.storeys)
     doc["walls"] = [wall_dict(w) for w in walls]
     doc["openings"] = [
         {"wall": o.wall_key, "kind": o.kind, "u_min": o.u_min, "u_max": o.u_max,
@@ -164,4 +174,5 @@ def job_dict(job: Job) -> dict:
             "progress": round(float(job.progress), 4), "error": job.error, "retry_of": job.retry_of,
             "created_by": job.created_by, "created_at": iso(job.created_at),
             "started_at": iso(job.started_at), "finished_at": iso(job.finished_at),
-            "updated_at": iso(job.updated_at), "expected": job.expected}
+            "updated_at": iso(job.updated_at), "expected": job.expected,
+            **({"storeys": job.storeys} if job.storeys else {})}

@@ -1,14 +1,18 @@
 """Storeys: a building detected whole against each of its floors detected alone (issue 12).
 
     flock /tmp/sbsc-heavy.lock .venv/bin/python benchmarks/bench_storeys.py --storeys 2 4 \
-        [--scene scenario|one_room] [--step 0.25] [--run-dir /tmp/bench_storeys] [--redo]
+        [--scene scenario|one_room] [--step 0.25] [--expected storeys|building|none] \
+        [--run-dir /tmp/bench_storeys] [--redo]
 
 For each storey count a building is simulated (``sbsc simulate --scenario building``, one
 PLY per station, kept in the run dir) and detected twice over:
 
-* whole: ``sbsc detect`` on every station file of the building;
+* whole: ``sbsc detect`` on every station file of the building, with ``--expected``:
+  ``storeys`` the simulator's ``expected.json`` (the building's counts and each storey's,
+  contract 3), ``building`` the building's counts only, ``none`` without expected counts;
 * alone: ``sbsc detect`` on the station files of one storey only (the same floor scanned
-  alone: exactly the same points), with the expected counts of that storey's objects.
+  alone: exactly the same points), with the expected counts of that storey's objects
+  (none with ``--expected none``).
 
 Both are evaluated per storey against the building's ground truth (objects of that storey;
 a detection of the whole run counts for the storey of its wall), with
@@ -45,10 +49,12 @@ def _run(cmd: list[str]) -> tuple[float, float]:
     return time.perf_counter() - t, rss_kb / 2**20
 
 
-def _detect(scans: list[Path], sim: Path, expected: Path, out: Path, redo: bool) -> tuple[dict, float, float]:
+def _detect(scans: list[Path], sim: Path, expected: Path | None, out: Path, redo: bool
+            ) -> tuple[dict, float, float]:
     if redo or not (out / "detections.json").exists():
-        secs, rss = _run([*SBSC, "-q", "detect", *map(str, scans), "--models", str(sim / "models"),
-                          "--expected", str(expected), "--out", str(out)])
+        exp = [] if expected is None else ["--expected", str(expected)]
+        secs, rss = _run([*SBSC, "-q", "detect", *map(str, scans), "--models", str(sim / "models"), *exp,
+                          "--out", str(out)])
         (out / "run.json").write_text(json.dumps({"seconds": secs, "rss_gib": rss}))
     run = json.loads((out / "run.json").read_text())
     return json.loads((out / "detections.json").read_text()), run["seconds"], run["rss_gib"]
@@ -64,7 +70,7 @@ def _storey_table(doc: dict, truth: dict, sid: str, walls_of: set[str] | None) -
     return total.instances, total.tp, total.fn, total.fp
 
 
-def bench(n: int, scene: str, step: float, run_dir: Path, redo: bool) -> dict:
+def bench(n: int, scene: str, step: float, run_dir: Path, redo: bool, mode: str = "storeys") -> dict:
     sim = run_dir / f"{scene}_{n}storeys_step{step:g}"
     if not (sim / "ground_truth.json").exists():
         secs, rss = _run([*SBSC, "-q", "simulate", "--scenario", "building", "--scene", scene,
@@ -72,7 +78,17 @@ def bench(n: int, scene: str, step: float, run_dir: Path, redo: bool) -> dict:
         print(f"simulated {sim.name} in {secs:.0f} s, peak {rss:.2f} GiB", flush=True)
     truth = json.loads((sim / "ground_truth.json").read_text())
     files = sorted((sim / "stations").iterdir())
-    whole, w_secs, w_rss = _detect(files, sim, sim / "expected.json", run_dir / f"{sim.name}_whole", redo)
+    whole_exp: Path | None = None
+    if mode == "storeys":
+        whole_exp = sim / "expected.json"
+        if "storeys" not in json.loads(whole_exp.read_text()):
+            raise SystemExit(f"{whole_exp}: no per-storey counts (simulated by an older sbsc: delete {sim})")
+    elif mode == "building":
+        whole_exp = run_dir / f"{sim.name}_building_expected.json"
+        counts = json.loads((sim / "expected.json").read_text())["counts"]
+        whole_exp.write_text(json.dumps({"schema": "sbsc.expected/1", "counts": counts}))
+    tag = {"storeys": "", "building": "_building", "none": "_noexp"}[mode]
+    whole, w_secs, w_rss = _detect(files, sim, whole_exp, run_dir / f"{sim.name}_whole{tag}", redo)
     rows = []
     found = {s["id"]: s for s in whole.get("storeys", [])}
     for st in truth["storeys"]:
@@ -83,8 +99,10 @@ def bench(n: int, scene: str, step: float, run_dir: Path, redo: bool) -> dict:
                 counts[o["class"]] = counts.get(o["class"], 0) + 1
         expected = run_dir / f"{sim.name}_{sid}_expected.json"  # the floor alone holds its own objects
         expected.write_text(json.dumps({"schema": "sbsc.expected/1", "counts": counts}))
-        alone, a_secs, a_rss = _detect([f for f in files if f.name.startswith(sid + "_")], sim, expected,
-                                       run_dir / f"{sim.name}_{sid}_alone", redo)
+        alone, a_secs, a_rss = _detect([f for f in files if f.name.startswith(sid + "_")], sim,
+                                       None if mode == "none" else expected,
+                                       run_dir / f"{sim.name}_{sid}_alone{'_noexp' if mode == 'none' else ''}",
+                                       redo)
         walls = {w["id"] for w in whole["walls"] if w.get("storey") == sid}
         got = found.get(sid)
         rows.append({
@@ -94,7 +112,8 @@ def bench(n: int, scene: str, step: float, run_dir: Path, redo: bool) -> dict:
             "whole": _storey_table(whole, truth, sid, walls), "alone": _storey_table(alone, truth, sid, None),
             "alone_seconds": a_secs, "alone_rss_gib": a_rss,
         })
-    return {"storeys": n, "scene": scene, "step": step, "whole_seconds": w_secs, "whole_rss_gib": w_rss,
+    return {"storeys": n, "scene": scene, "step": step, "expected": mode, "whole_seconds": w_secs,
+            "whole_rss_gib": w_rss,
             "storeys_found": len(found), "rows": rows}
 
 
@@ -113,15 +132,18 @@ def main() -> None:
     ap.add_argument("--scene", choices=["scenario", "one_room"], default="scenario")
     ap.add_argument("--step", type=float, default=0.25, help="scanner angular step, degrees")
     ap.add_argument("--run-dir", type=Path, default=Path("/tmp/bench_storeys"))
+    ap.add_argument("--expected", choices=["storeys", "building", "none"], default="storeys",
+                    help="expected counts of the whole run: per storey (default), the building's, none")
     ap.add_argument("--redo", action="store_true", help="detect again")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args()
     args.run_dir.mkdir(parents=True, exist_ok=True)
     results = []
     for n in args.storeys:
-        res = bench(n, args.scene, args.step, args.run_dir, args.redo)
+        res = bench(n, args.scene, args.step, args.run_dir, args.redo, args.expected)
         results.append(res)
-        print(f"\n{n} storeys ({args.scene}, {args.step:g} deg): {res['storeys_found']} found; whole building "
+        print(f"\n{n} storeys ({args.scene}, {args.step:g} deg, expected: {args.expected}): "
+              f"{res['storeys_found']} found; whole building "
               f"{res['whole_seconds']:.0f} s, peak {res['whole_rss_gib']:.2f} GiB")
         print(f"{'storey':6} {'floor z truth/found':>20} {'ceiling z truth/found':>22} {'walls w/a':>9} "
               f"{'inst':>4} {'TP whole/alone':>14} {'FP whole/alone':>14}")

@@ -52,7 +52,7 @@ from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
 from .io.crs import georeference_fields, scan_crs
-from .io.documents import detections_document, read_expected
+from .io.documents import ExpectedCounts, detections_document, read_expected_counts
 from .io.models import load_model_library
 from .lookalikes import resolve_on_wall
 from .orthoimage import build_orthoimage
@@ -263,6 +263,15 @@ def _walls_results(cloud: PointCloud, seg: Segmentation, templates: dict[str, Mo
             pool.shutdown(wait=True, cancel_futures=True)
 
 
+Expected = dict[str, int] | ExpectedCounts  # contract 3: counts, or counts with per-storey counts
+
+
+def _as_expected(expected: Expected | None) -> ExpectedCounts | None:
+    if expected is None or isinstance(expected, ExpectedCounts):
+        return expected
+    return ExpectedCounts(dict(expected))
+
+
 def _search_classes(library: ModelLibrary, expected: dict[str, int] | None) -> list[str]:
     if expected is not None:
         unknown = sorted(set(expected) - set(library.models))
@@ -287,14 +296,53 @@ def _collect_walls(results: Iterator[tuple[str, WallResult, dict[str, float]]], 
     return walls
 
 
+def storey_counts(seg: Segmentation, expected: ExpectedCounts | None,
+                  log: Callable[[str], None] | None = None) -> dict[str, dict[str, int]] | None:
+    """The expected counts of each storey found, when the expected counts give them for exactly
+    the storeys that segmentation found (same ids); else None, said in ``log`` when the
+    counts have storeys that do not match (then the building's counts apply to all storeys)."""
+    if expected is None or not expected.storeys or len(seg.storeys) < 2:
+        return None
+    found = [st.id for st in seg.storeys]
+    if sorted(found) != sorted(expected.storeys):
+        if log is not None:
+            log(f"warning: the expected counts name storeys {', '.join(sorted(expected.storeys))} but the scan "
+                f"has {', '.join(found)}: the building's counts apply to all storeys together")
+        return None
+    return {sid: dict(expected.storeys[sid]) for sid in found}
+
+
+def consensus_by_storey(depth: list[Candidate], colour: list[Candidate], wall_storey: dict[str, str],
+                        counts: dict[str, dict[str, int]], settings: DetectionSettings,
+                        classes: list[str]) -> dict[str, list]:
+    """:func:`~sbsc_core.consensus.consensus_all` on each storey with that storey's expected counts.
+
+    ``wall_storey`` maps a wall id to its storey. A storey's expected counts limit only the
+    instances on its own walls, so a storey whose candidates are weaker is not starved by
+    another's. Returns the hits per class, storey by storey in the order of ``counts``.
+    """
+    out: dict[str, list] = {c: [] for c in classes}
+    for sid, cnt in counts.items():
+        on = {w for w, st in wall_storey.items() if st == sid}
+        hits = consensus_all([c for c in depth if c.wall_id in on], [c for c in colour if c.wall_id in on],
+                             {c: int(cnt.get(c, 0)) for c in classes}, settings.consensus, classes)
+        for cls, hs in hits.items():
+            out.setdefault(cls, []).extend(hs)
+    return out
+
+
 def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[str, ModelTemplate],
-               classes: list[str], expected: dict[str, int] | None, s: DetectionSettings, progress: Progress,
-               timings: dict[str, float]) -> DetectionResult:
+               classes: list[str], expected: ExpectedCounts | None, s: DetectionSettings, progress: Progress,
+               timings: dict[str, float], log: Callable[[str], None] | None = None) -> DetectionResult:
     progress("consensus", 0.0)
     t = time.perf_counter()
     depth_c = [c for w in walls.values() for c in w.depth_candidates]
     colour_c = [c for w in walls.values() for c in w.colour_candidates]
-    hits = consensus_all(depth_c, colour_c, expected, s.consensus, classes)
+    per_storey = storey_counts(seg, expected, log)
+    if per_storey is not None:
+        hits = consensus_by_storey(depth_c, colour_c, {w.id: w.storey for w in seg.walls}, per_storey, s, classes)
+    else:
+        hits = consensus_all(depth_c, colour_c, None if expected is None else expected.counts, s.consensus, classes)
     orthos = {k: w.ortho for k, w in walls.items()}
     chosen = screen_hits([h for cls in classes for h in hits.get(cls, [])], depth_c, colour_c, s.confidence)
     if s.confidence.enabled and s.confidence.report_unknown:  # regions like no class, for review
@@ -308,7 +356,7 @@ def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[
 def detect(
     cloud: PointCloud,
     library: ModelLibrary,
-    expected: dict[str, int] | None = None,
+    expected: Expected | None = None,
     settings: DetectionSettings | None = None,
     progress: Progress | None = None,
     pool: ProcessPoolExecutor | None = None,
@@ -316,14 +364,17 @@ def detect(
     """Run sections 3 and 4 of the paper on a registered coloured cloud in memory.
 
     ``expected`` maps class ids to instance counts (contract 3); classes not named are not
-    searched. Without it every class of the library is searched with no count limit.
+    searched. Without it every class of the library is searched with no count limit. As
+    :class:`~sbsc_core.io.documents.ExpectedCounts` with per-storey counts for the storeys
+    found, each storey's counts limit the instances on its walls (:func:`consensus_by_storey`).
     ``pool`` (see :func:`wall_pool`) runs the per-wall stages; by default one is made.
     :func:`detect_scans` does the same on scan files without holding the cloud.
     """
     s = settings or DetectionSettings()
     progress = progress or _noop_progress
     timings: dict[str, float] = {}
-    classes = _search_classes(library, expected)
+    expected = _as_expected(expected)
+    classes = _search_classes(library, None if expected is None else expected.counts)
 
     t0 = time.perf_counter()
     progress("segmentation", 0.0)
@@ -409,7 +460,7 @@ def _in_order(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int)
 def detect_scans(
     scans: Sequence[Path],
     library: ModelLibrary,
-    expected: dict[str, int] | None = None,
+    expected: Expected | None = None,
     settings: DetectionSettings | None = None,
     progress: Progress | None = None,
     *,
@@ -433,7 +484,8 @@ def detect_scans(
     progress = progress or _noop_progress
     log = log or (lambda msg: None)
     timings: dict[str, float] = {}
-    classes = _search_classes(library, expected)
+    expected = _as_expected(expected)
+    classes = _search_classes(library, None if expected is None else expected.counts)
     workers = max(1, _worker_count(s))
     t0 = time.perf_counter()
 
@@ -491,7 +543,7 @@ def detect_scans(
                for wid, res, t_wall in _in_order(executor, wall_jobs, _partition_wall_job, 2 * workers))
     done = _collect_walls(results, len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
-    result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
+    result = _consensus(seg, walls, templates, classes, expected, s, progress, timings, log)
     timings["total"] = time.perf_counter() - t0
     return result, points
 
@@ -500,7 +552,7 @@ def detect_to_dir(
     scans: Sequence[Path],
     models: Path,
     *,
-    expected: Path | dict[str, int] | None = None,
+    expected: Path | Expected | None = None,
     out: Path,
     settings_file: Path | None = None,
     settings: DetectionSettings | None = None,
@@ -520,7 +572,7 @@ def detect_to_dir(
     s = settings or load_settings(settings_file)
     progress("reading", 0.0)
     library = load_model_library(Path(models))
-    counts = read_expected(expected) if isinstance(expected, (str, Path)) else expected
+    counts = read_expected_counts(expected) if isinstance(expected, (str, Path)) else expected
     paths = [Path(p) for p in scans]
     if not paths:
         raise InputError("scans", "no scan files given")
@@ -532,11 +584,13 @@ def detect_to_dir(
         seg = result.segmentation
         if seg.stray_points:
             log(f"ignored about {seg.stray_points:,} stray points outside the dense part of the scan")
+        per_storey = storey_counts(seg, _as_expected(counts)) or {}
         for st in seg.storeys:
             walls = [w for w in seg.walls if w.storey == st.id]
             found = sum(1 for d in result.detections if d.wall_id in {w.id for w in walls})
+            of = f" of {sum(per_storey[st.id].values())} expected" if st.id in per_storey else ""
             log(f"storey {st.id}: floor z = {st.floor_z:.2f} m, ceiling z = {st.ceiling_z:.2f} m, "
-                f"{len(walls)} walls, {found} objects")
+                f"{len(walls)} walls, {found} objects{of}")
             if st.ceiling_z - st.floor_z > _TALL_STOREY_M:
                 log(f"warning: storey {st.id} is {st.ceiling_z - st.floor_z:.1f} m high; if it is several "
                     "storeys, no slab between them was seen (check the scan)")

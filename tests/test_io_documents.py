@@ -13,6 +13,7 @@ from sbsc_core.io.documents import (
     detections_document,
     read_detections,
     read_expected,
+    read_expected_counts,
     read_truth,
     write_detections,
 )
@@ -76,6 +77,31 @@ def test_read_expected(tmp_path):
 def test_bad_expected(tmp_path, doc, fragment):
     msg = _error(read_expected, _write(tmp_path / "expected.json", doc))
     assert fragment in msg, msg
+
+
+def test_read_expected_per_storey(tmp_path):
+    """Contract 3's optional ``storeys``: each storey's counts, adding up to ``counts``."""
+    doc = {"schema": "sbsc.expected/1", "counts": {"socket_x1": 5, "switch": 2},
+           "storeys": {"S1": {"socket_x1": 3, "switch": 2}, "S2": {"socket_x1": 2}}}
+    got = read_expected_counts(_write(tmp_path / "e.json", doc))
+    assert got.counts == {"socket_x1": 5, "switch": 2}
+    assert got.storeys == {"S1": {"socket_x1": 3, "switch": 2}, "S2": {"socket_x1": 2}}
+    assert read_expected(tmp_path / "e.json") == {"socket_x1": 5, "switch": 2}  # the old reader: counts
+    old = read_expected_counts(_write(tmp_path / "old.json", {"schema": "sbsc.expected/1", "counts": {"switch": 1}}))
+    assert (old.counts, old.storeys) == ({"switch": 1}, None)
+
+
+@pytest.mark.parametrize("storeys, fragment", [
+    ([1], "storeys: expected a JSON object"),
+    ({"first": {"switch": 2}}, "storeys.first: storey ids are S1, S2"),
+    ({"S1": {"switch": -1}}, "storeys.S1.switch: expected a non-negative integer"),
+    ({"S1": {"switch": 1}, "S2": {"switch": 2}}, "storeys.*.switch: the storeys hold 3 in all, counts.switch is 2"),
+    ({"S1": {"switch": 2, "radiator": 1}}, "storeys.*.radiator: the storeys hold 1 in all, counts.radiator is 0"),
+])
+def test_bad_expected_storeys(tmp_path, storeys, fragment):
+    doc = {"schema": "sbsc.expected/1", "counts": {"switch": 2}, "storeys": storeys}
+    msg = _error(read_expected, _write(tmp_path / "expected.json", doc))
+    assert fragment in msg and "\n" not in msg, msg
 
 
 def test_missing_file(tmp_path):

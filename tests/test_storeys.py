@@ -265,3 +265,40 @@ def test_a_sparse_las_spanning_kilometres_is_refused_in_one_line(tmp_path, capsy
     err = capsys.readouterr().err.strip()
     assert rc == 2 and len(err.splitlines()) == 1 and "simple.las: no dense part" in err, err
     assert not (tmp_path / "out" / "detections.json").exists()
+
+
+def test_each_storey_keeps_its_own_expected_counts() -> None:
+    """With per-storey counts (contract 3's ``storeys``) a storey whose candidates are weaker is
+    not starved by another storey's: each storey takes its own count, as when scanned alone."""
+    from sbsc_core.io.documents import ExpectedCounts
+    from sbsc_core.matching import box_at
+    from sbsc_core.pipeline import consensus_by_storey, storey_counts
+    from sbsc_core.settings import DetectionSettings
+    from sbsc_core.types import Candidate, Segmentation, Storey, Wall, WallFrame
+
+    def cand(source: str, wall: str, col: float, score: float) -> Candidate:
+        return Candidate("switch", wall, source, box_at((50.0, col), 16, 16), (50.0, col), score)
+
+    # S1: one switch found in depth only (alpha 0.5); S2: two found in both (alpha 1), one of them not in the design
+    depth = [cand("depth", "S1-W01", 40, 0.85), cand("depth", "S2-W01", 40, 0.95), cand("depth", "S2-W01", 140, 0.95)]
+    colour = [cand("colour", "S2-W01", 40, 0.05), cand("colour", "S2-W01", 140, 0.05)]
+    frame = WallFrame(origin=np.zeros(3), axis_u=np.array([1.0, 0, 0]), axis_v=np.array([0, 0, 1.0]),
+                      normal=np.array([0, 1.0, 0]), width_m=4.0, height_m=2.8)
+    seg = Segmentation(0.0, 5.9, [Wall(f"{sid}-W01", frame, np.zeros(0, np.int64), sid) for sid in ("S1", "S2")],
+                       [Storey("S1", 0.0, 2.8), Storey("S2", 3.1, 5.9)])
+    s = DetectionSettings()
+    per_storey = ExpectedCounts({"switch": 2}, {"S1": {"switch": 1}, "S2": {"switch": 1}})
+    counts = storey_counts(seg, per_storey)
+    assert counts == {"S1": {"switch": 1}, "S2": {"switch": 1}}
+    hits = consensus_by_storey(depth, colour, {"S1-W01": "S1", "S2-W01": "S2"}, counts, s, ["switch"])
+    assert sorted(h.wall_id for h in hits["switch"]) == ["S1-W01", "S2-W01"]
+    # the building's counts alone: both places go to S2's stronger candidates
+    from sbsc_core.consensus import consensus_all
+
+    assert [h.wall_id for h in consensus_all(depth, colour, {"switch": 2}, s.consensus, ["switch"])["switch"]] == [
+        "S2-W01", "S2-W01"]
+    # storeys that do not match the scan's: the building's counts, and a warning naming both
+    said: list[str] = []
+    assert storey_counts(seg, ExpectedCounts({"switch": 2}, {"S1": {"switch": 2}}), said.append) is None
+    assert said and "S1" in said[0] and "S1, S2" in said[0]
+    assert storey_counts(Segmentation(0.0, 2.8, seg.walls[:1], seg.storeys[:1]), per_storey) is None

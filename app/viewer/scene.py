@@ -153,6 +153,12 @@ def _fmt(x: Any, nd: int = 2) -> str:
     return "–" if x is None else f"{float(x):.{nd}f}"
 
 
+def wall_label(wid: str, f: WallFrame, storey: str | None = None) -> str:
+    """A wall's name in the scene: its id and width, and its storey when the id does not carry it."""
+    named = f" ({storey})" if storey and not wid.startswith(f"{storey}-") else ""
+    return f"{wid}{named}  {f.width_m:.2f} m"
+
+
 def spot_label(det: dict) -> str:
     if det.get("confidence") is not None:
         return f"{det['class']} {_fmt(det['confidence'])}"
@@ -198,6 +204,7 @@ class ProjectScene:
         self.centre = np.zeros(3)
         self.lod: ScanLod | None = None
         self.frames: dict[str, WallFrame] = {}
+        self.storey_of: dict[str, str | None] = {}  # wall id -> its storey (several storeys)
         self.detections: dict[str, dict] = {}
         self.order: list[str] = []  # detection ids in review order
         self.locked = False
@@ -268,8 +275,10 @@ class ProjectScene:
         for d in self.detections.values():
             counts[d["review"]["status"]] = counts.get(d["review"]["status"], 0) + 1
         name = self.data.name if self.data else str(self.pid)
+        storeys = sorted({st for st in self.storey_of.values() if st})
+        where = f" in {len(storeys)} storeys ({', '.join(storeys)})" if len(storeys) > 1 else ""
         lines = [f"### {name}",
-                 f"{len(self.detections)} objects on {len(self.frames)} walls: "
+                 f"{len(self.detections)} objects on {len(self.frames)} walls{where}: "
                  f"**{counts['pending']} pending**, {counts['accepted']} accepted, "
                  f"{counts['rejected']} rejected."]
         if self.lod is not None:
@@ -329,6 +338,7 @@ class ProjectScene:
         self.locked, self.signoff = bool(data.locked), data.signoff
         doc = data.detections
         self.frames = {w["id"]: WallFrame.from_dict(w) for w in doc.get("walls", [])}
+        self.storey_of = {w["id"]: w.get("storey") for w in doc.get("walls", [])}  # contract 4, several storeys
         dets = doc.get("detections", [])
         self.detections = {d["id"]: d for d in dets}
         self.order = self.review_order()
@@ -409,7 +419,7 @@ class ProjectScene:
             thickness_units="screen")
         top = f.to_world(f.width_m / 2.0, f.height_m, 0.05) - self.centre
         self.nodes[f"walls/{wid}/label"] = scene.add_label(
-            f"/walls/{wid}/label", f"{wid}  {f.width_m:.2f} m", position=top,
+            f"/walls/{wid}/label", wall_label(wid, f, self.storey_of.get(wid)), position=top,
             anchor="bottom-center", font_screen_scale=1.1)
 
     def _add_opening(self, o: dict) -> None:
@@ -998,7 +1008,9 @@ class ReviewSession:
     def info_text(self, det: dict) -> str:
         r = det["review"]
         who = f" by {r['by']} at {r['at']}" if r.get("by") else ""
-        lines = [f"**{det.get('ref') or det['id']} · {det['class']}** on wall {det.get('wall')}",
+        storey = self.scene.storey_of.get(det.get("wall"))
+        lines = [f"**{det.get('ref') or det['id']} · {det['class']}** on wall {det.get('wall')}"
+                 + (f", storey {storey}" if storey else ""),
                  f"u {_fmt(det.get('u'), 3)} m, v {_fmt(det.get('v'), 3)} m, "
                  f"{_fmt(det.get('width_m'), 3)} × {_fmt(det.get('height_m'), 3)} m",
                  f"α {_fmt(det.get('alpha'))} · ρ_D {_fmt(det.get('rho_depth'))} · "

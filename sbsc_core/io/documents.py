@@ -137,19 +137,57 @@ def _load_json(path: Path) -> tuple[dict, _Checker]:
 # --------------------------------------------------------------------------- expected (3)
 
 
-def read_expected(path: Path | str) -> dict[str, int]:
-    """``expected.json``: instances per class that the as-designed model holds."""
-    doc, check = _load_json(Path(path))
-    check.schema(doc, EXPECTED_SCHEMA)
-    counts = check.obj(check.key(doc, "counts", ""), "counts")
+@dataclass
+class ExpectedCounts:
+    """Contract 3: instances per class that the as-designed model holds for the scanned
+    building (``counts``) and, optionally, per storey (``storeys``: storey id -> counts,
+    bottom up, ids as in contract 4: ``S1``, ``S2``, ...)."""
+
+    counts: dict[str, int]
+    storeys: dict[str, dict[str, int]] | None = None
+
+
+def _counts(check: _Checker, value: Any, where: str) -> dict[str, int]:
     out: dict[str, int] = {}
-    for cls, n in counts.items():
-        where = f"counts.{cls}"
-        check.string(cls, where, pattern=CLASS_ID_RE)
+    for cls, n in check.obj(value, where).items():
+        at = f"{where}.{cls}"
+        check.string(cls, at, pattern=CLASS_ID_RE)
         if isinstance(n, bool) or not isinstance(n, int) or n < 0:
-            raise check.fail(where, f"expected a non-negative integer, got {_show(n)}")
+            raise check.fail(at, f"expected a non-negative integer, got {_show(n)}")
         out[cls] = n
     return out
+
+
+STOREY_ID_RE = re.compile(r"^S[0-9]+$")
+
+
+def read_expected_counts(path: Path | str) -> ExpectedCounts:
+    """``expected.json`` (contract 3) with its optional per-storey counts.
+
+    ``storeys`` (an extension: ``{"S1": {"socket_x1": 20, ...}, "S2": {...}}``) must add up
+    to ``counts`` class by class (a class missing from a storey counts 0 there).
+    """
+    doc, check = _load_json(Path(path))
+    check.schema(doc, EXPECTED_SCHEMA)
+    counts = _counts(check, check.key(doc, "counts", ""), "counts")
+    if doc.get("storeys") is None:
+        return ExpectedCounts(counts)
+    storeys = {}
+    for sid, value in check.obj(doc["storeys"], "storeys").items():
+        if not STOREY_ID_RE.match(sid):
+            raise check.fail(f"storeys.{sid}", "storey ids are S1, S2, ... (bottom up, as in the detections)")
+        storeys[sid] = _counts(check, value, f"storeys.{sid}")
+    for cls in sorted(set(counts) | {c for st in storeys.values() for c in st}):
+        total = sum(st.get(cls, 0) for st in storeys.values())
+        if total != counts.get(cls, 0):
+            raise check.fail(f"storeys.*.{cls}", f"the storeys hold {total} in all, counts.{cls} is "
+                                                 f"{counts.get(cls, 0)}")
+    return ExpectedCounts(counts, storeys or None)
+
+
+def read_expected(path: Path | str) -> dict[str, int]:
+    """``expected.json``: instances per class that the as-designed model holds."""
+    return read_expected_counts(path).counts
 
 
 # --------------------------------------------------------------------------- truth (5)

@@ -15,7 +15,8 @@ degrees gives about 100 M points per Scenario floor).
 
 The output folder holds ``stations/S<k>_<nnn>.<ext>`` (world coordinates),
 ``ground_truth.json`` (contract 5; objects and walls carry their ``storey``, wall ids are
-prefixed with it, plus a top-level ``storeys`` list), ``expected.json`` and ``models/``.
+prefixed with it, plus a top-level ``storeys`` list), ``expected.json`` (the building's counts
+and each storey's, contract 3) and ``models/``.
 """
 
 from __future__ import annotations
@@ -277,8 +278,12 @@ def simulate_building(out: Path, storeys: int = 2, *, scene: str = "scenario", f
             "schema": "sbsc.truth/1", "scene": f"building of {storeys} {scene} storeys",
             "storeys": storeys_doc, "objects": truth_objects, "walls": truth_walls,
             "openings": truth_openings, "stations": stations_all})
+        per_storey: dict[str, dict[str, int]] = {p.id: {} for p in plans}  # contract 3's optional storeys
+        for o in truth_objects:
+            per_storey[o["storey"]][o["class"]] = per_storey[o["storey"]].get(o["class"], 0) + 1
         write_json_atomic(tmp / "expected.json", {"schema": "sbsc.expected/1",
-                                                  "counts": {c: n for c, n in counts.items() if n}})
+                                                  "counts": {c: n for c, n in counts.items() if n},
+                                                  "storeys": per_storey})
         from .library import write_model_library
 
         if object_builder is None:
