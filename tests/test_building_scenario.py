@@ -39,6 +39,13 @@ def test_one_file_per_station_and_truth_with_storeys(two_storeys: Path) -> None:
         assert st["floor_z"] < o["position"][2] < st["ceiling_z"] and o["wall"].startswith(o["storey"] + "-")
     counts = json.loads((two_storeys / "expected.json").read_text())["counts"]
     assert sum(counts.values()) == 26
+    # contract 3's optional per-storey counts: each storey's objects, adding up to the building's
+    from sbsc_core.io.documents import read_expected_counts
+
+    expected = read_expected_counts(two_storeys / "expected.json")
+    assert sorted(expected.storeys) == ["S1", "S2"]
+    for sid, per in expected.storeys.items():
+        assert sum(per.values()) == sum(o["storey"] == sid for o in truth["objects"])
     # a station sees its own storey only
     cloud = read_scans([two_storeys / "stations" / "S2_001.ply"])
     z = cloud.world()[:, 2]
