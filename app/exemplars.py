@@ -28,6 +28,7 @@ from .models import DetectionRow, Project, WallRow
 
 MIN_SEEN = 0.6  # a crop with less of its footprint scanned is left out
 MAX_VIEWS = 4  # extra colour views per class at most (the surest first): each is a further correlation
+MAX_TURN_DEG = 5.0  # an object turned by more (from upright or upside down) gives no crop
 MIN_DEPTH_SAMPLES = 1  # crops a learnt depth model needs at least
 EXEMPLAR_BASE = 100  # exemplar views are colour_101.png, colour_102.png, ...
 
@@ -96,8 +97,8 @@ def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_
         wall = walls.get(d.wall_key)
         if wall is None or not (cdir / "model.json").is_file() or added.get(d.class_id, 0) >= MAX_VIEWS:
             continue
-        if abs(float((d.extra or {}).get("rotation_deg") or 0.0)) > 1e-6:
-            continue  # crops are cut upright
+        if not upright(float((d.extra or {}).get("rotation_deg") or 0.0)):
+            continue  # a crop is cut over the upright footprint
         meta = json.loads((cdir / "model.json").read_text(encoding="utf-8"))
         colour, depth = image(wall, "colour"), image(wall, "depth")
         if colour is None:
@@ -121,6 +122,13 @@ def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_
         if model is not None:
             np.save(dest / cid / f"depth_{EXEMPLAR_BASE + 1}.npy", model)
     return added
+
+
+def upright(rotation_deg: float) -> bool:
+    """Whether an object turned by ``rotation_deg`` still covers its upright footprint: within
+    ``MAX_TURN_DEG`` of upright or of upside down (the crop is the object as it hangs)."""
+    off = abs((rotation_deg + 90.0) % 180.0 - 90.0)
+    return off <= MAX_TURN_DEG
 
 
 def learnt_depth(crops: list[np.ndarray]) -> np.ndarray | None:
