@@ -279,8 +279,8 @@ def test_a_further_depth_model_finds_another_design_of_the_class() -> None:
     further depth model (an exemplar from a reviewed floor) finds it, and costs nothing elsewhere."""
     from dataclasses import replace as dc_replace
 
-    from tests.recognition_synth import make_model, panel_like, socket_like
     from sbsc_core.types import ModelLibrary
+    from tests.recognition_synth import make_model, panel_like, socket_like
 
     view, ref = socket_like(relief_m=0.012)
     _, other = panel_like(w_px=16, h_px=16, relief_m=0.03)  # the design on site: sloped, deeper
