@@ -3,16 +3,20 @@
 Every accepted object (recognized, relabelled or added by a reviewer) is cut out of its
 wall's colour and depth orthoimages over exactly its footprint. Each class of the project's
 library is copied with its own views and ``model.json``, and gets those crops as extra front
-views (``colour_<k>.png``, which the library reader loads like any other view) and as depth
-samples (``depth_exemplar_<k>.npy``, relief from the wall level around the object; the
-reader keeps using ``depth.npy``). The result is a library a re-run of the project, or a run
-on another floor of the same building, can use like any uploaded library.
+views (``colour_<k>.png``, which the library reader loads like any other view) and as one
+further depth model (``depth_101.npy``: the per-pixel median of the upright objects' relief
+above the wall level around each, so that the scanner noise of one crop is averaged out;
+the reader loads ``depth_<k>.npy`` as further depth models and recognition keeps the best
+match of all a class's models, see docs/model-library.md). The result is a library a
+re-run of the project, or a run on another floor of the same building, can use like any
+uploaded library.
 """
 
 from __future__ import annotations
 
 import json
 import shutil
+import warnings
 from pathlib import Path
 
 import cv2
@@ -23,7 +27,9 @@ from sqlalchemy.orm import Session
 from .models import DetectionRow, Project, WallRow
 
 MIN_SEEN = 0.6  # a crop with less of its footprint scanned is left out
-MAX_VIEWS = 12  # extra views per class at most (the surest first)
+MAX_VIEWS = 4  # extra colour views per class at most (the surest first): each is a further correlation
+MAX_TURN_DEG = 5.0  # an object turned by more (from upright or upside down) gives no crop
+MIN_DEPTH_SAMPLES = 1  # crops a learnt depth model needs at least
 EXEMPLAR_BASE = 100  # exemplar views are colour_101.png, colour_102.png, ...
 
 
@@ -82,6 +88,7 @@ def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_
         return images[key]
 
     added: dict[str, int] = {}
+    reliefs: dict[str, list[np.ndarray]] = {}
     # the surest first: reviewer-added objects, then by confidence / alpha
     dets.sort(key=lambda d: -(2.0 if d.source == "reviewer" else
                               (d.confidence if d.confidence is not None else (d.alpha or 0.0))))
@@ -90,6 +97,8 @@ def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_
         wall = walls.get(d.wall_key)
         if wall is None or not (cdir / "model.json").is_file() or added.get(d.class_id, 0) >= MAX_VIEWS:
             continue
+        if not upright(float((d.extra or {}).get("rotation_deg") or 0.0)):
+            continue  # a crop is cut over the upright footprint
         meta = json.loads((cdir / "model.json").read_text(encoding="utf-8"))
         colour, depth = image(wall, "colour"), image(wall, "depth")
         if colour is None:
@@ -106,6 +115,32 @@ def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_
         # numbered after the library's own views: colour_101.png, colour_102.png, ...
         cv2.imwrite(str(cdir / f"colour_{EXEMPLAR_BASE + k}.png"), colour[r0:r1, c0:c1])
         if relief is not None:
-            np.save(cdir / f"depth_exemplar_{k}.npy", relief.astype(np.float32))
+            reliefs.setdefault(d.class_id, []).append(relief.astype(np.float32))
         added[d.class_id] = k
+    for cid, crops in reliefs.items():
+        model = learnt_depth(crops)
+        if model is not None:
+            np.save(dest / cid / f"depth_{EXEMPLAR_BASE + 1}.npy", model)
     return added
+
+
+def upright(rotation_deg: float) -> bool:
+    """Whether an object turned by ``rotation_deg`` still covers its upright footprint: within
+    ``MAX_TURN_DEG`` of upright or of upside down (the crop is the object as it hangs)."""
+    off = abs((rotation_deg + 90.0) % 180.0 - 90.0)
+    return off <= MAX_TURN_DEG
+
+
+def learnt_depth(crops: list[np.ndarray]) -> np.ndarray | None:
+    """The per-pixel median of the relief crops of one class (NaN where none saw it); None
+    with fewer than ``MIN_DEPTH_SAMPLES`` crops. Crops of another size than the most common
+    one (a wall of another pixel size) are left out."""
+    if len(crops) < MIN_DEPTH_SAMPLES:
+        return None
+    shapes = [c.shape for c in crops]
+    shape = max(set(shapes), key=shapes.count)
+    stack = np.stack([c for c in crops if c.shape == shape])
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pixels stay NaN
+        model = np.nanmedian(stack, axis=0).astype(np.float32)
+    return model if np.isfinite(model).any() else None

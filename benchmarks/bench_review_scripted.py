@@ -10,10 +10,20 @@ review service, then reviews it through the REST API the way issue 14 asks:
    the ground truth has an object of that class there (contract 5, 0.10 m), else rejected.
 
 Prints the single decisions without and with the bulk step, their fall in percent, and how
-many wrong objects (no truth object there) were accepted in bulk. ``T`` applies to the
-detections' calibrated ``confidence`` when they have one, else to ``alpha``.
+many wrong objects (no truth object of that class there) were accepted in bulk, and which
+objects were wrong in bulk or left to single decisions (class, confidence, what the truth has
+there). ``T`` applies to the detections' calibrated ``confidence`` when they have one, else
+to ``alpha``.
 
-    .venv/bin/python benchmarks/bench_review_scripted.py DETECT_OUT SCAN TRUTH [--threshold 0.9]
+The calibrated threshold. ``confidence`` is calibrated: an object of confidence c is an
+object of its class at that place with probability c (``sbsc_core/confidence.py``, fitted
+and checked on held-out simulated seeds by ``benchmarks/bench_confidence.py``; the shipped
+calibration's held-out expected calibration error is in its ``info``). A bulk accept that
+may get at most a share ``1 - P`` of its objects wrong therefore accepts the objects with
+``confidence >= P``: ``T = P``, by default ``P = 0.99`` (``--precision``). It is not fitted
+to the scene reviewed. ``--threshold`` overrides it (e.g. for alpha without a calibration).
+
+    .venv/bin/python benchmarks/bench_review_scripted.py DETECT_OUT SCAN TRUTH [--precision 0.99]
 """
 
 from __future__ import annotations
@@ -28,6 +38,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+import numpy as np  # noqa: E402
 from fastapi.testclient import TestClient  # noqa: E402
 
 from app.config import AppSettings  # noqa: E402
@@ -72,12 +83,33 @@ def review(out_dir: Path, scan: Path, truth_path: Path, threshold: float) -> dic
             elapsed = time.perf_counter() - t0
             summary = c.get(f"/api/projects/{pid}/summary", headers=h).json()
     wrong_bulk = sorted(bulk_ids - correct)
+    truth = read_truth(truth_path)
+
+    def why(d: dict) -> dict:
+        """The object, and the nearest truth object (or distractor) to it."""
+        p = np.asarray(d["position"], float)
+        near = min(((float(np.linalg.norm(np.asarray(o.position) - p)), o.class_id) for o in truth.objects),
+                   default=(float("inf"), None))
+        out = {"class": d["class"], "confidence": d.get("confidence"), "alpha": d.get("alpha"),
+               "source": d.get("source"), "correct": d["id"] in correct,
+               "nearest_truth": near[1], "nearest_truth_m": round(near[0], 3)}
+        dis = [x for x in truth.extra.get("distractors") or []
+               if "position" in x]
+        if dis:
+            dd = min(dis, key=lambda x: float(np.linalg.norm(np.asarray(x["position"], float) - p)))
+            out["nearest_distractor"] = dd.get("kind") or dd.get("class")
+            out["nearest_distractor_m"] = round(float(np.linalg.norm(np.asarray(dd["position"], float) - p)), 3)
+        return out
+
+    by_id = {d["id"]: d for d in doc["detections"]}
     return {"detections": n, "true_positives": len(correct), "score": score_kind,
             "threshold": threshold, "bulk_accepted": len(bulk_ids), "wrong_in_bulk": len(wrong_bulk),
             "single_without_bulk": n, "single_with_bulk": singles,
             "single_fall_pct": round(100.0 * (n - singles) / n, 1) if n else None,
             "review_s": round(elapsed, 2), "summary_bulk": summary["bulk"],
-            "summary_single": summary["single"]}
+            "summary_single": summary["single"],
+            "wrong_in_bulk_objects": [why(by_id[i]) for i in wrong_bulk],
+            "single_objects": [why(by_id[d["id"]]) for d in rest]}
 
 
 def main() -> int:
@@ -85,9 +117,16 @@ def main() -> int:
     ap.add_argument("detect_out", type=Path)
     ap.add_argument("scan", type=Path)
     ap.add_argument("truth", type=Path)
-    ap.add_argument("--threshold", type=float, default=0.9)
+    ap.add_argument("--precision", type=float, default=0.99,
+                    help="the share of right objects a bulk accept must reach; the calibrated threshold")
+    ap.add_argument("--threshold", type=float, default=None, help="override the calibrated threshold")
+    ap.add_argument("--json", type=Path, help="also write the result here")
     args = ap.parse_args()
-    res = review(args.detect_out, args.scan, args.truth, args.threshold)
+    threshold = args.precision if args.threshold is None else args.threshold
+    res = review(args.detect_out, args.scan, args.truth, threshold)
+    res["threshold_from"] = "--threshold" if args.threshold is not None else f"calibrated precision >= {args.precision}"
+    if args.json:
+        args.json.write_text(json.dumps(res, indent=1), encoding="utf-8")
     print(json.dumps(res, indent=1))
     return 0
 

@@ -464,20 +464,27 @@ def match_depth(
     out: list[Candidate] = []
     for cid in sorted(templates):
         t = templates[cid]
-        model = t.depth_filled()
-        if model is None or t.relief_m() < settings.min_template_relief_m:
+        if t.depth is None or t.relief_m() < settings.min_template_relief_m:
             continue
+        # the reference model and any further ones (exemplars): each is searched, NMS keeps the best
+        models = [m for i, m in enumerate(t.depth_models())
+                  if i == 0 or float(np.abs(m).max()) >= settings.min_template_relief_m]
         found: list[Candidate] = []
-        for deg, rot in rotated_variants(model, settings.rotations):
-            found.extend(search(cid, deg, rot, rois))
-        def turned(a: float, where: list[Box], cid: str = cid, model: np.ndarray = model) -> list[Candidate]:
-            return search(cid, a, rotate_template(model, a), where)
+        turners = []
+        for model in models:
+            for deg, rot in rotated_variants(model, settings.rotations):
+                found.extend(search(cid, deg, rot, rois))
 
-        for roi, turn in turns:
-            found.extend(search_turned(turned, roi, turn, settings.turn_refine_deg))
+            def turned(a: float, where: list[Box], cid: str = cid, model: np.ndarray = model) -> list[Candidate]:
+                return search(cid, a, rotate_template(model, a), where)
+
+            turners.append(turned)
+            for roi, turn in turns:
+                found.extend(search_turned(turned, roi, turn, settings.turn_refine_deg))
         kept = nms(found, settings.nms_overlap, upright_bonus=settings.rotation_margin)
         if settings.free_rotation:
-            kept = [refine_turn(turned, c, settings.turn_steps_deg, settings.min_turn_gain) for c in kept]
+            # refined with the reference model (exemplars are measured turned as they hang)
+            kept = [refine_turn(turners[0], c, settings.turn_steps_deg, settings.min_turn_gain) for c in kept]
         out.extend(kept)
     return out
 

@@ -29,7 +29,9 @@ class ModelTemplate:
 
     ``colour_views`` are RGBA ``(height_px, width_px, 4)`` uint8 (alpha 0 = background);
     ``depth`` is ``(height_px, width_px)`` float32 metres out of the wall plane (NaN
-    unknown) or None when the library has no depth model for the class.
+    unknown) or None when the library has no depth model for the class. ``extra_depths``
+    are the class's further depth models (``depth_<k>.npy``, e.g. exemplars measured on a
+    reviewed scan) at the same resolution; recognition tries them too (:meth:`depth_models`).
     """
 
     class_id: str
@@ -42,10 +44,18 @@ class ModelTemplate:
     depth: np.ndarray | None
     name: str = ""
     extra: dict = field(default_factory=dict)
+    extra_depths: list[np.ndarray] = field(default_factory=list)
 
     @property
     def shape(self) -> tuple[int, int]:
         return (self.height_px, self.width_px)
+
+    def depth_models(self) -> list[np.ndarray]:
+        """Every depth model of the class, unknown samples set to the wall plane: the
+        reference model first, then the further ones (none when the class has no depth)."""
+        if self.depth is None:
+            return []
+        return [self.depth_filled()] + [np.nan_to_num(d, nan=0.0).astype(np.float32) for d in self.extra_depths]
 
     def depth_filled(self) -> np.ndarray | None:
         """The depth model with unknown samples set to the wall plane (0 m)."""
@@ -115,10 +125,12 @@ def make_template(model: ObjectModel, pixel_m: float) -> ModelTemplate:
     depth = None if model.depth is None else resample_depth(model.depth, shape)
     if depth is not None and not np.isfinite(depth).any():
         depth = None
+    extra_depths = [resample_depth(d, shape) for d in getattr(model, "extra_depths", ())] if depth is not None else []
     return ModelTemplate(
         class_id=model.class_id, width_px=shape[1], height_px=shape[0],
         width_m=float(model.width_m), height_m=float(model.height_m), pixel_m=float(pixel_m),
         colour_views=views, depth=depth, name=model.name, extra=dict(model.extra),
+        extra_depths=[d for d in extra_depths if np.isfinite(d).any()],
     )
 
 

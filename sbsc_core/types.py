@@ -294,6 +294,7 @@ class ObjectModel:
     colour_views: list[np.ndarray]  # each (h, w, 4) uint8 RGBA, any pixel size
     depth: np.ndarray | None  # (h, w) float32 metres, NaN unknown
     extra: dict = field(default_factory=dict)  # other model.json keys (e.g. object_type)
+    extra_depths: list[np.ndarray] = field(default_factory=list)  # depth_<k>.npy: further depth models
 
 
 @dataclass

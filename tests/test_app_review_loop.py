@@ -302,7 +302,8 @@ def test_learn_exemplars_from_decisions(c, srv, tmp_path):
     crop = views[-1]
     assert len(views) >= 1 + len(switches) and crop.shape[:2] == (16, 16)  # 0.08 m at 5 mm
     assert np.allclose(crop[4:12, 4:12, :3].reshape(-1, 3).mean(axis=0), (30, 30, 30), atol=3)
-    relief = np.load(tmp_path / "models" / "switch" / "depth_exemplar_1.npy")
+    relief = np.load(tmp_path / "models" / "switch" / "depth_101.npy")  # the learnt depth model
     assert np.nanmedian(relief) == pytest.approx(0.012, abs=1e-3)
+    assert len(lib.models["switch"].extra_depths) == 1  # read as a further depth model
     # the next job uses the learnt library
     assert c.get(f"/api/projects/{pid}", headers=rita).json()["models"]["id"] == r.json()["library"]

@@ -272,3 +272,27 @@ def test_flush_object_on_a_stepped_wall_is_found() -> None:
     flat = replace(s, level_max_m=0.0)  # without the wall level: the step hides it
     assert not [x for x in match_depth(ortho, area, depth_rois(ortho, area, flat), templates, flat)
                 if x.class_id == "flush"]
+
+
+def test_a_further_depth_model_finds_another_design_of_the_class() -> None:
+    """A library model of another product misses the object; the object's own relief as a
+    further depth model (an exemplar from a reviewed floor) finds it, and costs nothing elsewhere."""
+    from dataclasses import replace as dc_replace
+
+    from sbsc_core.types import ModelLibrary
+    from tests.recognition_synth import make_model, panel_like, socket_like
+
+    view, ref = socket_like(relief_m=0.012)
+    _, other = panel_like(w_px=16, h_px=16, relief_m=0.03)  # the design on site: sloped, deeper
+    scene_t = make_templates(ModelLibrary({"socket": make_model("socket", view, other)}), PIXEL_M)["socket"]
+    ortho, area = make_wall(seed=5)
+    paste(ortho, area, scene_t, (120.0, 200.0), 0, seed=1)
+    s = DepthRecognitionSettings()
+    rois = depth_rois(ortho, area, s)
+    lib = make_templates(ModelLibrary({"socket": make_model("socket", view, ref)}), PIXEL_M)
+    near = lambda cands: [x for x in cands if np.hypot(x.centre[0] - 120, x.centre[1] - 200) < 3]  # noqa: E731
+    before = near(match_depth(ortho, area, rois, lib, s))
+    learnt = {"socket": dc_replace(lib["socket"], extra_depths=[scene_t.depth.copy()])}
+    after = near(match_depth(ortho, area, rois, learnt, s))
+    assert not before or max(x.score for x in before) < 0.9
+    assert after and max(x.score for x in after) > 0.9

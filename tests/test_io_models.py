@@ -220,3 +220,33 @@ def test_zip_with_bad_library_or_not_a_zip(tmp_path):
     (tmp_path / "busy" / "x").write_text("x")
     with pytest.raises(InputError, match="destination is not empty"):
         library_from_zip(tmp_path / "lib.zip", tmp_path / "busy")
+
+
+def test_further_depth_models_are_loaded_in_order(tmp_path) -> None:
+    root = tmp_path / "models"
+    d = _write_class(root, "socket_x1", depth=np.full((16, 16), 0.012))
+    np.save(d / "depth_101.npy", np.full((16, 16), 0.010, np.float32))
+    np.save(d / "depth_2.npy", np.full((16, 16), 0.008, np.float32))
+    np.save(d / "depth_exemplar_1.npy", np.full((16, 16), 0.007, np.float32))  # the old exemplar name
+    m = load_model_library(root).models["socket_x1"]
+    assert float(m.depth[0, 0]) == pytest.approx(0.012)
+    assert [float(x[0, 0]) for x in m.extra_depths] == pytest.approx([0.007, 0.008, 0.010])
+
+
+def test_a_library_without_further_depth_models_reads_as_before(library) -> None:
+    lib = load_model_library(library)
+    assert all(m.extra_depths == [] for m in lib.models.values())
+
+
+def test_further_depth_model_only_becomes_the_reference(tmp_path) -> None:
+    d = _write_class(tmp_path / "models", "socket_x1")
+    np.save(d / "depth_1.npy", np.full((16, 16), 0.01, np.float32))
+    m = load_model_library(tmp_path / "models").models["socket_x1"]
+    assert m.depth is not None and m.extra_depths == []
+
+
+def test_bad_further_depth_model_names_the_file(tmp_path) -> None:
+    d = _write_class(tmp_path / "models", "socket_x1", depth=np.full((16, 16), 0.012))
+    np.save(d / "depth_1.npy", np.full((16, 40), 0.01, np.float32))
+    with pytest.raises(InputError, match=r"depth_1\.npy.*does not match the footprint"):
+        load_model_library(tmp_path / "models")

@@ -51,3 +51,16 @@ def test_depth_resampling_ignores_unknown_samples() -> None:
     out = resample_depth(d, (4, 4))
     assert np.isnan(out[:, 0]).all()
     assert np.allclose(out[:, 1:], 0.01)  # partly unknown cells keep the known value
+
+
+def test_further_depth_models_are_resampled_with_the_reference() -> None:
+    from sbsc_core.templates import make_template
+    from sbsc_core.types import ObjectModel
+
+    view = np.full((40, 40, 4), 255, np.uint8)
+    m = ObjectModel("s", "s", "IfcOutlet", None, 0.08, 0.08, [view], np.full((40, 40), 0.01, np.float32),
+                    extra_depths=[np.full((32, 32), 0.02, np.float32), np.full((8, 8), np.nan, np.float32)])
+    t = make_template(m, 0.005)
+    assert [d.shape for d in t.extra_depths] == [(16, 16)]  # an all-unknown model is dropped
+    models = t.depth_models()
+    assert len(models) == 2 and float(models[1][0, 0]) == pytest.approx(0.02)

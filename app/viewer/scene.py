@@ -16,7 +16,10 @@ What the reviewer sees (paper, section 5 and figures 18, 19 and 21):
 ``/spots/<D>``, ``/spot_labels/<D>``
     every recognized object as a spot at its ``position`` (the paper's red spots), coloured
     by review state; clicking one selects it. The labels of all objects are a layer that is
-    off at first: each tab labels only its selection and the objects near its camera.
+    off at first: each tab labels only its selection and the objects near its camera. The
+    object under the pointer gets no label: viser (1.1.1, the newest release) tells the
+    server of clicks, rectangle selections and drags only, never of the pointer moving;
+    its browser client outlines the clickable spot under the pointer by itself.
 
 Every browser tab gets its own review panel (:class:`ReviewSession`): the reviewer signed in
 to the app (the viewer's cookie, see :mod:`app.viewer.gate`; an API token in the stand-alone

@@ -5,6 +5,9 @@ A library is a directory with one sub-directory per class::
     models/socket_x1/model.json      name, ifc_class, predefined_type?, width_m, height_m
     models/socket_x1/colour.png      front views: colour.png, colour_1.png, ...
     models/socket_x1/depth.npy       optional 2-D relief over the footprint (metres)
+    models/socket_x1/depth_1.npy     optional further depth models of the class: depth_1.npy,
+                                     depth_2.npy, ... (e.g. exemplars measured on a reviewed scan;
+                                     see docs/model-library.md); each checked like depth.npy
 
 An optional number ``order`` in ``model.json`` sets the class's place in the library's
 order (:func:`library_order`: tables and lists name the classes in it); classes without it
@@ -37,6 +40,10 @@ from .safe_json import load_json_file
 
 CLASS_ID_RE = re.compile(r"^[a-z0-9_]+$")
 COLOUR_FILE_RE = re.compile(r"^colour(?:_(\d+))?\.png$")
+# further depth models: depth_<k>.npy (and depth_exemplar_<k>.npy, the name exemplar libraries of
+# the review app used before they were read)
+EXTRA_DEPTH_RE = re.compile(r"^depth_(?:exemplar_)?(\d+)\.npy$")
+MAX_EXTRA_DEPTHS = 32  # more is refused: each one is a further correlation per wall
 REQUIRED_KEYS = ("name", "ifc_class", "width_m", "height_m")
 MODEL_MIN_M = 0.005  # an object's footprint side: at least about one orthoimage pixel
 MODEL_MAX_M = 10.0  # at most a wall's size (a 1e5 m model would allocate a huge template)
@@ -111,18 +118,28 @@ def read_library_metadata(root: Path | str) -> dict[str, dict]:
 
 
 def load_object_model(class_dir: Path) -> ObjectModel:
-    """Read one class directory (``model.json``, ``colour*.png``, optional ``depth.npy``)."""
+    """Read one class directory (``model.json``, ``colour*.png``, optional ``depth.npy`` and
+    further depth models ``depth_<k>.npy``).
+
+    The further depth models are kept apart from ``depth.npy`` (the class's reference model,
+    used for look-alikes, snapping and placement); recognition tries them as well and keeps
+    the best match. A class with further depth models but no ``depth.npy`` uses the first of
+    them as its reference model.
+    """
     class_dir = Path(class_dir)
     meta = _read_model_json(class_dir / "model.json")
     width, height = meta["width_m"], meta["height_m"]
     views = [_read_colour_view(p) for p in _colour_files(class_dir)]
     depth_path = class_dir / "depth.npy"
     depth = _read_depth(depth_path, width, height) if depth_path.exists() else None
+    extra_depths = [_read_depth(p, width, height) for p in _extra_depth_files(class_dir)]
+    if depth is None and extra_depths:
+        depth = extra_depths.pop(0)
     extra = {k: v for k, v in meta.items() if k not in (*REQUIRED_KEYS, "predefined_type")}
     return ObjectModel(
         class_id=class_dir.name, name=meta["name"], ifc_class=meta["ifc_class"],
         predefined_type=meta.get("predefined_type"), width_m=width, height_m=height,
-        colour_views=views, depth=depth, extra=extra,
+        colour_views=views, depth=depth, extra=extra, extra_depths=extra_depths,
     )
 
 
@@ -170,6 +187,18 @@ def _colour_files(class_dir: Path) -> list[Path]:
     if not found:
         raise InputError(class_dir, "no front view (expected colour.png, colour_1.png, ...)")
     return [p for _, p in sorted(found)]
+
+
+def _extra_depth_files(class_dir: Path) -> list[Path]:
+    """``depth_<k>.npy`` (or ``depth_exemplar_<k>.npy``) files in order of ``k``."""
+    found = []
+    for p in class_dir.iterdir():
+        m = EXTRA_DEPTH_RE.match(p.name)
+        if m and p.is_file():
+            found.append((int(m.group(1)), p.name, p))
+    if len(found) > MAX_EXTRA_DEPTHS:
+        raise InputError(class_dir, f"too many further depth models ({len(found)} > {MAX_EXTRA_DEPTHS})")
+    return [p for _, _, p in sorted(found)]
 
 
 def _read_colour_view(path: Path) -> np.ndarray:
