@@ -263,13 +263,14 @@ def _walls_results(cloud: PointCloud, seg: Segmentation, templates: dict[str, Mo
             pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _search_classes(library: ModelLibrary, expected: dict[str, int] | None) -> list[str]:
+def _search_classes(library: ModelLibrary, expected: dict[str, int] | None, kind: str = "wall") -> list[str]:
+    """The classes searched for on surfaces of ``kind``: expected (or all) and mounted there."""
     if expected is not None:
         unknown = sorted(set(expected) - set(library.models))
         if unknown:
             raise InputError("expected", f"class '{unknown[0]}' is not in the model library")
-        return sorted(c for c, n in expected.items() if n > 0)
-    return library.class_ids
+        return library.classes_on(kind, sorted(c for c, n in expected.items() if n > 0))
+    return library.classes_on(kind)
 
 
 def _collect_walls(results: Iterator[tuple[str, WallResult, dict[str, float]]], n_walls: int, progress: Progress,

@@ -13,6 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+# Surfaces an object may be mounted on (contract 2 "mount", contract 4/5 "surface").
+SURFACE_KINDS: tuple[str, ...] = ("wall", "ceiling", "column")
+
 
 @dataclass
 class PointCloud:
@@ -294,6 +297,7 @@ class ObjectModel:
     colour_views: list[np.ndarray]  # each (h, w, 4) uint8 RGBA, any pixel size
     depth: np.ndarray | None  # (h, w) float32 metres, NaN unknown
     extra: dict = field(default_factory=dict)  # other model.json keys (e.g. object_type)
+    mount: tuple[str, ...] = SURFACE_KINDS  # surface kinds the class may be on (model.json "mount")
 
 
 @dataclass
@@ -310,3 +314,8 @@ class ModelLibrary:
     @property
     def class_ids(self) -> list[str]:
         return sorted(self.models)
+
+    def classes_on(self, kind: str, classes: list[str] | None = None) -> list[str]:
+        """``classes`` (default: all) that may be mounted on a surface of ``kind``."""
+        return [c for c in (self.class_ids if classes is None else classes)
+                if c not in self.models or kind in self.models[c].mount]

@@ -81,7 +81,8 @@ def render_model(class_id: str, pixel_m: float = 0.002, seed: int = 0, n_views: 
 def model_json(class_id: str) -> dict:
     spec = CATALOGUE[class_id]
     doc = {"name": spec.name, "ifc_class": spec.ifc_class, "predefined_type": spec.predefined_type,
-           "width_m": spec.width_m, "height_m": spec.height_m, "depth_m": spec.depth_m}
+           "width_m": spec.width_m, "height_m": spec.height_m, "depth_m": spec.depth_m,
+           "mount": list(spec.mount)}
     if spec.object_type:
         doc["object_type"] = spec.object_type
     return doc
