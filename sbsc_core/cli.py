@@ -137,6 +137,10 @@ def _add_simulate(cmds: Commands) -> None:
     s.add_argument("--survey-frame", action="store_true",
                    help="write scan and truth at UTM-like coordinates, turned 23.5 degrees in plan")
     s.add_argument("--all-realism", action="store_true", help="all four options above together")
+    s.add_argument("--ceiling-objects", action="store_true",
+                   help="smoke detectors and exit lights on the ceilings too (the truth says each object's surface)")
+    s.add_argument("--columns", action="store_true",
+                   help="free-standing columns, rectangular and round, with objects on their faces")
     json_option(s)
 
 
@@ -401,18 +405,21 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     everything = args.all_realism
     realism = {"realistic": args.realistic or everything, "clutter": args.clutter or everything,
                "furniture": args.furniture or everything, "survey_frame": args.survey_frame or everything}
+    surfaces = {"ceiling_objects": args.ceiling_objects, "columns": args.columns}
     if args.scenario == "building":
         from .simulate.building_scenario import simulate_building
 
         summary = simulate_building(out, args.storeys, scene=args.scene or "scenario", fmt=args.format,
                                     seed=args.seed, angular_step_deg=args.step, log=con.simulation_log,
-                                    object_builder=builder)
+                                    object_builder=builder, **surfaces)
     elif args.scene:
         summary = simulate_scene(scene_path(args.scene), out, seed=args.seed, angular_step_deg=args.step,
-                                 log=con.simulation_log, object_builder=builder, library_builder=library, **realism)
+                                 log=con.simulation_log, object_builder=builder, library_builder=library,
+                                 **realism, **surfaces)
     else:
         summary = simulate_scenario(args.scenario, out, seed=args.seed, angular_step_deg=args.step,
-                                    log=con.simulation_log, object_builder=builder, library_builder=library, **realism)
+                                    log=con.simulation_log, object_builder=builder, library_builder=library,
+                                    **realism, **surfaces)
     if args.json:
         con.result({"out": out, **_jsonable(summary)})
     return 0
