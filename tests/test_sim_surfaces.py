@@ -118,3 +118,22 @@ def test_simulate_scene_writes_the_surfaces(tmp_path):
     assert expected["fire_extinguisher"] == 1 and expected["smoke_detector"] >= 1
     model = json.loads((tmp_path / "out" / "models" / "smoke_detector" / "model.json").read_text())
     assert model["mount"] == ["wall", "ceiling"]
+
+
+def test_building_storeys_put_ceiling_objects_under_their_own_ceilings():
+    from sbsc_core.simulate.building_scenario import build_storey, plan_building
+
+    plans = plan_building(2, ceiling_objects=True, columns=True)
+    assert all(p.scene.ceiling_objects and p.scene.columns for p in plans)
+    b = build_storey(plans[1])  # storey S2: lifted, and room R3 has a lower ceiling
+    top = plans[1].floor_z + plans[1].height_m
+    low = plans[1].floor_z + plans[1].room_ceilings["R3"]
+    on_ceiling = [o for o in b.objects if o.surface == "ceiling"]
+    assert on_ceiling and sorted({round(o.position[2], 6) for o in on_ceiling}) == pytest.approx([low, top])
+    for o in on_ceiling:
+        assert o.frame.origin[2] == pytest.approx(o.position[2])
+        assert np.allclose(o.frame.to_world(o.u, o.v), o.position)
+    assert sorted({round(s.frame.origin[2], 6) for s in b.surfaces if s.kind == "ceiling"}) == pytest.approx([low, top])
+    assert b.columns and all(o.position[2] > plans[1].floor_z for o in b.objects)
+    plain = build_storey(plan_building(2)[1])
+    assert not plain.surfaces and all(o.surface == "wall" for o in plain.objects)
