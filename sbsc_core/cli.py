@@ -156,6 +156,8 @@ def _add_detect(cmds: Commands) -> None:
                    help="run the per-wall work on an existing Dask cluster (e.g. tcp://10.0.0.5:8786); its "
                         "workers must see the scans and the output's folder at the same paths; default: "
                         "a local process pool")
+    d.add_argument("--ceilings", action="store_true",
+                   help="recognize objects on the ceilings too (classes whose model.json mount has 'ceiling')")
     json_option(d)
 
 
@@ -433,10 +435,16 @@ def _cmd_detect(args: argparse.Namespace) -> int:
 
     con = console()
     out = output_parent(args.out)
+    settings = None
+    if args.ceilings:
+        from .settings import load_settings
+
+        settings = load_settings(Path(args.settings) if args.settings else None)
+        settings.ceilings.enabled = True
     summary = detect_to_dir(
         [Path(s) for s in args.scans], Path(args.models),
         expected=Path(args.expected) if args.expected else None,
-        out=out, settings_file=Path(args.settings) if args.settings else None,
+        out=out, settings_file=Path(args.settings) if args.settings else None, settings=settings,
         log=con.info, progress=con.progress, scheduler=args.scheduler,
     )
     con.close()

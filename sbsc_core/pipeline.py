@@ -109,10 +109,12 @@ class DetectionResult:
     detections: list[Detection]
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
     classes: list[str] = field(default_factory=list)
+    surfaces: list[dict] = field(default_factory=list)  # contract-4 surfaces beyond walls (ceiling tiles)
 
     @property
     def openings(self):
-        return [o for w in self.walls.values() for o in w.area.openings]
+        beyond = {sf["id"] for sf in self.surfaces}
+        return [o for wid, w in self.walls.items() if wid not in beyond for o in w.area.openings]
 
 
 def _noop_progress(stage: str, fraction: float) -> None:
@@ -492,7 +494,22 @@ def detect_scans(
                for wid, res, t_wall in _in_order(executor, wall_jobs, _partition_wall_job, 2 * workers))
     done = _collect_walls(results, len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
+    surfaces: list[dict] = []
+    if s.ceilings.enabled:  # objects on ceilings (issue 11): the tiles join the walls in the consensus
+        from .ceilings import detect_ceilings
+
+        ceil = detect_ceilings(parts, origin, seg, library, expected, s, executor=executor, scratch=Path(scratch),
+                               parked=parked, in_flight=2 * workers, progress=progress, timings=timings, log=log)
+        walls.update(ceil.walls)
+        templates = {**ceil.templates, **templates}
+        classes = sorted(set(classes) | set(ceil.classes))
+        surfaces = ceil.surfaces()
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
+    if surfaces:
+        kinds = {sf["id"]: sf["kind"] for sf in surfaces}
+        for d in result.detections:
+            d.surface = kinds.get(d.wall_id)
+        result.surfaces = surfaces
     timings["total"] = time.perf_counter() - t0
     return result, points
 
@@ -643,6 +660,8 @@ def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dic
                    **(extra or {})}
     if len(seg.storeys) > 1:  # contract 4: a one-storey scan omits the storeys
         fields["storeys"] = [st.to_dict() for st in seg.storeys]
+    if result.surfaces:
+        fields["surfaces"] = result.surfaces
     doc = detections_document([(wall.id, wall.frame) for wall in seg.walls], result.openings,
                               result.detections, extra=fields)
     if len(seg.storeys) > 1:

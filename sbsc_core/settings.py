@@ -265,6 +265,16 @@ class ConfidenceSettings:
 
 
 @dataclass
+class CeilingSettings:
+    """Objects on ceilings (issue 11; :mod:`sbsc_core.ceilings`): off by default."""
+
+    enabled: bool = False  # recognize objects on the ceilings too (``sbsc detect --ceilings``)
+    tile_m: float = 6.0  # a storey's ceiling is cut into tiles at most this big each way
+    overlap_m: float = 0.3  # ... each grown by this on every side (more than half an object)
+    wall_clear_m: float = 0.05  # points this close to a wall's plane are the wall's, not the ceiling's
+
+
+@dataclass
 class DetectionSettings:
     segmentation: SegmentationSettings = field(default_factory=SegmentationSettings)
     orthoimage: OrthoimageSettings = field(default_factory=OrthoimageSettings)
@@ -275,6 +285,7 @@ class DetectionSettings:
     consensus: ConsensusSettings = field(default_factory=ConsensusSettings)
     lookalikes: LookalikeSettings = field(default_factory=LookalikeSettings)
     confidence: ConfidenceSettings = field(default_factory=ConfidenceSettings)
+    ceilings: CeilingSettings = field(default_factory=CeilingSettings)
     workers: int = 0  # processes for the per-wall stages; 0 = up to 2, by the CPU count
 
     def to_dict(self) -> dict[str, Any]:

@@ -262,6 +262,7 @@ class Detection:
     source: str  # "both" | "depth" | "colour"
     rotation_deg: float = 0.0  # the model's in-plane turn at the match, counter-clockwise seen from the room
     confidence: float | None = None  # calibrated probability that class and place are right
+    surface: str | None = None  # "ceiling" or "column" when not on a wall (contract 4)
 
     def to_dict(self) -> dict:
         out = {
@@ -281,6 +282,8 @@ class Detection:
         }
         if self.confidence is not None:
             out["confidence"] = round(float(self.confidence), 4)
+        if self.surface is not None:
+            out["surface"] = self.surface
         return out
 
 
