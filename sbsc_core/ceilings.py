@@ -34,6 +34,9 @@ from .settings import CeilingSettings, OrthoimageSettings
 from .types import Candidate, Orthoimage, Segmentation, WallFrame
 
 
+CEILING_SKIN_M = 0.01  # points this close to the ceiling plane are the ceiling's, even at a wall
+
+
 @dataclass(frozen=True)
 class CeilingTile:
     """One tile of a storey's ceiling: its frame and the part of it (u, v in metres) it owns."""
@@ -96,8 +99,9 @@ def ceiling_part(part: ScanPart, origin: np.ndarray, tiles: list[CeilingTile], w
                  scratch: str, ortho: OrthoimageSettings, wall_clear_m: float) -> list[int]:
     """Stream one part of a scan and append each tile's binned points to its partition.
 
-    A point goes to every tile whose image it falls in (tiles overlap), unless it lies
-    within ``wall_clear_m`` of a wall's plane over the wall. Returns records per tile.
+    A point goes to every tile whose image it falls in (tiles overlap), unless it hangs
+    more than ``CEILING_SKIN_M`` below the ceiling within ``wall_clear_m`` of a wall's plane
+    over the wall (the wall's top, seen edge-on). Returns records per tile.
     """
     root = Path(scratch)
     written = [0] * len(tiles)
@@ -112,10 +116,13 @@ def ceiling_part(part: ScanPart, origin: np.ndarray, tiles: list[CeilingTile], w
         if not len(idx):
             continue
         xyz = chunk.xyz[idx]
+        below = np.ones(len(idx), bool)  # hangs below every ceiling plane: may be a wall's top
+        for cz in zs:
+            below &= z[idx] < cz - CEILING_SKIN_M
         on_wall = np.zeros(len(idx), bool)
         for f in walls:
-            uvd = wall_coordinates(xyz, f, origin)
-            on_wall |= (np.abs(uvd[:, 2]) < wall_clear_m) & (uvd[:, 0] > -wall_clear_m) \
+            uvd = wall_coordinates(xyz[below], f, origin)
+            on_wall[below] |= (np.abs(uvd[:, 2]) < wall_clear_m) & (uvd[:, 0] > -wall_clear_m) \
                 & (uvd[:, 0] < f.width_m + wall_clear_m)
         idx, xyz = idx[~on_wall], xyz[~on_wall]
         for k, t in enumerate(tiles):
