@@ -100,3 +100,32 @@ def test_detect_ceilings_finds_the_smoke_detector_on_the_ceiling(tmp_path):
     assert np.linalg.norm(np.subtract(on_ceiling[0]["position"], want["position"])) < 0.01
     assert all(o["wall"] in {w["id"] for w in doc["walls"]} for o in doc["openings"])
     assert (det / "orthoimages" / "C01_depth.npy").exists()
+
+
+def test_evaluate_gives_figures_per_surface_kind(tmp_path):
+    from sbsc_core.evaluate import evaluate, format_table
+    from sbsc_core.io.documents import read_truth
+
+    def obj(cls, pos, surface):
+        return {"class": cls, "position": pos, "normal": [0, 0, -1], "width_m": 0.1, "height_m": 0.1,
+                "surface": surface}
+
+    truth = {"schema": "sbsc.truth/1", "objects": [
+        obj("smoke_detector", [1, 1, 2.8], "ceiling"), obj("smoke_detector", [3, 1, 2.8], "ceiling"),
+        obj("switch", [0, 2, 1.1], "wall"), obj("socket_x1", [5, 5, 0.3], "column")]}
+    (tmp_path / "t.json").write_text(json.dumps(truth))
+
+    def det(i, cls, pos, surface=None):
+        d = {"id": f"D{i}", "class": cls, "wall": "C01" if surface else "W1", "position": pos, "u": 0, "v": 0,
+             "width_m": 0.1, "height_m": 0.1, "alpha": 1.0, "rho_depth": 0.9, "rho_colour": None, "source": "depth"}
+        return {**d, **({"surface": surface} if surface else {})}
+
+    doc = {"schema": "sbsc.detections/1", "walls": [], "openings": [], "detections": [
+        det(1, "smoke_detector", [1.003, 1, 2.8], "ceiling"), det(2, "smoke_detector", [7, 7, 2.8], "ceiling"),
+        det(3, "switch", [0, 2.002, 1.1])]}
+    table = evaluate(doc, read_truth(tmp_path / "t.json"))
+    rows = {r.class_id: r for r in table.surfaces}
+    assert (rows["ceiling"].instances, rows["ceiling"].tp, rows["ceiling"].fp) == (2, 1, 1)
+    assert rows["ceiling"].h_mean_mm == pytest.approx(3.0)
+    assert (rows["wall"].tp, rows["wall"].fp, rows["column"].fn) == (1, 0, 1)
+    assert "on ceilings" in format_table(table) and table.to_dict()["surfaces"][1]["class"] == "ceiling"
