@@ -33,7 +33,6 @@ from .partition import RECORD, ScanPart, _part_chunks
 from .settings import CeilingSettings, OrthoimageSettings
 from .types import Candidate, Orthoimage, Segmentation, WallFrame
 
-
 CEILING_SKIN_M = 0.01  # points this close to the ceiling plane are the ceiling's, even at a wall
 
 
