@@ -158,6 +158,8 @@ def _add_detect(cmds: Commands) -> None:
                         "a local process pool")
     d.add_argument("--ceilings", action="store_true",
                    help="recognize objects on the ceilings too (classes whose model.json mount has 'ceiling')")
+    d.add_argument("--columns", action="store_true",
+                   help="find free-standing columns and recognize objects on them (mount 'column')")
     json_option(d)
 
 
@@ -436,11 +438,12 @@ def _cmd_detect(args: argparse.Namespace) -> int:
     con = console()
     out = output_parent(args.out)
     settings = None
-    if args.ceilings:
+    if args.ceilings or args.columns:
         from .settings import load_settings
 
         settings = load_settings(Path(args.settings) if args.settings else None)
-        settings.ceilings.enabled = True
+        settings.ceilings.enabled = settings.ceilings.enabled or args.ceilings
+        settings.columns.enabled = settings.columns.enabled or args.columns
     summary = detect_to_dir(
         [Path(s) for s in args.scans], Path(args.models),
         expected=Path(args.expected) if args.expected else None,

@@ -462,6 +462,11 @@ def detect_scans(
     seg = segment_floor_ceiling_walls(cloud, s.segmentation)
     if seg.stray_points:  # counted in the sample: scaled to the whole scan
         seg.stray_points = int(round(seg.stray_points * points / max(len(cloud), 1)))
+    found_columns = []
+    if s.columns.enabled:  # free-standing columns (issue 11), found in the sample
+        from .columns import find_columns
+
+        found_columns = find_columns(cloud, seg, s.columns)
     del cloud
     for wall in seg.walls:  # indices into the sample: the walls' points come from their partitions
         wall.point_index = np.zeros(0, np.int64)
@@ -504,11 +509,25 @@ def detect_scans(
         templates = {**ceil.templates, **templates}
         classes = sorted(set(classes) | set(ceil.classes))
         surfaces = ceil.surfaces()
+    faces = {}
+    if found_columns:  # objects on columns: their faces join the walls in the consensus too
+        from .columns import detect_columns
+
+        cols = detect_columns(parts, origin, found_columns, library, expected, s, executor=executor,
+                              scratch=Path(scratch), parked=parked, in_flight=2 * workers, progress=progress,
+                              timings=timings, log=log)
+        walls.update(cols.walls)
+        templates = {**cols.templates, **templates}
+        classes = sorted(set(classes) | set(cols.classes))
+        surfaces += cols.surfaces()
+        faces = {f.id: f for f in cols.faces}
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
     if surfaces:
         kinds = {sf["id"]: sf["kind"] for sf in surfaces}
         for d in result.detections:
             d.surface = kinds.get(d.wall_id)
+            if d.wall_id in faces:  # a round column's face is unrolled: put the object back on it
+                d.position = faces[d.wall_id].to_world(d.u, d.v)
         result.surfaces = surfaces
     timings["total"] = time.perf_counter() - t0
     return result, points
