@@ -14,9 +14,11 @@ scene itself, deterministically, so that any floor can have them:
   room's bounding box where u and v are 0 (min x, max y), so an object seen from below is
   drawn like on a wall.
 - **Columns.** Every room with a rectangle at least ``COLUMN_ROOM_MIN_M`` on both sides
-  gets one column in it, as far from the stations as the rectangle allows, rectangular and
-  round in turn. A rectangular column has four faces (surfaces ``<room>-COL<k>-N/E/S/W``,
-  each framed like a wall seen from outside the column) with an extinguisher and its sign,
+  gets one column in it, where the stations see most of its sides and as far from the
+  stations as the rectangle allows, rectangular and round in turn; a side that no station
+  sees (at ``SEEN_COS`` or straighter) carries no object. A rectangular column has four
+  faces (surfaces ``<room>-COL<k>-N/E/S/W``, each framed like a wall seen from outside the
+  column) with an extinguisher and its sign,
   a call point and its sign, a socket and a switch. A round column is one surface
   ``<room>-COL<k>`` unrolled around it (``u`` = arc length counter-clockwise from +x,
   ``radius_m`` and ``centre`` given) with an extinguisher, a call point and a socket.
@@ -46,6 +48,7 @@ COLUMN_RECT_M = 0.45  # side of a rectangular column
 COLUMN_ROUND_M = 0.50  # diameter of a round column
 COLUMN_WALL_CLEAR_M = 1.5  # a column stands at least this far from the walls
 COLUMN_STATION_CLEAR_M = 1.0  # ... and from every station
+SEEN_COS = 0.35  # a column's side carries objects only if a station sees it at least this straight
 ROUND_SEGMENTS = 48  # facets of a round column (sagitta 0.5 mm at 0.25 m radius)
 
 # (class, v) on the faces N, E, S, W of a rectangular column, and (class, angle_deg, v) around a round one
@@ -277,17 +280,38 @@ def _plan_columns(scene: SceneDescription, stations: np.ndarray, heights: dict[s
         clear = (np.min(np.linalg.norm(cand[:, None, :] - stations[None], axis=2), axis=1)
                  if len(stations) else np.full(len(cand), 9.0))
         off_centre = np.linalg.norm(cand - ((x0 + x1) / 2, (y0 + y1) / 2), axis=1)
-        best = int(np.lexsort((off_centre, -np.minimum(clear, 2.5)))[0])
+        rect = (k + 1) % 2 == 1
+        dirs = _object_directions(rect)
+        seen = np.array([sum(_seen(c, n, half, stations) for n, half in dirs) for c in cand])
+        best = int(np.lexsort((off_centre, -np.minimum(clear, 2.5), -seen))[0])
         if clear[best] < COLUMN_STATION_CLEAR_M:
             continue
         k += 1
         centre = (round(float(cand[best, 0]), 3), round(float(cand[best, 1]), 3))
         col_id = f"{room.id}-COL{k}"
         h = heights[room.id]
-        if k % 2:
-            _rect_column(plan, col_id, room, centre, h)
+        if rect:
+            _rect_column(plan, col_id, room, centre, h, stations)
         else:
-            _round_column(plan, col_id, room, centre, h)
+            _round_column(plan, col_id, room, centre, h, stations)
+
+
+def _object_directions(rect: bool) -> list[tuple[np.ndarray, float]]:
+    """(outward normal in plan, distance of the surface from the axis) of each object-bearing side."""
+    if rect:
+        return [(np.asarray(_SIDE_NORMALS[side]), COLUMN_RECT_M / 2) for side in RECT_COLUMN_OBJECTS]
+    return [(np.array([math.cos(math.radians(deg)), math.sin(math.radians(deg))]), COLUMN_ROUND_M / 2)
+            for _, deg, _ in ROUND_COLUMN_OBJECTS]
+
+
+def _seen(centre, normal: np.ndarray, half: float, stations: np.ndarray) -> bool:
+    """Whether a station sees the column's side facing ``normal`` at SEEN_COS or straighter."""
+    if not len(stations):
+        return True
+    p = np.asarray(centre, float) + half * np.asarray(normal, float)
+    to = stations - p
+    dist = np.linalg.norm(to, axis=1)
+    return bool(np.any((to @ normal) >= SEEN_COS * np.maximum(dist, 1e-9)))
 
 
 def _face_frame(centre: np.ndarray, normal_xy: tuple[float, float], half_depth: float, width: float,
@@ -300,7 +324,9 @@ def _face_frame(centre: np.ndarray, normal_xy: tuple[float, float], half_depth: 
                      width_m=float(width), height_m=float(height))
 
 
-def _rect_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[float, float], h: float) -> None:
+def _rect_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[float, float], h: float,
+                 stations: np.ndarray) -> None:
+    """A rectangular column and its objects (none on a face that no station sees)."""
     s = COLUMN_RECT_M
     faces = []
     for side, objs in RECT_COLUMN_OBJECTS.items():
@@ -308,12 +334,16 @@ def _rect_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[f
         sid = f"{col_id}-{side}"
         faces.append(sid)
         plan.surfaces.append(Surface(sid, "column", room.id, frame, column=col_id))
+        if not _seen(centre, np.asarray(_SIDE_NORMALS[side]), s / 2, stations):
+            continue
         for cls, v in objs:
             plan.objects.append(SurfaceObject(cls, sid, "column", frame, s / 2, v))
     plan.columns.append(Column(col_id, room.id, "rect", centre, (s, s), h, room.paint, tuple(faces)))
 
 
-def _round_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[float, float], h: float) -> None:
+def _round_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[float, float], h: float,
+                  stations: np.ndarray) -> None:
+    """A round column and its objects (none where no station sees it)."""
     r = COLUMN_ROUND_M / 2
     c = np.asarray(centre)
     unrolled = _face_frame(c, (1.0, 0.0), r, 0.0, h)
@@ -321,6 +351,8 @@ def _round_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[
     plan.surfaces.append(Surface(col_id, "column", room.id, unrolled, column=col_id, radius_m=r, centre=centre))
     for cls, deg, v in ROUND_COLUMN_OBJECTS:
         a = math.radians(deg)
+        if not _seen(centre, np.array([math.cos(a), math.sin(a)]), r, stations):
+            continue
         u = r * a
         tangent = _face_frame(c, (math.cos(a), math.sin(a)), r, 0.0, h)
         frame = WallFrame(tangent.origin - u * tangent.axis_u, tangent.axis_u, tangent.axis_v, tangent.normal,
