@@ -137,6 +137,10 @@ def _add_simulate(cmds: Commands) -> None:
     s.add_argument("--survey-frame", action="store_true",
                    help="write scan and truth at UTM-like coordinates, turned 23.5 degrees in plan")
     s.add_argument("--all-realism", action="store_true", help="all four options above together")
+    s.add_argument("--ceiling-objects", action="store_true",
+                   help="smoke detectors and exit lights on the ceilings too (the truth says each object's surface)")
+    s.add_argument("--columns", action="store_true",
+                   help="free-standing columns, rectangular and round, with objects on their faces")
     json_option(s)
 
 
@@ -152,6 +156,10 @@ def _add_detect(cmds: Commands) -> None:
                    help="run the per-wall work on an existing Dask cluster (e.g. tcp://10.0.0.5:8786); its "
                         "workers must see the scans and the output's folder at the same paths; default: "
                         "a local process pool")
+    d.add_argument("--ceilings", action="store_true",
+                   help="recognize objects on the ceilings too (classes whose model.json mount has 'ceiling')")
+    d.add_argument("--columns", action="store_true",
+                   help="find free-standing columns and recognize objects on them (mount 'column')")
     json_option(d)
 
 
@@ -403,18 +411,21 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     everything = args.all_realism
     realism = {"realistic": args.realistic or everything, "clutter": args.clutter or everything,
                "furniture": args.furniture or everything, "survey_frame": args.survey_frame or everything}
+    surfaces = {"ceiling_objects": args.ceiling_objects, "columns": args.columns}
     if args.scenario == "building":
         from .simulate.building_scenario import simulate_building
 
         summary = simulate_building(out, args.storeys, scene=args.scene or "scenario", fmt=args.format,
                                     seed=args.seed, angular_step_deg=args.step, log=con.simulation_log,
-                                    object_builder=builder)
+                                    object_builder=builder, **surfaces)
     elif args.scene:
         summary = simulate_scene(scene_path(args.scene), out, seed=args.seed, angular_step_deg=args.step,
-                                 log=con.simulation_log, object_builder=builder, library_builder=library, **realism)
+                                 log=con.simulation_log, object_builder=builder, library_builder=library,
+                                 **realism, **surfaces)
     else:
         summary = simulate_scenario(args.scenario, out, seed=args.seed, angular_step_deg=args.step,
-                                    log=con.simulation_log, object_builder=builder, library_builder=library, **realism)
+                                    log=con.simulation_log, object_builder=builder, library_builder=library,
+                                    **realism, **surfaces)
     if args.json:
         con.result({"out": out, **_jsonable(summary)})
     return 0
@@ -428,10 +439,17 @@ def _cmd_detect(args: argparse.Namespace) -> int:
 
     con = console()
     out = output_parent(args.out)
+    settings = None
+    if args.ceilings or args.columns:
+        from .settings import load_settings
+
+        settings = load_settings(Path(args.settings) if args.settings else None)
+        settings.ceilings.enabled = settings.ceilings.enabled or args.ceilings
+        settings.columns.enabled = settings.columns.enabled or args.columns
     summary = detect_to_dir(
         [Path(s) for s in args.scans], Path(args.models),
         expected=Path(args.expected) if args.expected else None,
-        out=out, settings_file=Path(args.settings) if args.settings else None,
+        out=out, settings_file=Path(args.settings) if args.settings else None, settings=settings,
         log=con.info, progress=con.progress, scheduler=args.scheduler,
     )
     con.close()

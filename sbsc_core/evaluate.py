@@ -31,6 +31,7 @@ from .io.atomic import write_json_atomic
 from .io.documents import TruthDocument, read_detections, read_truth
 from .io.models import read_library_metadata
 from .paths import bundled_models_dir
+from .types import SURFACE_KINDS
 
 EVALUATION_SCHEMA = "sbsc.evaluation/1"
 ALPHA_HIGH = 0.9  # Table 1, sixth column: TPs with alpha above this
@@ -83,10 +84,12 @@ class EvaluationTable:
     unknown_class_detections: int = 0  # detections of classes absent from the ground truth
     matches: list[Match] = field(default_factory=list)
     distractors: DistractorFigures | None = None  # when the truth lists distractors
+    surfaces: list[EvaluationRow] | None = None  # per surface kind, when the truth gives objects' surfaces
 
     def to_dict(self) -> dict:
         return {
             **({"distractors": asdict(self.distractors)} if self.distractors is not None else {}),
+            **({"surfaces": [r.to_dict() for r in self.surfaces]} if self.surfaces is not None else {}),
             "schema": EVALUATION_SCHEMA,
             "max_distance_m": self.max_distance_m,
             "rows": [r.to_dict() for r in self.rows],
@@ -232,8 +235,25 @@ def evaluate(detections_doc: dict, truth: TruthDocument, max_distance_m: float =
     figures = None
     if "distractors" in truth.extra:
         figures = distractor_figures(false_positives, list(truth.extra["distractors"]))
+    by_surface = None
+    if any("surface" in o.extra for o in truth.objects):
+        by_surface = surface_rows(truth, all_matches, false_positives)
     return EvaluationTable(rows=rows, total=total, max_distance_m=float(max_distance_m),
-                           unknown_class_detections=unknown, matches=all_matches, distractors=figures)
+                           unknown_class_detections=unknown, matches=all_matches, distractors=figures,
+                           surfaces=by_surface)
+
+
+def surface_rows(truth: TruthDocument, matches: list[Match], false_positives: list[dict]) -> list[EvaluationRow]:
+    """One row per surface kind (wall, ceiling, column) present: a truth object's kind is its
+    ``surface``, a false positive's its detection's ``surface`` (both default ``wall``)."""
+    kind_of = [str(o.extra.get("surface") or "wall") for o in truth.objects]
+    rows = []
+    for kind in SURFACE_KINDS:
+        n = kind_of.count(kind)
+        fp = sum(1 for d in false_positives if (d.get("surface") or "wall") == kind)
+        if n or fp:
+            rows.append(_row(kind, f"on {kind}s", n, fp, [m for m in matches if kind_of[m.truth_index] == kind]))
+    return rows
 
 
 _COLUMNS = (  # header, attribute, width, decimals
@@ -273,6 +293,10 @@ def format_table(table: EvaluationTable) -> str:
             continue
         lines.append("  ".join(_cell(getattr(row, a), w, d) for _, a, w, d in _COLUMNS))
     lines.append(rule)
+    for row in table.surfaces or []:
+        lines.append("  ".join(_cell(getattr(row, a), w, d) for _, a, w, d in _COLUMNS))
+    if table.surfaces:
+        lines.append(rule)
     note = f"match radius {table.max_distance_m * 1000:.0f} mm"
     if table.unknown_class_detections:
         note += f"; {table.unknown_class_detections} detection(s) of classes absent from the ground truth (counted as FP)"

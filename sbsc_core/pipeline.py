@@ -109,10 +109,12 @@ class DetectionResult:
     detections: list[Detection]
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
     classes: list[str] = field(default_factory=list)
+    surfaces: list[dict] = field(default_factory=list)  # contract-4 surfaces beyond walls (ceiling tiles)
 
     @property
     def openings(self):
-        return [o for w in self.walls.values() for o in w.area.openings]
+        beyond = {sf["id"] for sf in self.surfaces}
+        return [o for wid, w in self.walls.items() if wid not in beyond for o in w.area.openings]
 
 
 def _noop_progress(stage: str, fraction: float) -> None:
@@ -272,13 +274,14 @@ def _as_expected(expected: Expected | None) -> ExpectedCounts | None:
     return ExpectedCounts(dict(expected))
 
 
-def _search_classes(library: ModelLibrary, expected: dict[str, int] | None) -> list[str]:
+def _search_classes(library: ModelLibrary, expected: dict[str, int] | None, kind: str = "wall") -> list[str]:
+    """The classes searched for on surfaces of ``kind``: expected (or all) and mounted there."""
     if expected is not None:
         unknown = sorted(set(expected) - set(library.models))
         if unknown:
             raise InputError("expected", f"class '{unknown[0]}' is not in the model library")
-        return sorted(c for c, n in expected.items() if n > 0)
-    return library.class_ids
+        return library.classes_on(kind, sorted(c for c, n in expected.items() if n > 0))
+    return library.classes_on(kind)
 
 
 def _collect_walls(results: Iterator[tuple[str, WallResult, dict[str, float]]], n_walls: int, progress: Progress,
@@ -511,6 +514,11 @@ def detect_scans(
     seg = segment_floor_ceiling_walls(cloud, s.segmentation)
     if seg.stray_points:  # counted in the sample: scaled to the whole scan
         seg.stray_points = int(round(seg.stray_points * points / max(len(cloud), 1)))
+    found_columns = []
+    if s.columns.enabled:  # free-standing columns (issue 11), found in the sample
+        from .columns import find_columns
+
+        found_columns = find_columns(cloud, seg, s.columns)
     del cloud
     for wall in seg.walls:  # indices into the sample: the walls' points come from their partitions
         wall.point_index = np.zeros(0, np.int64)
@@ -543,7 +551,37 @@ def detect_scans(
                for wid, res, t_wall in _in_order(executor, wall_jobs, _partition_wall_job, 2 * workers))
     done = _collect_walls(results, len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
+    surfaces: list[dict] = []
+    counts = None if expected is None else expected.counts
+    if s.ceilings.enabled:  # objects on ceilings (issue 11): the tiles join the walls in the consensus
+        from .ceilings import detect_ceilings
+
+        ceil = detect_ceilings(parts, origin, seg, library, counts, s, executor=executor, scratch=Path(scratch),
+                               parked=parked, in_flight=2 * workers, progress=progress, timings=timings, log=log)
+        walls.update(ceil.walls)
+        templates = {**ceil.templates, **templates}
+        classes = sorted(set(classes) | set(ceil.classes))
+        surfaces = ceil.surfaces()
+    faces = {}
+    if found_columns:  # objects on columns: their faces join the walls in the consensus too
+        from .columns import detect_columns
+
+        cols = detect_columns(parts, origin, found_columns, library, counts, s, executor=executor,
+                              scratch=Path(scratch), parked=parked, in_flight=2 * workers, progress=progress,
+                              timings=timings, log=log)
+        walls.update(cols.walls)
+        templates = {**cols.templates, **templates}
+        classes = sorted(set(classes) | set(cols.classes))
+        surfaces += cols.surfaces()
+        faces = {f.id: f for f in cols.faces}
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings, log)
+    if surfaces:
+        kinds = {sf["id"]: sf["kind"] for sf in surfaces}
+        for d in result.detections:
+            d.surface = kinds.get(d.wall_id)
+            if d.wall_id in faces:  # a round column's face is unrolled: put the object back on it
+                d.position = faces[d.wall_id].to_world(d.u, d.v)
+        result.surfaces = surfaces
     timings["total"] = time.perf_counter() - t0
     return result, points
 
@@ -696,6 +734,8 @@ def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dic
                    **(extra or {})}
     if len(seg.storeys) > 1:  # contract 4: a one-storey scan omits the storeys
         fields["storeys"] = [st.to_dict() for st in seg.storeys]
+    if result.surfaces:
+        fields["surfaces"] = result.surfaces
     doc = detections_document([(wall.id, wall.frame) for wall in seg.walls], result.openings,
                               result.detections, extra=fields)
     if len(seg.storeys) > 1:

@@ -265,6 +265,30 @@ class ConfidenceSettings:
 
 
 @dataclass
+class CeilingSettings:
+    """Objects on ceilings (issue 11; :mod:`sbsc_core.ceilings`): off by default."""
+
+    enabled: bool = False  # recognize objects on the ceilings too (``sbsc detect --ceilings``)
+    tile_m: float = 6.0  # a storey's ceiling is cut into tiles at most this big each way
+    overlap_m: float = 0.3  # ... each grown by this on every side (more than half an object)
+    wall_clear_m: float = 0.05  # points this close to a wall's plane are the wall's, not the ceiling's
+
+
+@dataclass
+class ColumnSettings:
+    """Objects on free-standing columns (issue 11; :mod:`sbsc_core.columns`): off by default."""
+
+    enabled: bool = False  # find columns and recognize objects on their faces (``sbsc detect --columns``)
+    cell_m: float = 0.05  # plan cells of the column search
+    band_m: float = 0.2  # height bands: a cell is tall when its points fill ...
+    min_cover: float = 0.8  # ... at least this share of the bands between floor and ceiling (0.3 m off each)
+    min_side_m: float = 0.15  # a column is at least this thick ...
+    max_side_m: float = 1.5  # ... and at most this wide
+    round_rms_m: float = 0.012  # round when a circle fits its points within this (RMS)
+    wall_clear_m: float = 0.15  # points this close to a wall's plane are the wall's
+
+
+@dataclass
 class DetectionSettings:
     segmentation: SegmentationSettings = field(default_factory=SegmentationSettings)
     orthoimage: OrthoimageSettings = field(default_factory=OrthoimageSettings)
@@ -275,6 +299,8 @@ class DetectionSettings:
     consensus: ConsensusSettings = field(default_factory=ConsensusSettings)
     lookalikes: LookalikeSettings = field(default_factory=LookalikeSettings)
     confidence: ConfidenceSettings = field(default_factory=ConfidenceSettings)
+    ceilings: CeilingSettings = field(default_factory=CeilingSettings)
+    columns: ColumnSettings = field(default_factory=ColumnSettings)
     workers: int = 0  # processes for the per-wall stages; 0 = up to 2, by the CPU count
 
     def to_dict(self) -> dict[str, Any]:

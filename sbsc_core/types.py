@@ -13,6 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+# Surfaces an object may be mounted on (contract 2 "mount", contract 4/5 "surface").
+SURFACE_KINDS: tuple[str, ...] = ("wall", "ceiling", "column")
+
 
 @dataclass
 class PointCloud:
@@ -259,6 +262,7 @@ class Detection:
     source: str  # "both" | "depth" | "colour"
     rotation_deg: float = 0.0  # the model's in-plane turn at the match, counter-clockwise seen from the room
     confidence: float | None = None  # calibrated probability that class and place are right
+    surface: str | None = None  # "ceiling" or "column" when not on a wall (contract 4)
 
     def to_dict(self) -> dict:
         out = {
@@ -278,6 +282,8 @@ class Detection:
         }
         if self.confidence is not None:
             out["confidence"] = round(float(self.confidence), 4)
+        if self.surface is not None:
+            out["surface"] = self.surface
         return out
 
 
@@ -295,6 +301,7 @@ class ObjectModel:
     depth: np.ndarray | None  # (h, w) float32 metres, NaN unknown
     extra: dict = field(default_factory=dict)  # other model.json keys (e.g. object_type)
     extra_depths: list[np.ndarray] = field(default_factory=list)  # depth_<k>.npy: further depth models
+    mount: tuple[str, ...] = SURFACE_KINDS  # surface kinds the class may be on (model.json "mount")
 
 
 @dataclass
@@ -311,3 +318,8 @@ class ModelLibrary:
     @property
     def class_ids(self) -> list[str]:
         return sorted(self.models)
+
+    def classes_on(self, kind: str, classes: list[str] | None = None) -> list[str]:
+        """``classes`` (default: all) that may be mounted on a surface of ``kind``."""
+        return [c for c in (self.class_ids if classes is None else classes)
+                if c not in self.models or kind in self.models[c].mount]

@@ -2,7 +2,7 @@
 
 A library is a directory with one sub-directory per class::
 
-    models/socket_x1/model.json      name, ifc_class, predefined_type?, width_m, height_m
+    models/socket_x1/model.json      name, ifc_class, predefined_type?, width_m, height_m, mount?
     models/socket_x1/colour.png      front views: colour.png, colour_1.png, ...
     models/socket_x1/depth.npy       optional 2-D relief over the footprint (metres)
     models/socket_x1/depth_1.npy     optional further depth models of the class: depth_1.npy,
@@ -34,7 +34,7 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from ..errors import InputError
-from ..types import ModelLibrary, ObjectModel
+from ..types import SURFACE_KINDS, ModelLibrary, ObjectModel
 from .detections_model import bad_text
 from .safe_json import load_json_file
 
@@ -135,11 +135,11 @@ def load_object_model(class_dir: Path) -> ObjectModel:
     extra_depths = [_read_depth(p, width, height) for p in _extra_depth_files(class_dir)]
     if depth is None and extra_depths:
         depth = extra_depths.pop(0)
-    extra = {k: v for k, v in meta.items() if k not in (*REQUIRED_KEYS, "predefined_type")}
+    extra = {k: v for k, v in meta.items() if k not in (*REQUIRED_KEYS, "predefined_type", "mount")}
     return ObjectModel(
         class_id=class_dir.name, name=meta["name"], ifc_class=meta["ifc_class"],
         predefined_type=meta.get("predefined_type"), width_m=width, height_m=height,
-        colour_views=views, depth=depth, extra=extra, extra_depths=extra_depths,
+        colour_views=views, depth=depth, extra=extra, extra_depths=extra_depths, mount=meta["mount"],
     )
 
 
@@ -175,7 +175,22 @@ def _read_model_json(path: Path) -> dict:
             raise InputError(path, f"'{key}' must be between {MODEL_MIN_M:g} and {MODEL_MAX_M:g} m "
                                    f"(a wall-mounted object), got {json.dumps(v)}")
         meta[key] = float(v)
+    meta["mount"] = _read_mount(path, meta.get("mount", list(SURFACE_KINDS)))
     return meta
+
+
+def _read_mount(path: Path, value: object) -> tuple[str, ...]:
+    """``mount``: a non-empty list of distinct surface kinds (wall, ceiling, column), kept in that order."""
+    if not isinstance(value, list) or not value:
+        raise InputError(path, f"'mount' must be a non-empty list of {', '.join(SURFACE_KINDS)}, "
+                               f"got {json.dumps(value)[:80]}")
+    for kind in value:
+        if kind not in SURFACE_KINDS:
+            raise InputError(path, f"'mount' has unknown surface {json.dumps(kind)[:40]} "
+                                   f"(known: {', '.join(SURFACE_KINDS)})")
+    if len(set(value)) != len(value):
+        raise InputError(path, "'mount' names a surface twice")
+    return tuple(k for k in SURFACE_KINDS if k in value)
 
 
 def _colour_files(class_dir: Path) -> list[Path]:

@@ -49,6 +49,8 @@ class PlacedObject:
     width_m: float
     height_m: float
     rotation_deg: float = 0.0  # in-plane turn seen from the room, counter-clockwise
+    surface: str = "wall"  # the kind of surface it is on: wall, ceiling or column
+    frame: WallFrame | None = None  # the plane it sits on, when not its wall's (ceilings, columns)
 
     def to_truth(self) -> dict:
         return {
@@ -72,10 +74,17 @@ class Building:
     objects: list[PlacedObject]
     stations: np.ndarray  # (S, 3) scanner origins, world
     distractors: list = field(default_factory=list)  # clutter.Distractor: clutter and furniture
+    surfaces: list = field(default_factory=list)  # surfaces.Surface: ceilings and column faces
+    columns: list = field(default_factory=list)  # surfaces.Column
+
+    def frame_of(self, obj: PlacedObject) -> WallFrame:
+        """The plane ``obj`` sits on (its wall's frame, or its ceiling's or column's)."""
+        return obj.frame if obj.frame is not None else self.layout.walls[obj.wall].frame
 
     def truth_document(self) -> dict:
         """``ground_truth.json`` (contract 5, extended with walls and openings; with clutter or
-        furniture, the top-level ``distractors``)."""
+        furniture, the top-level ``distractors``; with ceiling objects or columns, each object's
+        ``surface`` and the top-level ``surfaces`` and ``columns``)."""
         doc = {
             "schema": "sbsc.truth/1",
             "scene": self.scene.name,
@@ -86,6 +95,11 @@ class Building:
         }
         if self.scene.clutter_per_metre or self.scene.furniture_per_metre or self.distractors:
             doc["distractors"] = [d.to_truth(self.layout) for d in self.distractors]
+        if self.surfaces or self.columns:
+            for o, d in zip(self.objects, doc["objects"], strict=True):
+                d["surface"] = o.surface
+            doc["surfaces"] = [s.to_truth() for s in self.surfaces]
+            doc["columns"] = [c.to_truth() for c in self.columns]
         return doc
 
     def expected_document(self) -> dict:
@@ -127,6 +141,7 @@ def build_building(scene: SceneDescription, object_builder: ObjectBuilder | None
         objects.append(PlacedObject(p.index, p.class_id, p.wall, p.u, p.v, wall.frame.to_world(p.u, p.v),
                                     wall.frame.normal.copy(), spec.width_m, spec.height_m, p.rotation_deg))
     stations = station_positions(scene)
+    surfaces, columns = add_surface_objects(scene, layout, stations, object_builder, parts, objects)
     distractors = []
     if scene.clutter_per_metre or scene.furniture_per_metre:
         from .clutter import distractor_mesh, place_clutter, place_furniture
@@ -137,7 +152,31 @@ def build_building(scene: SceneDescription, object_builder: ObjectBuilder | None
             distractors += place_furniture(scene, layout, stations, seed, scene.furniture_per_metre,
                                            existing=distractors)
         parts += [distractor_mesh(d, layout) for d in distractors]
-    return Building(scene, layout, M.merge(parts), objects, stations, distractors)
+    return Building(scene, layout, M.merge(parts), objects, stations, distractors, surfaces, columns)
+
+
+def add_surface_objects(scene: SceneDescription, layout: Layout, stations: np.ndarray,
+                        object_builder: ObjectBuilder, parts: list[ColouredMesh], objects: list[PlacedObject],
+                        ceilings: dict[str, float] | None = None) -> tuple[list, list]:
+    """Columns and objects on ceilings and columns (the scene's options; :mod:`surfaces`).
+
+    Appends their meshes to ``parts`` and the objects to ``objects`` (indices after the
+    scene's), returns the surfaces and columns. Nothing when both options are off.
+    """
+    from .surfaces import plan_surfaces
+
+    plan = plan_surfaces(scene, layout, stations, ceilings=ceilings)
+    parts += [c.mesh() for c in plan.columns]
+    index = max((o.index for o in objects), default=-1) + 1
+    for k, so in enumerate(plan.objects):
+        spec = CATALOGUE[so.class_id]
+        local = object_builder(so.class_id).glossy(CLASS_GLOSS.get(so.class_id, 0.0))
+        turn = _rotation(so.frame) @ _in_plane(so.rotation_deg)
+        where = so.frame.to_world(so.u, so.v)
+        parts.append(local.transformed(turn, where).labelled(index + k))
+        objects.append(PlacedObject(index + k, so.class_id, so.surface, so.u, so.v, where, so.frame.normal.copy(),
+                                    spec.width_m, spec.height_m, so.rotation_deg, so.kind, so.frame))
+    return plan.surfaces, plan.columns
 
 
 def station_positions(scene: SceneDescription) -> np.ndarray:

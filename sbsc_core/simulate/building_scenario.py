@@ -42,6 +42,7 @@ from .building import (
     _casing,
     _reveal,
     _rotation,
+    add_surface_objects,
     station_positions,
     wall_face_mesh,
 )
@@ -91,8 +92,12 @@ class BuildingSummary:
 
 
 def plan_building(storeys: int, scene: str = "scenario", object_builder: ObjectBuilder | None = None,
-                  angular_step_deg: float | None = None) -> list[StoreyPlan]:
-    """The storeys of a ``storeys``-storey building of ``scene`` floors (see the module docstring)."""
+                  angular_step_deg: float | None = None, *, ceiling_objects: bool = False,
+                  columns: bool = False) -> list[StoreyPlan]:
+    """The storeys of a ``storeys``-storey building of ``scene`` floors (see the module docstring).
+
+    ``ceiling_objects`` and ``columns`` turn on the floors' objects beyond walls (:mod:`surfaces`).
+    """
     if not 1 <= storeys <= MAX_STOREYS:
         raise InputError("--storeys", f"must be 1..{MAX_STOREYS}, got {storeys}")
     if scene not in SCENES:
@@ -123,6 +128,8 @@ def plan_building(storeys: int, scene: str = "scenario", object_builder: ObjectB
                 floor.scanner = floor.scanner.replace(angular_step_deg=float(angular_step_deg))
             except ValueError as exc:
                 raise InputError("--step", str(exc)) from None
+        floor.ceiling_objects = floor.ceiling_objects or ceiling_objects
+        floor.columns = floor.columns or columns
         plans.append(StoreyPlan(f"S{k + 1}", floor, round(z, 4), low))
         z += height + SLAB_M[k % len(SLAB_M)]
     return plans
@@ -161,13 +168,19 @@ def build_storey(plan: StoreyPlan, object_builder: ObjectBuilder | None = None) 
         parts.append(local.transformed(_rotation(wall.frame), wall.frame.to_world(p.u, p.v)).labelled(p.index))
         objects.append(PlacedObject(p.index, p.class_id, p.wall, p.u, p.v, wall.frame.to_world(p.u, p.v),
                                     wall.frame.normal.copy(), spec.width_m, spec.height_m))
+    stations = station_positions(scene)
+    surfaces, columns = add_surface_objects(scene, layout, stations, object_builder, parts, objects,
+                                            ceilings=plan.room_ceilings)
     lift = np.array([0.0, 0.0, plan.floor_z])
     mesh = M.merge(parts).transformed(np.eye(3), lift)
     for o in objects:
         o.position = o.position + lift
+        if o.frame is not None:
+            o.frame = _lifted(o.frame, plan.floor_z)
     for wid, wall in list(layout.walls.items()):
         layout.walls[wid] = dataclasses.replace(wall, frame=_lifted(wall.frame, plan.floor_z))
-    return Building(scene, layout, mesh, objects, station_positions(scene) + lift)
+    surfaces = [dataclasses.replace(sf, frame=_lifted(sf.frame, plan.floor_z)) for sf in surfaces]
+    return Building(scene, layout, mesh, objects, stations + lift, surfaces=surfaces, columns=columns)
 
 
 def _lifted(f: WallFrame, dz: float) -> WallFrame:
@@ -223,18 +236,24 @@ def write_station(path: Path, xyz: np.ndarray, rgb: np.ndarray, origin: np.ndarr
 
 def simulate_building(out: Path, storeys: int = 2, *, scene: str = "scenario", fmt: str = "ply", seed: int = 0,
                       angular_step_deg: float | None = None, log: Log | None = None,
-                      object_builder: ObjectBuilder | None = None) -> BuildingSummary:
+                      object_builder: ObjectBuilder | None = None, ceiling_objects: bool = False,
+                      columns: bool = False) -> BuildingSummary:
     """Build, scan and write a ``storeys``-storey building into ``out`` (see the module docstring).
 
     Everything is written into a temporary folder beside ``out`` and moved in at the end.
     Deterministic for a seed; station ``k`` (counted over the whole building) draws its
-    noise from ``[seed, k]``.
+    noise from ``[seed, k]``. ``ceiling_objects`` and ``columns``: see :mod:`surfaces`; the
+    truth then gives each object's ``surface`` and lists ``surfaces`` and ``columns`` (ids
+    prefixed by the storey, like the walls'). Off, nothing changes.
     """
     t0 = time.perf_counter()
     say = log or (lambda msg: None)
     if fmt not in FORMATS:
         raise InputError("--format", f"unknown format {fmt!r} ({', '.join(FORMATS)})")
-    plans = plan_building(storeys, scene, object_builder, angular_step_deg)
+    plans = plan_building(storeys, scene, object_builder, angular_step_deg, ceiling_objects=ceiling_objects,
+                          columns=columns)
+    truth_surfaces: list[dict] = []
+    truth_columns: list[dict] = []
     ext = {"ply": ".ply", "e57": ".e57", "las": ".las"}[fmt]
     truth_objects: list[dict] = []
     truth_walls: list[dict] = []
@@ -266,7 +285,16 @@ def simulate_building(out: Path, storeys: int = 2, *, scene: str = "scenario", f
             del rc
             for o in b.objects:
                 counts[o.class_id] = counts.get(o.class_id, 0) + 1
-                truth_objects.append({**o.to_truth(), "wall": f"{plan.id}-{o.wall}", "storey": plan.id})
+                truth_objects.append({**o.to_truth(), "wall": f"{plan.id}-{o.wall}", "storey": plan.id,
+                                      **({"surface": o.surface} if ceiling_objects or columns else {})})
+            for sf in b.surfaces:
+                d = sf.to_truth()
+                truth_surfaces.append({**d, "id": f"{plan.id}-{sf.id}", "storey": plan.id,
+                                       **({"column": f"{plan.id}-{sf.column}"} if sf.column else {})})
+            for c in b.columns:
+                d = c.to_truth()
+                truth_columns.append({**d, "id": f"{plan.id}-{c.id}", "storey": plan.id,
+                                      "floor_z": plan.floor_z, "faces": [f"{plan.id}-{f}" for f in c.faces]})
             truth_walls += [{"id": f"{plan.id}-{w.id}", "room": w.room, "storey": plan.id, **w.frame.to_dict()}
                             for w in b.layout.walls.values()]
             truth_openings += [{**o.to_dict(), "wall": f"{plan.id}-{o.wall}"} for o in b.layout.openings]
@@ -277,7 +305,8 @@ def simulate_building(out: Path, storeys: int = 2, *, scene: str = "scenario", f
         write_json_atomic(tmp / "ground_truth.json", {
             "schema": "sbsc.truth/1", "scene": f"building of {storeys} {scene} storeys",
             "storeys": storeys_doc, "objects": truth_objects, "walls": truth_walls,
-            "openings": truth_openings, "stations": stations_all})
+            "openings": truth_openings, "stations": stations_all,
+            **({"surfaces": truth_surfaces, "columns": truth_columns} if ceiling_objects or columns else {})})
         per_storey: dict[str, dict[str, int]] = {p.id: {} for p in plans}  # contract 3's optional storeys
         for o in truth_objects:
             per_storey[o["storey"]][o["class"]] = per_storey[o["storey"]].get(o["class"], 0) + 1

@@ -82,7 +82,8 @@ def model_json(class_id: str) -> dict:
     spec = CATALOGUE[class_id]
     doc = {"name": spec.name, "ifc_class": spec.ifc_class, "predefined_type": spec.predefined_type,
            "width_m": spec.width_m, "height_m": spec.height_m, "depth_m": spec.depth_m,
-           "order": CLASS_ORDER.index(class_id) + 1}  # the library's order (contract 2): the paper's
+           "order": CLASS_ORDER.index(class_id) + 1,  # the library's order (contract 2): the paper's
+           "mount": list(spec.mount)}
     if spec.object_type:
         doc["object_type"] = spec.object_type
     return doc

@@ -53,6 +53,7 @@ class SimulationSummary:
 
 
 REALISM_OPTIONS = ("realistic", "clutter", "furniture", "survey_frame")
+SURFACE_OPTIONS = ("ceiling_objects", "columns")  # objects beyond walls (surfaces.py)
 
 
 def simulate_scenario(scenario: str, out: Path, seed: int = 0, angular_step_deg: float | None = None,
@@ -95,7 +96,8 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
                    log: Log | None = None, object_builder: ObjectBuilder | None = None,
                    design: bool = True, library_builder: ObjectBuilder | None = None,
                    realistic: bool = False, clutter: bool = False, furniture: bool = False,
-                   survey_frame: bool = False) -> SimulationSummary:
+                   survey_frame: bool = False, ceiling_objects: bool = False,
+                   columns: bool = False) -> SimulationSummary:
     """Build the described floor, scan it and write contracts 1, 2, 3 and 5 into ``out``.
 
     ``out`` receives ``scan.ply`` (float32 xyz, uchar colour), ``ground_truth.json``,
@@ -115,10 +117,17 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
     scan and truth in a survey frame; with any of them the truth also records each
     object's ``visible_fraction`` and the stations' ``registration_errors``. All off, the
     output is that of the plain simulator.
+
+    ``ceiling_objects`` and ``columns`` (or the description's keys of the same names) add
+    smoke detectors and exit lights on the ceilings and free-standing columns with objects
+    on their faces (:mod:`surfaces`); the truth then gives each object's ``surface`` and
+    lists ``surfaces`` and ``columns``. Off, nothing changes.
     """
     t0 = time.perf_counter()
     say = log or (lambda msg: None)
     scene = apply_realism(load_scene(description_path), realistic, clutter, furniture, survey_frame)
+    scene.ceiling_objects = scene.ceiling_objects or ceiling_objects
+    scene.columns = scene.columns or columns
     settings = scene.scanner
     if angular_step_deg is not None:
         try:
@@ -128,7 +137,10 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
         scene.scanner = settings
     building = build_building(scene, object_builder, seed=seed)
     say(f"{scene.source}: {len(building.layout.walls)} walls, {len(building.objects)} objects, "
-        f"{len(building.distractors)} distractors, {building.mesh.n_triangles:,} triangles; scanning from "
+        f"{len(building.distractors)} distractors, "
+        + (f"{len(building.columns)} columns, {sum(o.surface != 'wall' for o in building.objects)} objects "
+           "on ceilings and columns, " if building.surfaces else "")
+        + f"{building.mesh.n_triangles:,} triangles; scanning from "
         f"{len(building.stations)} stations at {settings.angular_step_deg:g} deg"
         + (" with the realistic scanner" if scene.effects else ""))
     from .raycast import MeshRaycaster

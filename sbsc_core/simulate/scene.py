@@ -19,6 +19,8 @@ outlines, openings (doors, windows) on walls and objects placed on walls::
     stations:                                       # optional; default: planned per room
       - {room: R1, xy: [2.0, 1.5]}
     scanner: {angular_step_deg: 0.1}                # optional ScannerSettings fields
+    ceiling_objects: true            # optional: objects on the ceilings (see surfaces.py)
+    columns: true                    # optional: free-standing columns with objects on them
     # optional realism (all off by default; see realism.py, clutter.py, survey.py):
     realism: {}                      # the realistic scanner; {} = published defaults, or ScanEffects fields
     clutter: {per_metre: 0.4}        # wall clutter that is none of the classes
@@ -160,6 +162,8 @@ class SceneDescription:
     clutter_per_metre: float = 0.0  # wall clutter items per metre of wall (0: none)
     furniture_per_metre: float = 0.0  # furniture pieces per metre of wall (0: none)
     survey_frame: SurveyFrameSpec | None = None  # write scan and truth in a survey frame
+    ceiling_objects: bool = False  # smoke detectors and exit lights on the ceilings (surfaces.py)
+    columns: bool = False  # free-standing columns with objects on them (surfaces.py)
 
     @property
     def realistic(self) -> bool:
@@ -251,7 +255,7 @@ def parse_scene(data: Any, source: str = "scene") -> SceneDescription:
     r.known_keys(data, "", {"schema", "name", "ceiling_height_m", "exterior_wall_thickness_m",
                             "door_frame_width_m", "colours", "rooms", "openings", "objects",
                             "stations", "scanner", "object_rotation", "realism", "clutter", "furniture",
-                            "survey_frame"})
+                            "survey_frame", "ceiling_objects", "columns"})
     schema = data.get("schema", SCHEMA)
     if schema != SCHEMA:
         raise InputError(f"{source}: schema", f"unsupported schema {schema!r} (expected {SCHEMA!r})")
@@ -279,6 +283,11 @@ def parse_scene(data: Any, source: str = "scene") -> SceneDescription:
     stations = [r.station(item, i, height) for i, item in enumerate(r.seq(data, "stations"))]
     scanner = r.scanner(data.get("scanner", {}) or {})
     extras = r.realism_options(data)
+    for key in ("ceiling_objects", "columns"):
+        if data.get(key) is not None:
+            if not isinstance(data[key], bool):
+                raise InputError(f"{source}: {key}", f"expected true or false, got {data[key]!r}")
+            extras[key] = data[key]
     scene = SceneDescription(
         name=str(data.get("name", source)), source=source, ceiling_height_m=height,
         exterior_wall_thickness_m=r.number(data, "exterior_wall_thickness_m", "", default=0.25,

@@ -30,7 +30,7 @@ def visible_fractions(building: Building, settings: ScannerSettings, raycaster: 
     lo_el, hi_el = math.radians(settings.elevation_min_deg), math.radians(settings.elevation_max_deg)
     out = []
     for o in building.objects:
-        fr = building.layout.walls[o.wall].frame
+        fr = building.frame_of(o)
         nu = max(1, round(o.width_m / cell_m))
         nv = max(1, round(o.height_m / cell_m))
         us = o.u - o.width_m / 2 + (np.arange(nu) + 0.5) * o.width_m / nu

@@ -1,0 +1,330 @@
+"""Objects on free-standing columns (issue 11, item 2): find columns, recognize on their faces.
+
+**Finding columns.** In each storey, the segmentation sample's points between 0.3 m above
+the floor and 0.3 m below the ceiling that are not on a wall (``wall_clear_m`` from a wall's
+plane over the wall) are binned into plan cells of ``cell_m``; a cell is *tall* when its
+points cover at least ``min_cover`` of that height. Connected groups of tall cells between
+``min_side_m`` and ``max_side_m`` across are columns: round when a circle fits their points
+within ``round_rms_m``, else rectangles (the smallest rectangle around the points). A wall
+(its points are removed) and furniture (not tall) are never columns, and a column never
+cuts a wall (walls are segmented before and without it).
+
+**Faces.** A rectangular column has four faces, each framed like a wall seen from outside the
+column (origin at its lower-left corner, ``axis_v`` up, ``normal`` out), ids
+``COL1-N`` ... by the compass side their normal is nearest to. A round column is one face
+unrolled around its axis: ``u`` is the arc length counter-clockwise from +x (radius times
+the angle), ``v`` the height above the floor, depth the distance out of the cylinder; its
+``surfaces`` entry gives ``radius_m`` and ``centre``, and a detection's ``position`` is put
+back on the cylinder.
+
+The scan is read once more: points near a column are binned into its faces' partitions;
+each face goes through the walls' stages with the classes whose ``mount`` has ``column``
+and joins the walls in the consensus (see :mod:`sbsc_core.ceilings`, which does the same
+for ceilings).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
+from .partition import RECORD, ScanPart, _part_chunks
+from .settings import ColumnSettings, OrthoimageSettings
+from .types import Orthoimage, PointCloud, Segmentation, WallFrame
+
+_UP = np.array([0.0, 0.0, 1.0])
+_COMPASS = (("E", 0.0), ("N", 90.0), ("W", 180.0), ("S", 270.0))
+
+
+@dataclass(frozen=True)
+class FoundColumn:
+    """A free-standing column found in the scan (world coordinates)."""
+
+    id: str
+    storey: str | None
+    shape: str  # "rect" | "round"
+    centre: tuple[float, float]
+    size_m: tuple[float, float]  # rect: side lengths along angle_deg and across; round: the diameter twice
+    angle_deg: float  # rect: direction of the first side
+    floor_z: float
+    height_m: float
+
+    def to_dict(self) -> dict:
+        return {"id": self.id, "shape": self.shape, "centre": [round(c, 4) for c in self.centre],
+                "size_m": [round(s, 4) for s in self.size_m], "angle_deg": round(self.angle_deg, 2),
+                "floor_z": round(self.floor_z, 4), "height_m": round(self.height_m, 4),
+                **({"storey": self.storey} if self.storey else {})}
+
+
+@dataclass(frozen=True)
+class ColumnFace:
+    """One face of a column as a surface: planar (a rectangle's side) or unrolled (round)."""
+
+    id: str
+    column: str
+    storey: str | None
+    frame: WallFrame
+    radius_m: float | None = None  # round: the frame is unrolled around the axis
+    centre: tuple[float, float] | None = None
+
+    def coords(self, xyz: np.ndarray, origin: np.ndarray) -> np.ndarray:
+        """(N, 3) float32 u, v, d of float32 points given relative to ``origin``."""
+        if self.radius_m is None:
+            return wall_coordinates(xyz, self.frame, origin)
+        rel = xyz.astype(np.float64) + np.asarray(origin, np.float64)
+        dx, dy = rel[:, 0] - self.centre[0], rel[:, 1] - self.centre[1]
+        theta = np.mod(np.arctan2(dy, dx), 2 * math.pi)
+        return np.column_stack([theta * self.radius_m, rel[:, 2] - self.frame.origin[2],
+                                np.hypot(dx, dy) - self.radius_m]).astype(np.float32)
+
+    def to_world(self, u: float, v: float) -> np.ndarray:
+        """The point (u, v) of the face, on its plane or on the cylinder."""
+        if self.radius_m is None:
+            return self.frame.to_world(u, v)
+        a = u / self.radius_m
+        return np.array([self.centre[0] + self.radius_m * math.cos(a), self.centre[1] + self.radius_m * math.sin(a),
+                         self.frame.origin[2] + v])
+
+    def surface(self) -> dict:
+        doc = {"id": self.id, "kind": "column", "column": self.column, **self.frame.to_dict()}
+        if self.radius_m is not None:
+            doc["radius_m"] = round(self.radius_m, 4)
+            doc["centre"] = [round(c, 4) for c in self.centre]
+        if self.storey is not None:
+            doc["storey"] = self.storey
+        return doc
+
+
+def find_columns(cloud: PointCloud, seg: Segmentation, s: ColumnSettings) -> list[FoundColumn]:
+    """The free-standing columns of every storey (see the module docstring)."""
+    import cv2
+
+    storeys = [(st.id, st.floor_z, st.ceiling_z) for st in seg.storeys] or [(None, seg.floor_z, seg.ceiling_z)]
+    origin = np.asarray(cloud.origin, np.float64)
+    out: list[FoundColumn] = []
+    for sid, fz, cz in storeys:
+        z0, z1 = fz + 0.3, cz - 0.3
+        if z1 - z0 < 0.5:
+            continue
+        z = cloud.xyz[:, 2].astype(np.float64) + origin[2]
+        idx = np.flatnonzero((z > z0) & (z < z1))
+        walls = [w for w in seg.walls if sid is None or w.storey in (sid, None)]
+        if not len(idx) or not walls:
+            continue
+        xyz = cloud.xyz[idx]
+        keep = np.ones(len(idx), bool)
+        for w in walls:
+            uvd = wall_coordinates(xyz, w.frame, origin)
+            keep &= ~((np.abs(uvd[:, 2]) < s.wall_clear_m) & (uvd[:, 0] > -s.wall_clear_m)
+                      & (uvd[:, 0] < w.frame.width_m + s.wall_clear_m))
+        xy = xyz[keep, :2].astype(np.float64) + origin[:2]
+        zz = z[idx[keep]]
+        if len(xy) < 50:
+            continue
+        lo = xy.min(axis=0)
+        ij = np.floor((xy - lo) / s.cell_m).astype(np.int64)
+        nx, ny = int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1
+        nb = max(1, int((z1 - z0) / s.band_m))
+        zb = np.clip(((zz - z0) / s.band_m).astype(np.int64), 0, nb - 1)
+        cell = ij[:, 1] * nx + ij[:, 0]
+        pairs = np.unique(cell * nb + zb)
+        cover = np.bincount(pairs // nb, minlength=nx * ny)
+        tall = (cover >= s.min_cover * nb).reshape(ny, nx).astype(np.uint8)
+        grown = cv2.dilate(tall, np.ones((3, 3), np.uint8))
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(grown, connectivity=8)
+        for lab in range(1, n):
+            w_c, h_c = stats[lab, cv2.CC_STAT_WIDTH], stats[lab, cv2.CC_STAT_HEIGHT]
+            span = (np.array([w_c, h_c]) - 2) * s.cell_m  # the dilation grew it by a cell each side
+            if span.min() < s.min_side_m or span.max() > s.max_side_m:
+                continue
+            mine = (labels.ravel()[cell] == lab) & (tall.ravel()[cell] == 1)
+            pts = xy[mine]
+            if len(pts) < 50:
+                continue
+            col = _fit(pts, s)
+            if col is None:
+                continue
+            shape, centre, size, angle = col
+            k = len(out) + 1
+            cid = (f"{sid}-" if sid and len(storeys) > 1 else "") + f"COL{k}"
+            out.append(FoundColumn(cid, sid, shape, centre, size, angle, float(fz), float(cz - fz)))
+    return out
+
+
+def _fit(pts: np.ndarray, s: ColumnSettings) -> tuple | None:
+    """("round", centre, (d, d), 0) or ("rect", centre, (a, b), angle) for a column's plan points."""
+    import cv2
+
+    a = np.column_stack([pts[:, 0], pts[:, 1], np.ones(len(pts))])
+    b = -(pts[:, 0] ** 2 + pts[:, 1] ** 2)
+    (d_, e_, f_), *_ = np.linalg.lstsq(a, b, rcond=None)
+    cx, cy = -d_ / 2, -e_ / 2
+    r2 = cx * cx + cy * cy - f_
+    if r2 > 0:
+        r = math.sqrt(r2)
+        rms = float(np.sqrt(np.mean((np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) - r) ** 2)))
+        if rms < s.round_rms_m and s.min_side_m / 2 <= r <= s.max_side_m / 2:
+            return "round", (float(cx), float(cy)), (2 * r, 2 * r), 0.0
+    (rx, ry), (w, h), ang = cv2.minAreaRect(pts.astype(np.float32))
+    centre, size, ang = _refine_rect(pts, np.array([rx, ry]), np.array([w, h], float), float(ang))
+    if min(size) < s.min_side_m or max(size) > s.max_side_m:
+        return None
+    return "rect", (float(centre[0]), float(centre[1])), (float(size[0]), float(size[1])), float(ang)
+
+
+def _refine_rect(pts: np.ndarray, centre: np.ndarray, size: np.ndarray, angle_deg: float, band_m: float = 0.04
+                 ) -> tuple[np.ndarray, np.ndarray, float]:
+    """The rectangle's sides put on the median of their points (objects on a face and stray
+    points move the smallest enclosing rectangle out and turn it), its turn from their slopes."""
+    for _ in range(2):
+        a = math.radians(angle_deg)
+        axes = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+        p = (pts - centre) @ axes.T  # coordinates along the two sides
+        turns, lo_hi = [], np.zeros((2, 2))
+        for k in range(2):
+            t = 1 - k
+            along = np.abs(p[:, t]) < 0.8 * size[t] / 2
+            for j, sign in enumerate((-1.0, 1.0)):
+                on = along & (sign * p[:, k] > size[k] / 2 - band_m)
+                if on.sum() < 10:
+                    lo_hi[k, j] = sign * size[k] / 2
+                    continue
+                lo_hi[k, j] = float(np.median(p[on, k]))
+                slope = np.polyfit(p[on, t], p[on, k], 1)[0]
+                turns.append(math.degrees(math.atan(slope)) * (-1 if k == 0 else 1))
+        centre = centre + axes.T @ lo_hi.mean(axis=1)
+        size = lo_hi[:, 1] - lo_hi[:, 0]
+        angle_deg += float(np.median(turns)) if turns else 0.0
+    return centre, size, angle_deg
+
+
+def column_faces(columns: list[FoundColumn]) -> list[ColumnFace]:
+    """The faces of the columns as surfaces (see the module docstring)."""
+    faces: list[ColumnFace] = []
+    for c in columns:
+        cx, cy = c.centre
+        if c.shape == "round":
+            r = c.size_m[0] / 2
+            frame = WallFrame(np.array([cx + r, cy, c.floor_z]), np.array([0.0, 1.0, 0.0]), _UP.copy(),
+                              np.array([1.0, 0.0, 0.0]), 2 * math.pi * r, c.height_m)
+            faces.append(ColumnFace(c.id, c.id, c.storey, frame, r, (cx, cy)))
+            continue
+        used: set[str] = set()
+        for k in range(4):
+            a = math.radians(c.angle_deg + 90.0 * k)
+            n = np.array([math.cos(a), math.sin(a), 0.0])
+            half = (c.size_m[0] if k % 2 == 0 else c.size_m[1]) / 2  # the side along n
+            width = c.size_m[1] if k % 2 == 0 else c.size_m[0]
+            u = np.cross(_UP, n)
+            mid = np.array([cx, cy, c.floor_z]) + half * n
+            deg = math.degrees(math.atan2(n[1], n[0])) % 360.0
+            side = min((x for x in _COMPASS if x[0] not in used),
+                       key=lambda x: min(abs(deg - x[1]), 360 - abs(deg - x[1])))[0]
+            used.add(side)
+            frame = WallFrame(mid - width / 2 * u, u, _UP.copy(), n, float(width), c.height_m)
+            faces.append(ColumnFace(f"{c.id}-{side}", c.id, c.storey, frame))
+    return faces
+
+
+def _face_dir(scratch: Path, k: int) -> Path:
+    return scratch / "columns" / f"{k:05d}"
+
+
+def column_part(part: ScanPart, origin: np.ndarray, faces: list[ColumnFace], reach_m: list[float], scratch: str,
+                ortho: OrthoimageSettings) -> list[int]:
+    """Stream one part and append each face's binned points to its partition (records per face)."""
+    root = Path(scratch)
+    written = [0] * len(faces)
+    centres = np.array([f.centre if f.centre is not None else _face_centre(f) for f in faces])
+    for chunk in _part_chunks(part, origin):
+        xy = chunk.xyz[:, :2].astype(np.float64) + origin[:2]
+        for k, f in enumerate(faces):
+            near = np.flatnonzero(np.hypot(xy[:, 0] - centres[k, 0], xy[:, 1] - centres[k, 1]) < reach_m[k])
+            if not len(near):
+                continue
+            uvd = f.coords(chunk.xyz[near], origin)
+            keep, pixel = ortho_pixels(uvd, f.frame, ortho)
+            if not len(pixel):
+                continue
+            rec = np.empty(len(pixel), RECORD)
+            rec["pixel"] = pixel
+            rec["depth"] = uvd[keep, 2]
+            rec["rgb"] = chunk.rgb[near[keep]]
+            d = _face_dir(root, k)
+            d.mkdir(parents=True, exist_ok=True)
+            with open(d / f"{part.key}.rec", "ab") as fh:
+                rec.tofile(fh)
+            written[k] += len(rec)
+    return written
+
+
+def _face_centre(f: ColumnFace) -> tuple[float, float]:
+    mid = f.frame.origin + f.frame.width_m / 2 * f.frame.axis_u
+    return float(mid[0]), float(mid[1])
+
+
+def face_orthoimage(scratch: str | Path, k: int, face: ColumnFace, ortho: OrthoimageSettings) -> Orthoimage:
+    d = _face_dir(Path(scratch), k)
+    files = sorted(d.glob("*.rec")) if d.is_dir() else []
+    rec = np.concatenate([np.fromfile(f, RECORD) for f in files]) if files else np.zeros(0, RECORD)
+    return orthoimage_from_pixels(face.id, face.frame, rec["pixel"].astype(np.int64), rec["depth"], rec["rgb"], ortho)
+
+
+def column_face_job(scratch: str, k: int, face: ColumnFace, templates: dict, prototypes, s) -> tuple:
+    """One face's work (what a worker runs): orthoimage and the walls' stages."""
+    from .pipeline import process_orthoimage
+
+    t = time.perf_counter()
+    ortho = face_orthoimage(scratch, k, face, s.orthoimage)
+    res, t_stage = process_orthoimage(ortho, templates, prototypes, s, {"orthoimage": time.perf_counter() - t})
+    return face.id, res, t_stage
+
+
+@dataclass
+class ColumnResults:
+    walls: dict
+    templates: dict
+    classes: list[str]
+    columns: list[FoundColumn]
+    faces: list[ColumnFace]
+
+    def surfaces(self) -> list[dict]:
+        return [f.surface() for f in self.faces]
+
+
+def detect_columns(parts: list[ScanPart], origin: np.ndarray, columns: list[FoundColumn], library,
+                   expected: dict | None, s, *, executor, scratch: Path, parked: Path, in_flight: int, progress,
+                   timings: dict, log) -> ColumnResults:
+    """Bin the columns' points into their faces, then run the walls' stages on every face."""
+    from .colour_recognition import learn_prototypes
+    from .pipeline import _in_order, _search_classes, park_wall
+    from .templates import make_templates
+
+    t0 = time.perf_counter()
+    faces = column_faces(columns)
+    classes = _search_classes(library, expected, kind="column")
+    if not faces or not classes:
+        return ColumnResults({}, {}, classes, columns, [])
+    progress("columns", 0.0)
+    by_id = {c.id: c for c in columns}
+    reach = [max(by_id[f.column].size_m) / 2 * math.sqrt(2) + s.orthoimage.depth_range_m[1] + 0.05 for f in faces]
+    jobs = [(part, origin, faces, reach, str(scratch), s.orthoimage) for part in parts]
+    kept = np.zeros(len(faces), np.int64)
+    for written in _in_order(executor, jobs, column_part, in_flight):
+        kept += np.asarray(written, np.int64)
+    templates = make_templates(library, s.orthoimage.pixel_m, classes)
+    prototypes = learn_prototypes(templates, s.colour)
+    face_jobs = [(str(scratch), k, f, templates, prototypes, s) for k, f in enumerate(faces)]
+    results: dict = {}
+    for i, (fid, res, _) in enumerate(_in_order(executor, face_jobs, column_face_job, in_flight)):
+        results[fid] = park_wall(res, parked)
+        progress("columns", (i + 1) / len(faces))
+    timings["columns"] = time.perf_counter() - t0
+    log(f"{len(columns)} columns ({', '.join(c.shape for c in columns)}), {len(faces)} faces: "
+        f"{int(kept.sum()):,} points, searched for {', '.join(classes)} in {timings['columns']:.1f} s")
+    return ColumnResults(results, templates, classes, columns, faces)

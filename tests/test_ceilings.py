@@ -1,0 +1,131 @@
+"""Objects on ceilings (issue 11): ceiling tiles, their partitions and detect --ceilings."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from sbsc_core.ceilings import ceiling_part, ceiling_tiles, in_core, tile_orthoimage
+from sbsc_core.io.ply import write_ply
+from sbsc_core.partition import plan_parts, scan_origin
+from sbsc_core.settings import CeilingSettings, OrthoimageSettings
+from sbsc_core.types import Box, Candidate, Segmentation, Storey, Wall, WallFrame
+
+
+def _wall(wid: str, a, b, height: float = 2.8) -> Wall:
+    """A wall from plan point a to b (seen from the room on its left)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    e = (b - a) / np.linalg.norm(b - a)
+    frame = WallFrame(np.array([a[0], a[1], 0.0]), np.array([e[0], e[1], 0.0]), np.array([0.0, 0.0, 1.0]),
+                      np.array([e[1], -e[0], 0.0]), float(np.linalg.norm(b - a)), height)
+    return Wall(wid, frame, np.zeros(0, np.int64), "S1")
+
+
+def _room(w: float = 13.0, d: float = 7.0) -> Segmentation:
+    walls = [_wall("W1", (0, 0), (0, d)), _wall("W2", (0, d), (w, d)), _wall("W3", (w, d), (w, 0)),
+             _wall("W4", (w, 0), (0, 0))]
+    return Segmentation(0.0, 2.8, walls, [Storey("S1", 0.0, 2.8)])
+
+
+def test_tiles_cover_the_ceiling_once_seen_from_below():
+    tiles = ceiling_tiles(_room(), CeilingSettings(tile_m=6.0, overlap_m=0.3))
+    assert [t.id for t in tiles] == [f"C0{k}" for k in range(1, 7)]  # 3 x 2 tiles
+    rng = np.random.default_rng(0)
+    for x, y in rng.uniform((0, 0), (13, 7), (500, 2)):
+        owners = [t for t in tiles if t.owns(*t.frame.to_uvd(np.array([[x, y, 2.8]]))[0, :2])]
+        assert len(owners) == 1
+        # the owner's image holds the whole neighbourhood of an object centred there
+        u, v = owners[0].frame.to_uvd(np.array([[x, y, 2.8]]))[0, :2]
+        f = owners[0].frame
+        assert (min(u, 13 - x) >= -1e-9 and min(f.width_m - u, x) >= -1e-9)
+    for t in tiles:
+        f = t.frame
+        assert np.allclose(f.normal, [0, 0, -1]) and f.axis_v[2] == 0
+        assert np.isclose(np.cross(f.axis_u, f.axis_v) @ f.normal, 1.0)
+        assert f.width_m <= 6.0 / 1 + 0.6 and f.origin[2] == 2.8
+        # points below the ceiling have positive depth (they hang into the room)
+        assert f.to_uvd(np.array([[f.origin[0] + 0.1, f.origin[1] - 0.1, 2.75]]))[0, 2] == pytest.approx(0.05)
+
+
+def test_ceiling_points_are_binned_into_tiles_without_the_walls(tmp_path):
+    seg = _room(4.0, 3.0)
+    (tile,) = ceiling_tiles(seg, CeilingSettings())
+    g = np.arange(0.0025, 4.0, 0.004)
+    h = np.arange(0.0025, 3.0, 0.004)
+    gx, gy = np.meshgrid(g, h)
+    ceiling = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, 2.8)])
+    bump = (np.abs(ceiling[:, 0] - 2.0) < 0.05) & (np.abs(ceiling[:, 1] - 1.0) < 0.05)
+    ceiling[bump, 2] = 2.75  # a 10 cm box hanging 5 cm below the ceiling
+    zz, yy = np.meshgrid(np.arange(2.5, 2.785, 0.004), h)
+    wall = np.column_stack([np.zeros(zz.size), yy.ravel(), zz.ravel()])  # the top of wall W1 (x = 0)
+    xyz = np.vstack([ceiling, wall]).astype(np.float32)
+    rgb = np.full((len(xyz), 3), 200, np.uint8)
+    rgb[len(ceiling):] = (10, 200, 10)
+    write_ply(tmp_path / "scan.ply", xyz, rgb)
+    parts, _ = plan_parts([tmp_path / "scan.ply"])
+    origin = scan_origin(tmp_path / "scan.ply")
+    ortho = OrthoimageSettings()
+    walls = [w.frame for w in seg.walls]
+    written = sum(np.asarray(ceiling_part(p, origin, [tile], walls, str(tmp_path), ortho, 0.05)) for p in parts)
+    assert written[0] == len(ceiling)  # every ceiling point, none of the wall's
+    img = tile_orthoimage(tmp_path, 0, tile, ortho)
+    assert img.depth.shape == (600, 800)
+    r, c = img.uv_to_pixel(2.0, 2.0)  # u = x, v = 3 - y
+    assert img.depth[int(r), int(c)] == pytest.approx(0.05, abs=1e-3)
+    assert np.nanmedian(img.depth) == pytest.approx(0.0, abs=1e-3)
+    assert not (img.colour[img.mask] == (10, 200, 10)).all(axis=1).any()  # no wall colour in the image
+    cands = [Candidate("smoke_detector", tile.id, "depth", Box(0, 0, 1, 1), (float(r), float(c)), 0.9),
+             Candidate("smoke_detector", tile.id, "depth", Box(0, 0, 1, 1), (-50.0, float(c)), 0.9)]
+    assert in_core(cands, tile, ortho.pixel_m) == cands[:1]
+
+
+@pytest.mark.slow
+def test_detect_ceilings_finds_the_smoke_detector_on_the_ceiling(tmp_path):
+    from sbsc_core.cli import main
+    from sbsc_core.io.documents import read_detections
+
+    sim, det = tmp_path / "sim", tmp_path / "det"
+    assert main(["-q", "simulate", "--scene", "one_room", "--ceiling-objects", "--out", str(sim)]) == 0
+    assert main(["-q", "detect", str(sim / "scan.ply"), "--models", str(sim / "models"), "--expected",
+                 str(sim / "expected.json"), "--ceilings", "--out", str(det)]) == 0
+    doc = json.loads((det / "detections.json").read_text())
+    read_detections(det / "detections.json")  # the document validates (surfaces, detections on them)
+    assert [s["kind"] for s in doc["surfaces"]] == ["ceiling"]
+    truth = json.loads((sim / "ground_truth.json").read_text())
+    (want,) = [o for o in truth["objects"] if o["surface"] == "ceiling"]
+    on_ceiling = [d for d in doc["detections"] if d.get("surface") == "ceiling"]
+    assert [d["class"] for d in on_ceiling] == [want["class"]]
+    assert np.linalg.norm(np.subtract(on_ceiling[0]["position"], want["position"])) < 0.01
+    assert all(o["wall"] in {w["id"] for w in doc["walls"]} for o in doc["openings"])
+    assert (det / "orthoimages" / "C01_depth.npy").exists()
+
+
+def test_evaluate_gives_figures_per_surface_kind(tmp_path):
+    from sbsc_core.evaluate import evaluate, format_table
+    from sbsc_core.io.documents import read_truth
+
+    def obj(cls, pos, surface):
+        return {"class": cls, "position": pos, "normal": [0, 0, -1], "width_m": 0.1, "height_m": 0.1,
+                "surface": surface}
+
+    truth = {"schema": "sbsc.truth/1", "objects": [
+        obj("smoke_detector", [1, 1, 2.8], "ceiling"), obj("smoke_detector", [3, 1, 2.8], "ceiling"),
+        obj("switch", [0, 2, 1.1], "wall"), obj("socket_x1", [5, 5, 0.3], "column")]}
+    (tmp_path / "t.json").write_text(json.dumps(truth))
+
+    def det(i, cls, pos, surface=None):
+        d = {"id": f"D{i}", "class": cls, "wall": "C01" if surface else "W1", "position": pos, "u": 0, "v": 0,
+             "width_m": 0.1, "height_m": 0.1, "alpha": 1.0, "rho_depth": 0.9, "rho_colour": None, "source": "depth"}
+        return {**d, **({"surface": surface} if surface else {})}
+
+    doc = {"schema": "sbsc.detections/1", "walls": [], "openings": [], "detections": [
+        det(1, "smoke_detector", [1.003, 1, 2.8], "ceiling"), det(2, "smoke_detector", [7, 7, 2.8], "ceiling"),
+        det(3, "switch", [0, 2.002, 1.1])]}
+    table = evaluate(doc, read_truth(tmp_path / "t.json"))
+    rows = {r.class_id: r for r in table.surfaces}
+    assert (rows["ceiling"].instances, rows["ceiling"].tp, rows["ceiling"].fp) == (2, 1, 1)
+    assert rows["ceiling"].h_mean_mm == pytest.approx(3.0)
+    assert (rows["wall"].tp, rows["wall"].fp, rows["column"].fn) == (1, 0, 1)
+    assert "on ceilings" in format_table(table) and table.to_dict()["surfaces"][1]["class"] == "ceiling"

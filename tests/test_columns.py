@@ -1,0 +1,110 @@
+"""Free-standing columns (issue 11): finding them, their faces, and detect --columns."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from sbsc_core.columns import column_faces, find_columns
+from sbsc_core.settings import ColumnSettings
+from sbsc_core.types import PointCloud, Segmentation, Storey, Wall, WallFrame
+
+
+def _wall(wid: str, a, b, height: float = 3.0) -> Wall:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    e = (b - a) / np.linalg.norm(b - a)
+    frame = WallFrame(np.array([a[0], a[1], 0.0]), np.array([e[0], e[1], 0.0]), np.array([0.0, 0.0, 1.0]),
+                      np.array([e[1], -e[0], 0.0]), float(np.linalg.norm(b - a)), height)
+    return Wall(wid, frame, np.zeros(0, np.int64), "S1")
+
+
+def _scene(rng) -> tuple[PointCloud, Segmentation]:
+    """A 10 x 8 m room, 3 m high: a 0.45 m square column turned 20 degrees at (3, 4), a round
+    one of 0.5 m at (7, 4) and a table (not tall)."""
+    zs = np.arange(0.02, 2.98, 0.01)
+    parts = []
+    for y in np.arange(0.0, 8.0, 0.01):  # the walls x = 0 and x = 10
+        parts += [np.column_stack([np.full(len(zs), 0.0), np.full(len(zs), y), zs]),
+                  np.column_stack([np.full(len(zs), 10.0), np.full(len(zs), y), zs])]
+    a = math.radians(20.0)
+    e1, e2 = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)])
+    t = np.arange(-0.225, 0.225, 0.01)
+    for n, s in ((e1, e2), (-e1, e2), (e2, e1), (-e2, e1)):
+        xy = np.array([3.0, 4.0]) + 0.225 * n + t[:, None] * s
+        gx, gz = np.meshgrid(np.arange(len(xy)), zs)
+        parts.append(np.column_stack([xy[gx.ravel(), 0], xy[gx.ravel(), 1], gz.ravel()]))
+    ang = np.arange(0, 2 * math.pi, 0.02)
+    ga, gz = np.meshgrid(ang, zs)
+    parts.append(np.column_stack([7.0 + 0.25 * np.cos(ga.ravel()), 4.0 + 0.25 * np.sin(ga.ravel()), gz.ravel()]))
+    tx, ty = np.meshgrid(np.arange(5.0, 5.8, 0.01), np.arange(1.0, 1.6, 0.01))  # a table top, 0.75 m
+    parts.append(np.column_stack([tx.ravel(), ty.ravel(), np.full(tx.size, 0.75)]))
+    xyz = np.vstack(parts)
+    xyz = xyz + rng.normal(0, 0.002, xyz.shape)
+    cloud = PointCloud(xyz.astype(np.float32), np.full((len(xyz), 3), 200, np.uint8))
+    walls = [_wall("W1", (0, 0), (0, 8)), _wall("W3", (10, 8), (10, 0))]
+    return cloud, Segmentation(0.0, 3.0, walls, [Storey("S1", 0.0, 3.0)])
+
+
+def test_find_columns_rect_and_round_not_walls_or_tables():
+    cloud, seg = _scene(np.random.default_rng(1))
+    cols = find_columns(cloud, seg, ColumnSettings(enabled=True))
+    assert [c.shape for c in cols] == ["rect", "round"]
+    rect, rnd = cols
+    assert rect.centre == pytest.approx((3.0, 4.0), abs=0.01) and rect.size_m == pytest.approx((0.45, 0.45), abs=0.01)
+    assert (rect.angle_deg - 20.0 + 45.0) % 90.0 - 45.0 == pytest.approx(0.0, abs=0.5)
+    assert rnd.centre == pytest.approx((7.0, 4.0), abs=0.005) and rnd.size_m[0] == pytest.approx(0.5, abs=0.01)
+    faces = column_faces(cols)
+    assert sorted(f.id for f in faces) == ["COL1-E", "COL1-N", "COL1-S", "COL1-W", "COL2"]
+    faces = sorted(faces, key=lambda f: f.id)
+    for f in faces[:4]:  # each face lies on the column's side, its normal out of the column
+        mid = f.frame.to_world(f.frame.width_m / 2, 1.0)
+        assert np.dot(mid[:2] - (3.0, 4.0), f.frame.normal[:2]) == pytest.approx(0.225, abs=0.01)
+        assert f.frame.width_m == pytest.approx(0.45, abs=0.01)
+        assert np.isclose(np.cross(f.frame.axis_u, f.frame.axis_v) @ f.frame.normal, 1.0)
+    # the round face is unrolled: u is the arc length counter-clockwise from +x, depth out of it
+    rf = faces[4]
+    p = np.array([[7.0, 4.0 + 0.25 + 0.05, 1.2]], np.float32)
+    u, v, d = rf.coords(p, np.zeros(3))[0]
+    assert (u, v, d) == pytest.approx((0.25 * math.pi / 2, 1.2, 0.05), abs=1e-3)
+    assert rf.to_world(u, v) == pytest.approx([7.0, 4.25, 1.2], abs=1e-3)
+
+
+def test_no_columns_in_an_empty_room():
+    cloud, seg = _scene(np.random.default_rng(2))
+    walls_only = np.abs(cloud.xyz[:, 0] - 5.0) > 4.9
+    cloud = PointCloud(cloud.xyz[walls_only], cloud.rgb[walls_only])
+    assert find_columns(cloud, seg, ColumnSettings(enabled=True)) == []
+
+
+@pytest.mark.slow
+def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
+    import yaml
+
+    from sbsc_core.cli import main
+    from sbsc_core.evaluate import evaluate
+    from sbsc_core.io.documents import read_detections, read_truth
+
+    scene = {"schema": "sbsc.scene/1", "name": "hall", "ceiling_height_m": 2.8,
+             "rooms": [{"id": "H", "rect": [0, 0, 7, 6.5]}],
+             "openings": [{"wall": "H-S", "kind": "door", "u": 2.0, "width_m": 0.9, "height_m": 2.1}],
+             "objects": [{"class": "switch", "wall": "H-S", "u": 3.0, "v": 1.1}],
+             "scanner": {"angular_step_deg": 0.1}}
+    (tmp_path / "hall.yaml").write_text(yaml.safe_dump(scene))
+    sim, det = tmp_path / "sim", tmp_path / "det"
+    assert main(["-q", "simulate", "--scene", str(tmp_path / "hall.yaml"), "--ceiling-objects", "--columns",
+                 "--out", str(sim)]) == 0
+    assert main(["-q", "detect", str(sim / "scan.ply"), "--models", str(sim / "models"), "--expected",
+                 str(sim / "expected.json"), "--ceilings", "--columns", "--out", str(det)]) == 0
+    doc = read_detections(det / "detections.json")
+    kinds = {s["id"]: s["kind"] for s in doc["surfaces"]}
+    assert sorted(k for k in kinds if kinds[k] == "column") == ["COL1-E", "COL1-N", "COL1-S", "COL1-W"]
+    assert len(doc["walls"]) == 4  # the column is no wall
+    table = evaluate(doc, read_truth(sim / "ground_truth.json"))
+    rows = {r.class_id: r for r in table.surfaces}
+    assert rows["column"].instances >= 4  # the objects on the sides the stations see
+    assert rows["column"].tp == rows["column"].instances and rows["column"].fp == 0
+    assert rows["ceiling"].tp == rows["ceiling"].instances and rows["ceiling"].fp == 0
+    assert json.loads((det / "detections.json").read_text())["surfaces"][0]["kind"] == "ceiling"
