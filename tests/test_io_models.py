@@ -105,7 +105,7 @@ def test_library_order_and_metadata(tmp_path):
     expected = ["c", "e", "b", "a", "d"]
     assert list(models_mod.read_library_metadata(tmp_path / "m")) == expected
     assert models_mod.ordered_class_ids(load_model_library(tmp_path / "m")) == expected
-    assert models_mod.read_library_metadata(tmp_path / "m")["b"] == {**meta, "order": 2}
+    assert models_mod.read_library_metadata(tmp_path / "m")["b"] == {**meta, "order": 2, "mount": ("wall", "ceiling", "column")}
     (tmp_path / "m" / "a" / "colour.png").unlink()  # views are not read
     assert list(models_mod.read_library_metadata(tmp_path / "m")) == expected
     from sbsc_core.paths import bundled_models_dir
