@@ -30,7 +30,7 @@ import shutil
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -66,6 +66,7 @@ from .partition import (
     scan_origin,
     scratch_folder,
     wall_orthoimage,
+    worker_ready,
 )
 from .placement import place_hits
 from .segmentation import segment_floor_ceiling_walls
@@ -184,7 +185,7 @@ def _worker_count(settings: DetectionSettings) -> int:
 
 
 def _ready() -> bool:
-    """A no-op run in each new worker: it is spawned and has imported the method."""
+    """A no-op run in a worker: it has imported the whole method (this module)."""
     return True
 
 
@@ -216,9 +217,11 @@ def _environment(extra: dict[str, str]) -> Iterator[None]:
 def wall_pool(settings: DetectionSettings, n_walls: int | None = None) -> ProcessPoolExecutor | None:
     """The worker processes for the per-wall stages (None when they run in this process).
 
-    The workers are started at once (spawned, each importing the library, about a second),
-    so a caller that creates the pool before reading the scan has them ready when the walls
-    are. The caller shuts the pool down.
+    The workers are started at once (spawned), each importing only what reading the scan
+    needs (:func:`~sbsc_core.partition.worker_ready`, a fraction of a second), so a caller
+    that creates the pool before reading the scan has them ready for the reading tasks;
+    :func:`detect_scans` has them import the rest while segmentation runs. The caller shuts
+    the pool down.
     """
     workers = _worker_count(settings)
     if workers <= 1 or (n_walls is not None and n_walls <= 1):
@@ -226,7 +229,7 @@ def wall_pool(settings: DetectionSettings, n_walls: int | None = None) -> Proces
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     with _environment(worker_environment()):  # each submit below starts one worker (a copy of the environment)
         for _ in range(workers):
-            pool.submit(_ready)
+            pool.submit(worker_ready)
     return pool
 
 
@@ -388,19 +391,27 @@ def wall_executor(settings: DetectionSettings, scheduler: str | None = None) -> 
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _in_order(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int) -> Iterator:
-    """Results of ``fn(*job)`` for each job, in order, with at most ``in_flight`` submitted at once."""
-    pending: deque = deque()
-    todo = iter(jobs)
+def _as_done(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int) -> Iterator[tuple[int, object]]:
+    """``(k, fn(*job))`` for the k-th job, as the tasks finish, with at most ``in_flight`` submitted at once.
+
+    A new job is submitted as soon as any task finishes (not only the oldest), so that a
+    long task never leaves the other workers idle; the caller puts the results back in
+    order where it matters. Tasks finished together are given in job order.
+    """
+    pending: dict[Future, int] = {}
+    todo = enumerate(jobs)
     try:
-        for job in itertools.islice(todo, in_flight):
-            pending.append(ex.submit(fn, *job))
+        for k, job in itertools.islice(todo, in_flight):
+            pending[ex.submit(fn, *job)] = k
         while pending:
-            res = pending.popleft().result()
-            nxt = next(todo, None)
-            if nxt is not None:
-                pending.append(ex.submit(fn, *nxt))
-            yield res
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in sorted(done, key=pending.__getitem__):
+                k = pending.pop(fut)
+                res = fut.result()
+                nxt = next(todo, None)
+                if nxt is not None:
+                    pending[ex.submit(fn, *nxt[1])] = nxt[0]
+                yield k, res
     finally:
         for f in pending:
             f.cancel()
@@ -442,9 +453,9 @@ def detect_scans(
     origin = scan_origin(scans[0]) if origin is None else np.asarray(origin, np.float64)
     step = sample_step(estimate, s)
     sample_jobs = [(part, origin, step, str(scratch)) for part in parts]
-    samples = []
-    for i, smp in enumerate(_in_order(executor, sample_jobs, sample_part, 2 * workers)):
-        samples.append(smp)
+    samples: list = [None] * len(parts)
+    for i, (k, smp) in enumerate(_as_done(executor, sample_jobs, sample_part, 2 * workers)):
+        samples[k] = smp
         progress("reading", (i + 1) / len(parts))
     points = sum(smp.points for smp in samples)
     cloud = sample_cloud(samples, origin, [str(p) for p in scans], 2 * s.segmentation.fit_max_points)
@@ -456,12 +467,16 @@ def detect_scans(
 
     t = time.perf_counter()
     progress("segmentation", 0.0)
+    # the workers are idle while segmentation runs here: they import the per-wall stages now
+    warm = [executor.submit(_ready) for _ in range(workers)] if workers > 1 else []
     seg = segment_floor_ceiling_walls(cloud, s.segmentation)
     if seg.stray_points:  # counted in the sample: scaled to the whole scan
         seg.stray_points = int(round(seg.stray_points * points / max(len(cloud), 1)))
     del cloud
     for wall in seg.walls:  # indices into the sample: the walls' points come from their partitions
         wall.point_index = np.zeros(0, np.int64)
+    for f in warm:
+        f.cancel()  # not started yet: not needed (a worker that imports it runs a wall task later)
     timings["segmentation"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -470,7 +485,7 @@ def detect_scans(
     part_jobs = [(part, origin, index, str(scratch), n, spilled, s.orthoimage)
                  for part, (n, spilled) in zip(parts, sample_meta, strict=True)]
     kept = np.zeros(len(seg.walls), np.int64)
-    for i, written in enumerate(_in_order(executor, part_jobs, partition_part, 2 * workers)):
+    for i, (_, written) in enumerate(_as_done(executor, part_jobs, partition_part, 2 * workers)):
         kept += np.asarray(written, np.int64)
         progress("partition", (i + 1) / len(parts))
     timings["partition"] = time.perf_counter() - t
@@ -488,7 +503,7 @@ def detect_scans(
     parked = Path(scratch) / "images"
     parked.mkdir(exist_ok=True)
     results = ((wid, park_wall(res, parked), t_wall)
-               for wid, res, t_wall in _in_order(executor, wall_jobs, _partition_wall_job, 2 * workers))
+               for _, (wid, res, t_wall) in _as_done(executor, wall_jobs, _partition_wall_job, 2 * workers))
     done = _collect_walls(results, len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
