@@ -158,12 +158,18 @@ def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], p
 
 
 def _partition_wall_job(scratch: str, w: int, wall_id: str, frame: WallFrame, templates: dict[str, ModelTemplate],
-                        prototypes: ColourPrototypes, s: DetectionSettings
+                        prototypes: ColourPrototypes, s: DetectionSettings, images: str | None = None
                         ) -> tuple[str, WallResult, dict[str, float]]:
-    """One wall's work from its partition file (what a worker, local or on a cluster, runs)."""
+    """One wall's work from its partition file (what a worker, local or on a cluster, runs).
+
+    With ``images`` (a folder beside the partitions) the wall's images are written there
+    and the result is returned without them (:func:`park_wall`).
+    """
     t = time.perf_counter()
     ortho = wall_orthoimage(scratch, w, wall_id, frame, s.orthoimage)
     res, t_stage = process_orthoimage(ortho, templates, prototypes, s, {"orthoimage": time.perf_counter() - t})
+    if images is not None:
+        res = park_wall(res, Path(images))
     return wall_id, res, t_stage
 
 
@@ -434,8 +440,8 @@ def detect_scans(
     Every part of the files is read by a task of ``executor``: once for a bounded regular
     sample that segmentation runs on, once more (or from its spill) to write each wall's
     binned points to its partition in ``scratch``; each wall's stages then run as a task on
-    its partition. Each wall's images are written to ``scratch/images`` as its result comes
-    in (:func:`park_wall`), so the result holds no orthoimage: write it with
+    its partition. Each wall's task writes the wall's images to ``scratch/images``
+    (:func:`park_wall`), so the result holds no orthoimage: write it with
     ``write_outputs(..., parked=scratch / "images")``. ``origin`` is the recentring origin
     (default: :func:`~sbsc_core.partition.scan_origin` of the first file). Returns the result
     and the number of points read.
@@ -499,11 +505,12 @@ def detect_scans(
     # the biggest walls first, so that no worker is left with a big one at the end; the
     # results are put back in the walls' order (the consensus sees them as in memory)
     order = sorted(range(len(seg.walls)), key=lambda w: -int(kept[w]))
-    wall_jobs = [(str(scratch), w, seg.walls[w].id, seg.walls[w].frame, templates, prototypes, s) for w in order]
     parked = Path(scratch) / "images"
     parked.mkdir(exist_ok=True)
-    results = ((wid, park_wall(res, parked), t_wall)
-               for _, (wid, res, t_wall) in _as_done(executor, wall_jobs, _partition_wall_job, 2 * workers))
+    # each task writes its wall's images itself: this process only receives the small results
+    wall_jobs = [(str(scratch), w, seg.walls[w].id, seg.walls[w].frame, templates, prototypes, s, str(parked))
+                 for w in order]
+    results = (res for _, res in _as_done(executor, wall_jobs, _partition_wall_job, 2 * workers))
     done = _collect_walls(results, len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
@@ -559,7 +566,7 @@ def detect_to_dir(
             f"{len(result.detections)} objects in {result.timings['total']:.1f} s")
         progress("writing", 0.0)
         with atomic_output_dir(out) as tmp:
-            write_outputs(result, tmp, s.orthoimage.pixel_m, extra=georef, parked=work / "images")
+            write_outputs(result, tmp, s.orthoimage.pixel_m, extra=georef, parked=work / "images", executor=ex)
     progress("done", 1.0)
     return {
         "points": points,
@@ -630,26 +637,44 @@ def park_wall(res: WallResult, images: Path) -> WallResult:
     return WallResult(ortho, area, res.depth_rois, res.colour_rois, res.depth_candidates, res.colour_candidates)
 
 
+def _parked_overlay_job(parked: str, w: WallResult, detections: list[Detection]) -> str:
+    """Draw a parked wall's overlay from its colour image in ``parked`` and write it there."""
+    wid = w.ortho.wall_id
+    colour = cv2.imread(str(Path(parked) / f"{wid}_colour.png"), cv2.IMREAD_COLOR)
+    if not cv2.imwrite(str(Path(parked) / f"{wid}_overlay.png"), overlay_image(w, detections, colour)):
+        raise SbscError(f"{parked}: cannot write images")
+    return wid
+
+
 def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dict | None = None,
-                  parked: Path | None = None) -> None:
+                  parked: Path | None = None, executor: Executor | None = None) -> None:
     """Write detections.json, rois.json and the per-wall images into ``out``.
 
     ``extra`` adds top-level keys to detections.json (the scan's ``crs`` and ``origin``);
-    ``parked``: the folder where :func:`park_wall` wrote the walls' images.
+    ``parked``: the folder where :func:`park_wall` wrote the walls' images; with it,
+    ``executor`` (that of the detection) draws the overlays side by side, in ``parked``.
     """
     images = out / "orthoimages"
     images.mkdir(parents=True, exist_ok=True)
     rois: dict[str, dict] = {}
+    drawn = set()
+    if parked is not None and executor is not None:
+        jobs = [(str(parked), w, [d for d in result.detections if d.wall_id == wid])
+                for wid, w in result.walls.items()]
+        drawn = {wid for _, wid in _as_done(executor, jobs, _parked_overlay_job, 4 * max(1, len(jobs)))}
     for wid, w in result.walls.items():
         dets = [d for d in result.detections if d.wall_id == wid]
         if parked is None:
             _write_wall_images(w.ortho, images)
-            overlay = overlay_image(w, dets)
+            cv2.imwrite(str(images / f"{wid}_overlay.png"), overlay_image(w, dets))
         else:
             for suffix in ("colour.png", "depth.png", "depth.npy"):
                 shutil.move(parked / f"{wid}_{suffix}", images / f"{wid}_{suffix}")
-            overlay = overlay_image(w, dets, cv2.imread(str(images / f"{wid}_colour.png"), cv2.IMREAD_COLOR))
-        cv2.imwrite(str(images / f"{wid}_overlay.png"), overlay)
+            if wid in drawn:
+                shutil.move(parked / f"{wid}_overlay.png", images / f"{wid}_overlay.png")
+            else:
+                overlay = overlay_image(w, dets, cv2.imread(str(images / f"{wid}_colour.png"), cv2.IMREAD_COLOR))
+                cv2.imwrite(str(images / f"{wid}_overlay.png"), overlay)
         rois[wid] = {"depth": [_box_uv(w.ortho, b) for b in w.depth_rois],
                      "colour": [_box_uv(w.ortho, b) for b in w.colour_rois]}
     seg = result.segmentation
