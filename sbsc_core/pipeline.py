@@ -173,6 +173,13 @@ def _partition_wall_job(scratch: str, w: int, wall_id: str, frame: WallFrame, te
     return wall_id, res, t_stage
 
 
+def _templates_job(library: ModelLibrary, s: DetectionSettings, classes: list[str]
+                   ) -> tuple[dict[str, ModelTemplate], ColourPrototypes]:
+    """The templates of the searched classes at the orthoimage's pixel size, and their colour prototypes."""
+    templates = make_templates(library, s.orthoimage.pixel_m, classes)
+    return templates, learn_prototypes(templates, s.colour)
+
+
 def _wall_cloud(cloud: PointCloud, wall: Wall) -> tuple[PointCloud, Wall]:
     """The points of one wall as a cloud of their own (what a worker process receives)."""
     sub = PointCloud(cloud.xyz[wall.point_index], cloud.rgb[wall.point_index], cloud.origin, cloud.sources)
@@ -473,8 +480,10 @@ def detect_scans(
 
     t = time.perf_counter()
     progress("segmentation", 0.0)
-    # the workers are idle while segmentation runs here: they import the per-wall stages now
+    # the workers are idle while segmentation runs here: they import the per-wall stages and
+    # make the templates now
     warm = [executor.submit(_ready) for _ in range(workers)] if workers > 1 else []
+    made = executor.submit(_templates_job, library, s, classes) if workers > 1 else None
     seg = segment_floor_ceiling_walls(cloud, s.segmentation)
     if seg.stray_points:  # counted in the sample: scaled to the whole scan
         seg.stray_points = int(round(seg.stray_points * points / max(len(cloud), 1)))
@@ -499,8 +508,7 @@ def detect_scans(
         f"in {timings['partition']:.1f} s")
 
     t = time.perf_counter()
-    templates = make_templates(library, s.orthoimage.pixel_m, classes)
-    prototypes = learn_prototypes(templates, s.colour)
+    templates, prototypes = made.result() if made is not None else _templates_job(library, s, classes)
     timings["templates"] = time.perf_counter() - t
     # the biggest walls first, so that no worker is left with a big one at the end; the
     # results are put back in the walls' order (the consensus sees them as in memory)
