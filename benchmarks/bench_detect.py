@@ -141,6 +141,7 @@ def run_tree(tree: Path, scans: list[Path], models: Path, expected: Path | None,
     env = {**os.environ, "PYTHONPATH": str(tree.resolve())}
     args = json.dumps({"scans": [str(p) for p in scans], "models": str(models),
                        "expected": str(expected) if expected else None, "out": str(out)})
+    load0 = os.getloadavg()[0]
     t = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-c", RUNNER, args], env=env, cwd=tree, stdout=subprocess.PIPE, text=True)
     sampler = TreeRssSampler(proc.pid)
@@ -151,7 +152,8 @@ def run_tree(tree: Path, scans: list[Path], models: Path, expected: Path | None,
     if proc.returncode != 0:
         raise SystemExit(f"{tree}: detect failed ({proc.returncode})")
     summary = json.loads(next(line for line in stdout.splitlines() if line.startswith("SUMMARY "))[8:])
-    return {"tree": str(tree), "wall_s": wall, "peak_tree_rss_bytes": peak, "peak_tree_anon_bytes": anon, **summary}
+    return {"tree": str(tree), "wall_s": wall, "peak_tree_rss_bytes": peak, "peak_tree_anon_bytes": anon,
+            "load_before": load0, "load_after": os.getloadavg()[0], **summary}
 
 
 def main() -> int:
@@ -177,7 +179,8 @@ def main() -> int:
         print(f"{tree}: {n:,} points in {len(scans)} file(s), {r['walls']} walls, {r['detections']} detections")
         print(f"  whole command {r['wall_s']:.1f} s = {n / r['wall_s'] / 1e6:.2f} Mpoints/s; peak of the process "
               f"tree {r['peak_tree_rss_bytes'] / 2**30:.2f} GiB resident, "
-              f"{r['peak_tree_anon_bytes'] / 2**30:.2f} GiB anonymous")
+              f"{r['peak_tree_anon_bytes'] / 2**30:.2f} GiB anonymous; machine load (1 min) "
+              f"{r['load_before']:.1f} before, {r['load_after']:.1f} after")
         print(f"  {'stage':<14}{'seconds':>10}{'Mpoints/s':>12}")
         for stage, sec in r["timings"].items():
             rate = n / sec / 1e6 if sec > 0 else float("inf")
