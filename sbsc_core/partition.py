@@ -368,15 +368,18 @@ def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch
     for chunk in chunks:
         for w, idx, uvd in assign_chunk(chunk.xyz, index):
             keep, pixel = ortho_pixels(uvd, index.frames[w], ortho)
-            rec = np.empty(len(pixel), RECORD)
-            rec["pixel"] = pixel
-            rec["depth"] = uvd[keep, 2]
-            rec["rgb"] = chunk.rgb[idx[keep]]
+            kept = np.flatnonzero(keep)
             band = pixel // band_px[w]
             b0, b1 = (int(band.min()), int(band.max())) if len(band) else (0, -1)
-            if b0 != b1:
-                order = np.argsort(band, kind="stable")
-                rec, band = rec[order], band[order]
+            if b0 != b1:  # the points grouped by band (a radix sort of small integers)
+                band -= b0
+                order = np.argsort(band.astype(np.uint16 if b1 - b0 < 65536 else np.int64), kind="stable")
+                kept, pixel, band = kept[order], pixel[order], band[order]
+                band += b0
+            rec = np.empty(len(pixel), RECORD)
+            rec["pixel"] = pixel
+            rec["depth"] = uvd[kept, 2]
+            rec["rgb"] = chunk.rgb[idx[kept]]
             cuts = np.searchsorted(band, np.arange(b0, b1 + 2))
             for b in range(b0, b1 + 1):
                 a, z = int(cuts[b - b0]), int(cuts[b - b0 + 1])
