@@ -39,7 +39,13 @@ from pathlib import Path
 import numpy as np
 
 from .io.scans import BLOCK_POINTS, CHUNK_POINTS, ScanChunk, iter_scan, open_scan, sample_scan
-from .orthoimage import ortho_pixels, ortho_shape, orthoimage_from_images, rasterize_median, wall_coordinates
+from .orthoimage import (
+    ortho_pixels,
+    ortho_shape,
+    orthoimage_from_images,
+    rasterize_median,
+    wall_coordinates,
+)
 from .settings import DetectionSettings, OrthoimageSettings, SegmentationSettings
 from .types import Orthoimage, PointCloud, Wall, WallFrame
 
