@@ -55,6 +55,8 @@ class TreeRssSampler(threading.Thread):
         self.pid = pid
         self.peak = 0
         self.peak_anon = 0
+        self.peak_main = 0  # the command's own process
+        self.peak_child = 0  # the largest single worker
         self._halt = threading.Event()
 
     @staticmethod
@@ -94,6 +96,8 @@ class TreeRssSampler(threading.Thread):
             mems = [self._mem(p) for p in self._tree(self.pid)]
             self.peak = max(self.peak, sum(m[0] for m in mems))
             self.peak_anon = max(self.peak_anon, sum(m[1] for m in mems))
+            self.peak_main = max(self.peak_main, mems[0][0])
+            self.peak_child = max([self.peak_child] + [m[0] for m in mems[1:]])
 
     def stop(self) -> tuple[int, int]:
         self._halt.set()
@@ -164,6 +168,7 @@ def run_tree(tree: Path, scans: list[Path], models: Path, expected: Path | None,
         raise SystemExit(f"{tree}: detect failed ({proc.returncode})")
     summary = json.loads(next(line for line in stdout.splitlines() if line.startswith("SUMMARY "))[8:])
     return {"tree": str(tree), "wall_s": wall, "cpu_s": cpu, "peak_tree_rss_bytes": peak, "peak_tree_anon_bytes": anon,
+            "peak_main_rss_bytes": sampler.peak_main, "peak_worker_rss_bytes": sampler.peak_child,
             "load_before": load0, "load_after": os.getloadavg()[0], **summary}
 
 
@@ -194,7 +199,9 @@ def main() -> int:
             print(f"  whole command {r['wall_s']:.1f} s = {n / r['wall_s'] / 1e6:.2f} Mpoints/s, {r['cpu_s']:.1f} CPU s "
                   f"(all processes); peak of the process tree {r['peak_tree_rss_bytes'] / 2**30:.2f} GiB resident, "
                   f"{r['peak_tree_anon_bytes'] / 2**30:.2f} GiB anonymous; machine load (1 min) "
-                  f"{r['load_before']:.1f} before, {r['load_after']:.1f} after", flush=True)
+                  f"{r['load_before']:.1f} before, {r['load_after']:.1f} after; largest single process: main "
+                  f"{r['peak_main_rss_bytes'] / 2**30:.2f} GiB, a worker {r['peak_worker_rss_bytes'] / 2**30:.2f} GiB",
+                  flush=True)
             print(f"  {'stage':<14}{'seconds':>10}{'Mpoints/s':>12}")
             for stage, sec in r["timings"].items():
                 rate = n / sec / 1e6 if sec > 0 else float("inf")
