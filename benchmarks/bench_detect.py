@@ -1,7 +1,7 @@
 """Benchmark ``sbsc detect``: the whole command and each stage, and the peak memory of its process tree.
 
     flock /tmp/sbsc-heavy.lock .venv/bin/python benchmarks/bench_detect.py [--scenario I]
-        [--run-dir runs/bench_I] [--tiles 4] [--tree OLD_CHECKOUT] [--tree .]
+        [--run-dir runs/bench_I] [--tiles 4] [--repeat 2] [--tree OLD_CHECKOUT] [--tree .]
 
 Simulates the scenario once (kept in the run dir). ``--tiles N`` makes a building of N
 copies of the scan side by side (files only, written once: the same floor shifted in plan,
@@ -10,9 +10,11 @@ default this one) runs the detection in a fresh process, ``python -c`` with that
 on the path, one after the other in this run: that is how an old and a new commit are
 compared on the same machine at the same time. For each tree it prints the wall-clock time
 and points per second of the whole command, the seconds per stage that the detection
-reports, and the peak resident memory of the whole process tree (the command and its
-workers, sampled every 0.1 s from /proc): all resident pages, and the anonymous ones
-(without file pages the kernel may drop).
+reports, the CPU seconds of all its processes (less sensitive than the wall-clock time to
+other work on a shared machine), and the peak resident memory of the whole process tree
+(the command and its workers, sampled every 0.1 s from /proc): all resident pages, and the
+anonymous ones (without file pages the kernel may drop). ``--repeat N`` runs the trees N
+times, taking turns, and compares the fastest run of each.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import threading
@@ -52,6 +55,8 @@ class TreeRssSampler(threading.Thread):
         self.pid = pid
         self.peak = 0
         self.peak_anon = 0
+        self.peak_main = 0  # the command's own process
+        self.peak_child = 0  # the largest single worker
         self._halt = threading.Event()
 
     @staticmethod
@@ -91,6 +96,8 @@ class TreeRssSampler(threading.Thread):
             mems = [self._mem(p) for p in self._tree(self.pid)]
             self.peak = max(self.peak, sum(m[0] for m in mems))
             self.peak_anon = max(self.peak_anon, sum(m[1] for m in mems))
+            self.peak_main = max(self.peak_main, mems[0][0])
+            self.peak_child = max([self.peak_child] + [m[0] for m in mems[1:]])
 
     def stop(self) -> tuple[int, int]:
         self._halt.set()
@@ -137,21 +144,32 @@ def tile_scans(scan: Path, tiles: int, out_dir: Path) -> list[Path]:
     return paths
 
 
+def _children_cpu() -> float:
+    """User + system CPU seconds of this process's finished descendants."""
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
 def run_tree(tree: Path, scans: list[Path], models: Path, expected: Path | None, out: Path) -> dict:
     env = {**os.environ, "PYTHONPATH": str(tree.resolve())}
     args = json.dumps({"scans": [str(p) for p in scans], "models": str(models),
                        "expected": str(expected) if expected else None, "out": str(out)})
+    load0 = os.getloadavg()[0]
+    cpu0 = _children_cpu()
     t = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-c", RUNNER, args], env=env, cwd=tree, stdout=subprocess.PIPE, text=True)
     sampler = TreeRssSampler(proc.pid)
     sampler.start()
     stdout, _ = proc.communicate()
     wall = time.perf_counter() - t
+    cpu = _children_cpu() - cpu0  # the command and its workers (each waited for by its parent)
     peak, anon = sampler.stop()
     if proc.returncode != 0:
         raise SystemExit(f"{tree}: detect failed ({proc.returncode})")
     summary = json.loads(next(line for line in stdout.splitlines() if line.startswith("SUMMARY "))[8:])
-    return {"tree": str(tree), "wall_s": wall, "peak_tree_rss_bytes": peak, "peak_tree_anon_bytes": anon, **summary}
+    return {"tree": str(tree), "wall_s": wall, "cpu_s": cpu, "peak_tree_rss_bytes": peak, "peak_tree_anon_bytes": anon,
+            "peak_main_rss_bytes": sampler.peak_main, "peak_worker_rss_bytes": sampler.peak_child,
+            "load_before": load0, "load_after": os.getloadavg()[0], **summary}
 
 
 def main() -> int:
@@ -160,6 +178,7 @@ def main() -> int:
     ap.add_argument("--run-dir", default=None)
     ap.add_argument("--tiles", type=int, default=1, help="copies of the floor side by side (a bigger building)")
     ap.add_argument("--tree", action="append", default=None, help="checkout to run (repeatable; default: this one)")
+    ap.add_argument("--repeat", type=int, default=1, help="runs of each tree, taking turns (the fastest is compared)")
     args = ap.parse_args()
     run = Path(args.run_dir or f"runs/bench_{args.scenario}")
     scan = run / "scan"
@@ -170,23 +189,30 @@ def main() -> int:
     expected = scan / "expected.json" if args.tiles == 1 else None
     trees = [Path(t) for t in (args.tree or [Path(__file__).resolve().parents[1]])]
     results = []
-    for k, tree in enumerate(trees):
-        r = run_tree(tree, scans, scan / "models", expected, run / f"detect_{k}")
-        results.append(r)
-        n = r["points"]
-        print(f"{tree}: {n:,} points in {len(scans)} file(s), {r['walls']} walls, {r['detections']} detections")
-        print(f"  whole command {r['wall_s']:.1f} s = {n / r['wall_s'] / 1e6:.2f} Mpoints/s; peak of the process "
-              f"tree {r['peak_tree_rss_bytes'] / 2**30:.2f} GiB resident, "
-              f"{r['peak_tree_anon_bytes'] / 2**30:.2f} GiB anonymous")
-        print(f"  {'stage':<14}{'seconds':>10}{'Mpoints/s':>12}")
-        for stage, sec in r["timings"].items():
-            rate = n / sec / 1e6 if sec > 0 else float("inf")
-            print(f"  {stage:<14}{sec:>10.2f}{rate:>12.2f}")
-    if len(results) > 1:
-        base = results[0]
-        for r in results[1:]:
-            print(f"throughput {r['tree']} / {base['tree']}: "
-                  f"{(r['points'] / r['wall_s']) / (base['points'] / base['wall_s']):.2f}x")
+    for rep in range(args.repeat):  # the trees take turns, so that other work on the machine hits each alike
+        for k, tree in enumerate(trees):
+            r = run_tree(tree, scans, scan / "models", expected, run / f"detect_{k}")
+            r["repeat"] = rep
+            results.append(r)
+            n = r["points"]
+            print(f"{tree}: {n:,} points in {len(scans)} file(s), {r['walls']} walls, {r['detections']} detections")
+            print(f"  whole command {r['wall_s']:.1f} s = {n / r['wall_s'] / 1e6:.2f} Mpoints/s, {r['cpu_s']:.1f} CPU s "
+                  f"(all processes); peak of the process tree {r['peak_tree_rss_bytes'] / 2**30:.2f} GiB resident, "
+                  f"{r['peak_tree_anon_bytes'] / 2**30:.2f} GiB anonymous; machine load (1 min) "
+                  f"{r['load_before']:.1f} before, {r['load_after']:.1f} after; largest single process: main "
+                  f"{r['peak_main_rss_bytes'] / 2**30:.2f} GiB, a worker {r['peak_worker_rss_bytes'] / 2**30:.2f} GiB",
+                  flush=True)
+            print(f"  {'stage':<14}{'seconds':>10}{'Mpoints/s':>12}")
+            for stage, sec in r["timings"].items():
+                rate = n / sec / 1e6 if sec > 0 else float("inf")
+                print(f"  {stage:<14}{sec:>10.2f}{rate:>12.2f}", flush=True)
+    if len(trees) > 1:  # the fastest run of each tree (the one least disturbed by other work)
+        best = [min((r for r in results if r["tree"] == str(t)), key=lambda r: r["wall_s"]) for t in trees]
+        base = best[0]
+        for r in best[1:]:
+            print(f"throughput {r['tree']} / {base['tree']} (fastest of {args.repeat} run(s) each): "
+                  f"{(r['points'] / r['wall_s']) / (base['points'] / base['wall_s']):.2f}x; "
+                  f"per CPU second {(r['points'] / r['cpu_s']) / (base['points'] / base['cpu_s']):.2f}x")
     (run / "bench.json").write_text(json.dumps(results, indent=2))
     return 0
 

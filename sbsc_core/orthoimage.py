@@ -25,8 +25,8 @@ import numpy as np
 from .settings import OrthoimageSettings
 from .types import Orthoimage, PointCloud, Wall, WallFrame
 
-__all__ = ["build_orthoimage", "ortho_shape", "ortho_pixels", "orthoimage_from_pixels", "wall_coordinates",
-           "rasterize_median", "fill_sampling_gaps"]
+__all__ = ["build_orthoimage", "ortho_shape", "ortho_pixels", "orthoimage_from_pixels", "orthoimage_from_images",
+           "wall_coordinates", "rasterize_median", "fill_sampling_gaps"]
 
 
 def build_orthoimage(cloud: PointCloud, wall: Wall, settings: OrthoimageSettings | None = None) -> Orthoimage:
@@ -75,9 +75,16 @@ def orthoimage_from_pixels(wall_id: str, frame: WallFrame, pixel: np.ndarray, de
     px = float(s.pixel_m)
     d0, d1 = s.depth_range_m
     depth, colour, mask = rasterize_median(pixel, depth, rgb, ortho_shape(frame, px), (d0, d1), s.depth_quantum_m)
+    return orthoimage_from_images(wall_id, frame, depth, colour, mask, s)
+
+
+def orthoimage_from_images(wall_id: str, frame: WallFrame, depth: np.ndarray, colour: np.ndarray, mask: np.ndarray,
+                           settings: OrthoimageSettings | None = None) -> Orthoimage:
+    """Orthoimage J_CD from the per-pixel medians (:func:`rasterize_median`): the sampling gaps filled."""
+    s = settings or OrthoimageSettings()
     if s.fill_gaps_px > 0:
         depth, colour, mask = fill_sampling_gaps(depth, colour, mask, s.fill_gaps_px, s.fill_min_fraction)
-    return Orthoimage(wall_id=wall_id, frame=frame, pixel_m=px, colour=colour, depth=depth, mask=mask)
+    return Orthoimage(wall_id=wall_id, frame=frame, pixel_m=float(s.pixel_m), colour=colour, depth=depth, mask=mask)
 
 
 def wall_coordinates(xyz: np.ndarray, frame: WallFrame, cloud_origin: np.ndarray | None = None) -> np.ndarray:

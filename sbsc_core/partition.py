@@ -13,9 +13,11 @@ No stage holds the whole cloud (paper, Figure 2, run on a building instead of a 
 4. :func:`partition_part` streams each part again (or its spill) and gives every point to
    at most one wall (:func:`assign_chunk`, a pure function of a chunk and the walls'
    frames); a wall's points are binned at once into its orthoimage pixels and appended to
-   the wall's partition files as 11-byte records (pixel, depth, colour).
-5. The orthoimage stage of a wall reads its partition and only computes the per-pixel
-   medians (:func:`~sbsc_core.orthoimage.orthoimage_from_pixels`).
+   the wall's partition files as 11-byte records (pixel, depth, colour), one folder per
+   band of orthoimage rows (``BAND_PIXELS`` pixels).
+5. The orthoimage stage of a wall reads its partition band by band and only computes the
+   per-pixel medians (:func:`~sbsc_core.orthoimage.rasterize_median`), so it holds the
+   points of one band at a time, not the wall's.
 
 The sample, the spills and the partitions live in a scratch folder (:func:`scratch_dir`)
 that workers of a Dask cluster reach at the same path. The order in which parts are
@@ -37,14 +39,21 @@ from pathlib import Path
 import numpy as np
 
 from .io.scans import BLOCK_POINTS, CHUNK_POINTS, ScanChunk, iter_scan, open_scan, sample_scan
-from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
+from .orthoimage import (
+    ortho_pixels,
+    ortho_shape,
+    orthoimage_from_images,
+    rasterize_median,
+    wall_coordinates,
+)
 from .settings import DetectionSettings, OrthoimageSettings, SegmentationSettings
 from .types import Orthoimage, PointCloud, Wall, WallFrame
 
 __all__ = ["ScanPart", "WallIndex", "plan_parts", "sample_part", "partition_part", "assign_chunk",
-           "wall_orthoimage", "scratch_dir", "RECORD"]
+           "band_rows", "wall_records", "wall_orthoimage", "scratch_dir", "worker_ready", "RECORD"]
 
-PART_POINTS = 1 << 24  # points of a seekable (binary PLY / PCD) file read by one task
+BAND_PIXELS = 1 << 19  # orthoimage pixels of one band of a wall's partition (bounds the points binned at once)
+PART_POINTS = 1 << 22  # points of a seekable (binary PLY / PCD) file read by one task (small: balanced workers)
 RECORD = np.dtype([("pixel", "<i4"), ("depth", "<f4"), ("rgb", "u1", (3,))])  # 11 bytes, packed
 _TEXT_BYTES_PER_POINT = 30  # to estimate the point count of a text file from its size
 
@@ -341,26 +350,50 @@ def _wall_dir(scratch: Path, w: int) -> Path:
     return scratch / f"wall-{w:04d}"
 
 
+def _band_dir(scratch: Path, w: int, band: int) -> Path:
+    return _wall_dir(scratch, w) / f"b{band:04d}"
+
+
+def band_rows(frame: WallFrame, ortho: OrthoimageSettings) -> int:
+    """Orthoimage rows of one band of a wall's partition: about ``BAND_PIXELS`` pixels."""
+    return max(1, BAND_PIXELS // ortho_shape(frame, ortho.pixel_m)[1])
+
+
 def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch: str, points: int,
                    spilled: bool, ortho: OrthoimageSettings) -> list[int]:
     """Stream one part again (or its spill) and append each wall's binned points to its partition.
 
-    Returns the number of records written per wall.
+    A wall's partition is cut into bands of orthoimage rows (:func:`band_rows`), one folder
+    each, so that its orthoimage is made band by band. Returns the number of records
+    written per wall.
     """
     root = Path(scratch)
     chunks = _spilled_chunks(root, part, origin, points) if spilled else _part_chunks(part, origin)
     written = [0] * len(index.frames)
+    band_px = [band_rows(f, ortho) * ortho_shape(f, ortho.pixel_m)[1] for f in index.frames]
     for chunk in chunks:
         for w, idx, uvd in assign_chunk(chunk.xyz, index):
             keep, pixel = ortho_pixels(uvd, index.frames[w], ortho)
+            kept = np.flatnonzero(keep)
+            band = pixel // band_px[w]
+            b0, b1 = (int(band.min()), int(band.max())) if len(band) else (0, -1)
+            if b0 != b1:  # the points grouped by band (a radix sort of small integers)
+                band -= b0
+                order = np.argsort(band.astype(np.uint16 if b1 - b0 < 65536 else np.int64), kind="stable")
+                kept, pixel, band = kept[order], pixel[order], band[order]
+                band += b0
             rec = np.empty(len(pixel), RECORD)
             rec["pixel"] = pixel
-            rec["depth"] = uvd[keep, 2]
-            rec["rgb"] = chunk.rgb[idx[keep]]
-            d = _wall_dir(root, w)
-            d.mkdir(exist_ok=True)
-            with open(d / f"{part.key}.rec", "ab") as fh:
-                rec.tofile(fh)
+            rec["depth"] = uvd[kept, 2]
+            rec["rgb"] = chunk.rgb[idx[kept]]
+            cuts = np.searchsorted(band, np.arange(b0, b1 + 2))
+            for b in range(b0, b1 + 1):
+                a, z = int(cuts[b - b0]), int(cuts[b - b0 + 1])
+                if z > a:
+                    d = _band_dir(root, w, b)
+                    d.mkdir(parents=True, exist_ok=True)
+                    with open(d / f"{part.key}.rec", "ab") as fh:
+                        rec[a:z].tofile(fh)
             written[w] += len(rec)
     if spilled:
         for p in _spill_paths(root, part):
@@ -368,12 +401,7 @@ def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch
     return written
 
 
-def wall_records(scratch: Path | str, w: int) -> np.ndarray:
-    """Every record of wall number ``w`` (in a fixed order of the parts)."""
-    d = _wall_dir(Path(scratch), w)
-    files = sorted(d.glob("*.rec")) if d.is_dir() else []
-    if not files:
-        return np.zeros(0, RECORD)
+def _read_records(files: Sequence[Path]) -> np.ndarray:
     sizes = [f.stat().st_size // RECORD.itemsize for f in files]
     out = np.empty(sum(sizes), RECORD)
     at = 0
@@ -384,15 +412,43 @@ def wall_records(scratch: Path | str, w: int) -> np.ndarray:
     return out
 
 
+def wall_records(scratch: Path | str, w: int, band: int | None = None) -> np.ndarray:
+    """The records of wall number ``w`` (of one band of it, or all), in a fixed order of the parts."""
+    d = _wall_dir(Path(scratch), w)
+    pattern = "b*/*.rec" if band is None else f"b{band:04d}/*.rec"
+    return _read_records(sorted(d.glob(pattern)) if d.is_dir() else [])
+
+
 def wall_orthoimage(scratch: Path | str, w: int, wall_id: str, frame: WallFrame,
                     settings: OrthoimageSettings) -> Orthoimage:
-    """The orthoimage of wall number ``w`` from its partition (the bare per-pixel medians)."""
-    rec = wall_records(scratch, w)
-    pixel = rec["pixel"].astype(np.int64)
-    depth = np.ascontiguousarray(rec["depth"])
-    rgb = np.ascontiguousarray(rec["rgb"])
-    del rec
-    return orthoimage_from_pixels(wall_id, frame, pixel, depth, rgb, settings)
+    """The orthoimage of wall number ``w`` from its partition (the bare per-pixel medians).
+
+    The bands of the partition are binned one after the other, so the points held at once
+    are those of one band, however many the wall has.
+    """
+    h, width = ortho_shape(frame, settings.pixel_m)
+    rows = band_rows(frame, settings)
+    depth = np.full((h, width), np.nan, np.float32)
+    colour = np.zeros((h, width, 3), np.uint8)
+    mask = np.zeros((h, width), bool)
+    for b, r0 in enumerate(range(0, h, rows)):
+        rec = wall_records(scratch, w, b)
+        if not len(rec):
+            continue
+        r1 = min(h, r0 + rows)
+        pixel = rec["pixel"].astype(np.int64)
+        pixel -= r0 * width
+        d, c, m = rasterize_median(pixel, np.ascontiguousarray(rec["depth"]), np.ascontiguousarray(rec["rgb"]),
+                                   (r1 - r0, width), settings.depth_range_m, settings.depth_quantum_m)
+        del rec, pixel
+        depth[r0:r1], colour[r0:r1], mask[r0:r1] = d, c, m
+    return orthoimage_from_images(wall_id, frame, depth, colour, mask, settings)
+
+
+def worker_ready() -> bool:
+    """A no-op run in each new worker process: it has started and imported the reading tasks
+    (this module: numpy and the scan readers, not the recognition stages)."""
+    return True
 
 
 def sample_step(total_points: int, s: DetectionSettings) -> int:

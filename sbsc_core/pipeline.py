@@ -30,7 +30,7 @@ import shutil
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -66,6 +66,7 @@ from .partition import (
     scan_origin,
     scratch_folder,
     wall_orthoimage,
+    worker_ready,
 )
 from .placement import place_hits
 from .segmentation import segment_floor_ceiling_walls
@@ -159,13 +160,26 @@ def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], p
 
 
 def _partition_wall_job(scratch: str, w: int, wall_id: str, frame: WallFrame, templates: dict[str, ModelTemplate],
-                        prototypes: ColourPrototypes, s: DetectionSettings
+                        prototypes: ColourPrototypes, s: DetectionSettings, images: str | None = None
                         ) -> tuple[str, WallResult, dict[str, float]]:
-    """One wall's work from its partition file (what a worker, local or on a cluster, runs)."""
+    """One wall's work from its partition file (what a worker, local or on a cluster, runs).
+
+    With ``images`` (a folder beside the partitions) the wall's images are written there
+    and the result is returned without them (:func:`park_wall`).
+    """
     t = time.perf_counter()
     ortho = wall_orthoimage(scratch, w, wall_id, frame, s.orthoimage)
     res, t_stage = process_orthoimage(ortho, templates, prototypes, s, {"orthoimage": time.perf_counter() - t})
+    if images is not None:
+        res = park_wall(res, Path(images))
     return wall_id, res, t_stage
+
+
+def _templates_job(library: ModelLibrary, s: DetectionSettings, classes: list[str]
+                   ) -> tuple[dict[str, ModelTemplate], ColourPrototypes]:
+    """The templates of the searched classes at the orthoimage's pixel size, and their colour prototypes."""
+    templates = make_templates(library, s.orthoimage.pixel_m, classes)
+    return templates, learn_prototypes(templates, s.colour)
 
 
 def _wall_cloud(cloud: PointCloud, wall: Wall) -> tuple[PointCloud, Wall]:
@@ -186,7 +200,7 @@ def _worker_count(settings: DetectionSettings) -> int:
 
 
 def _ready() -> bool:
-    """A no-op run in each new worker: it is spawned and has imported the method."""
+    """A no-op run in a worker: it has imported the whole method (this module)."""
     return True
 
 
@@ -218,9 +232,11 @@ def _environment(extra: dict[str, str]) -> Iterator[None]:
 def wall_pool(settings: DetectionSettings, n_walls: int | None = None) -> ProcessPoolExecutor | None:
     """The worker processes for the per-wall stages (None when they run in this process).
 
-    The workers are started at once (spawned, each importing the library, about a second),
-    so a caller that creates the pool before reading the scan has them ready when the walls
-    are. The caller shuts the pool down.
+    The workers are started at once (spawned), each importing only what reading the scan
+    needs (:func:`~sbsc_core.partition.worker_ready`, a fraction of a second), so a caller
+    that creates the pool before reading the scan has them ready for the reading tasks;
+    :func:`detect_scans` has them import the rest while segmentation runs. The caller shuts
+    the pool down.
     """
     workers = _worker_count(settings)
     if workers <= 1 or (n_walls is not None and n_walls <= 1):
@@ -228,7 +244,7 @@ def wall_pool(settings: DetectionSettings, n_walls: int | None = None) -> Proces
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     with _environment(worker_environment()):  # each submit below starts one worker (a copy of the environment)
         for _ in range(workers):
-            pool.submit(_ready)
+            pool.submit(worker_ready)
     return pool
 
 
@@ -442,19 +458,27 @@ def wall_executor(settings: DetectionSettings, scheduler: str | None = None) -> 
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _in_order(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int) -> Iterator:
-    """Results of ``fn(*job)`` for each job, in order, with at most ``in_flight`` submitted at once."""
-    pending: deque = deque()
-    todo = iter(jobs)
+def _as_done(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int) -> Iterator[tuple[int, object]]:
+    """``(k, fn(*job))`` for the k-th job, as the tasks finish, with at most ``in_flight`` submitted at once.
+
+    A new job is submitted as soon as any task finishes (not only the oldest), so that a
+    long task never leaves the other workers idle; the caller puts the results back in
+    order where it matters. Tasks finished together are given in job order.
+    """
+    pending: dict[Future, int] = {}
+    todo = enumerate(jobs)
     try:
-        for job in itertools.islice(todo, in_flight):
-            pending.append(ex.submit(fn, *job))
+        for k, job in itertools.islice(todo, in_flight):
+            pending[ex.submit(fn, *job)] = k
         while pending:
-            res = pending.popleft().result()
-            nxt = next(todo, None)
-            if nxt is not None:
-                pending.append(ex.submit(fn, *nxt))
-            yield res
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in sorted(done, key=pending.__getitem__):
+                k = pending.pop(fut)
+                res = fut.result()
+                nxt = next(todo, None)
+                if nxt is not None:
+                    pending[ex.submit(fn, *nxt[1])] = nxt[0]
+                yield k, res
     finally:
         for f in pending:
             f.cancel()
@@ -477,8 +501,8 @@ def detect_scans(
     Every part of the files is read by a task of ``executor``: once for a bounded regular
     sample that segmentation runs on, once more (or from its spill) to write each wall's
     binned points to its partition in ``scratch``; each wall's stages then run as a task on
-    its partition. Each wall's images are written to ``scratch/images`` as its result comes
-    in (:func:`park_wall`), so the result holds no orthoimage: write it with
+    its partition. Each wall's task writes the wall's images to ``scratch/images``
+    (:func:`park_wall`), so the result holds no orthoimage: write it with
     ``write_outputs(..., parked=scratch / "images")``. ``origin`` is the recentring origin
     (default: :func:`~sbsc_core.partition.scan_origin` of the first file). Returns the result
     and the number of points read.
@@ -497,9 +521,9 @@ def detect_scans(
     origin = scan_origin(scans[0]) if origin is None else np.asarray(origin, np.float64)
     step = sample_step(estimate, s)
     sample_jobs = [(part, origin, step, str(scratch)) for part in parts]
-    samples = []
-    for i, smp in enumerate(_in_order(executor, sample_jobs, sample_part, 2 * workers)):
-        samples.append(smp)
+    samples: list = [None] * len(parts)
+    for i, (k, smp) in enumerate(_as_done(executor, sample_jobs, sample_part, 2 * workers)):
+        samples[k] = smp
         progress("reading", (i + 1) / len(parts))
     points = sum(smp.points for smp in samples)
     cloud = sample_cloud(samples, origin, [str(p) for p in scans], 2 * s.segmentation.fit_max_points)
@@ -511,6 +535,10 @@ def detect_scans(
 
     t = time.perf_counter()
     progress("segmentation", 0.0)
+    # the workers are idle while segmentation runs here: they import the per-wall stages and
+    # make the templates now
+    warm = [executor.submit(_ready) for _ in range(workers)] if workers > 1 else []
+    made = executor.submit(_templates_job, library, s, classes) if workers > 1 else None
     seg = segment_floor_ceiling_walls(cloud, s.segmentation)
     if seg.stray_points:  # counted in the sample: scaled to the whole scan
         seg.stray_points = int(round(seg.stray_points * points / max(len(cloud), 1)))
@@ -522,6 +550,8 @@ def detect_scans(
     del cloud
     for wall in seg.walls:  # indices into the sample: the walls' points come from their partitions
         wall.point_index = np.zeros(0, np.int64)
+    for f in warm:
+        f.cancel()  # not started yet: not needed (a worker that imports it runs a wall task later)
     timings["segmentation"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -530,7 +560,7 @@ def detect_scans(
     part_jobs = [(part, origin, index, str(scratch), n, spilled, s.orthoimage)
                  for part, (n, spilled) in zip(parts, sample_meta, strict=True)]
     kept = np.zeros(len(seg.walls), np.int64)
-    for i, written in enumerate(_in_order(executor, part_jobs, partition_part, 2 * workers)):
+    for i, (_, written) in enumerate(_as_done(executor, part_jobs, partition_part, 2 * workers)):
         kept += np.asarray(written, np.int64)
         progress("partition", (i + 1) / len(parts))
     timings["partition"] = time.perf_counter() - t
@@ -538,17 +568,17 @@ def detect_scans(
         f"in {timings['partition']:.1f} s")
 
     t = time.perf_counter()
-    templates = make_templates(library, s.orthoimage.pixel_m, classes)
-    prototypes = learn_prototypes(templates, s.colour)
+    templates, prototypes = made.result() if made is not None else _templates_job(library, s, classes)
     timings["templates"] = time.perf_counter() - t
     # the biggest walls first, so that no worker is left with a big one at the end; the
     # results are put back in the walls' order (the consensus sees them as in memory)
     order = sorted(range(len(seg.walls)), key=lambda w: -int(kept[w]))
-    wall_jobs = [(str(scratch), w, seg.walls[w].id, seg.walls[w].frame, templates, prototypes, s) for w in order]
     parked = Path(scratch) / "images"
     parked.mkdir(exist_ok=True)
-    results = ((wid, park_wall(res, parked), t_wall)
-               for wid, res, t_wall in _in_order(executor, wall_jobs, _partition_wall_job, 2 * workers))
+    # each task writes its wall's images itself: this process only receives the small results
+    wall_jobs = [(str(scratch), w, seg.walls[w].id, seg.walls[w].frame, templates, prototypes, s, str(parked))
+                 for w in order]
+    results = (res for _, res in _as_done(executor, wall_jobs, _partition_wall_job, 2 * workers))
     done = _collect_walls(results, len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
     surfaces: list[dict] = []
@@ -636,7 +666,7 @@ def detect_to_dir(
             f"{len(result.detections)} objects in {result.timings['total']:.1f} s")
         progress("writing", 0.0)
         with atomic_output_dir(out) as tmp:
-            write_outputs(result, tmp, s.orthoimage.pixel_m, extra=georef, parked=work / "images")
+            write_outputs(result, tmp, s.orthoimage.pixel_m, extra=georef, parked=work / "images", executor=ex)
     progress("done", 1.0)
     return {
         "points": points,
@@ -707,26 +737,44 @@ def park_wall(res: WallResult, images: Path) -> WallResult:
     return WallResult(ortho, area, res.depth_rois, res.colour_rois, res.depth_candidates, res.colour_candidates)
 
 
+def _parked_overlay_job(parked: str, w: WallResult, detections: list[Detection]) -> str:
+    """Draw a parked wall's overlay from its colour image in ``parked`` and write it there."""
+    wid = w.ortho.wall_id
+    colour = cv2.imread(str(Path(parked) / f"{wid}_colour.png"), cv2.IMREAD_COLOR)
+    if not cv2.imwrite(str(Path(parked) / f"{wid}_overlay.png"), overlay_image(w, detections, colour)):
+        raise SbscError(f"{parked}: cannot write images")
+    return wid
+
+
 def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dict | None = None,
-                  parked: Path | None = None) -> None:
+                  parked: Path | None = None, executor: Executor | None = None) -> None:
     """Write detections.json, rois.json and the per-wall images into ``out``.
 
     ``extra`` adds top-level keys to detections.json (the scan's ``crs`` and ``origin``);
-    ``parked``: the folder where :func:`park_wall` wrote the walls' images.
+    ``parked``: the folder where :func:`park_wall` wrote the walls' images; with it,
+    ``executor`` (that of the detection) draws the overlays side by side, in ``parked``.
     """
     images = out / "orthoimages"
     images.mkdir(parents=True, exist_ok=True)
     rois: dict[str, dict] = {}
+    drawn = set()
+    if parked is not None and executor is not None:
+        jobs = [(str(parked), w, [d for d in result.detections if d.wall_id == wid])
+                for wid, w in result.walls.items()]
+        drawn = {wid for _, wid in _as_done(executor, jobs, _parked_overlay_job, 4 * max(1, len(jobs)))}
     for wid, w in result.walls.items():
         dets = [d for d in result.detections if d.wall_id == wid]
         if parked is None:
             _write_wall_images(w.ortho, images)
-            overlay = overlay_image(w, dets)
+            cv2.imwrite(str(images / f"{wid}_overlay.png"), overlay_image(w, dets))
         else:
             for suffix in ("colour.png", "depth.png", "depth.npy"):
                 shutil.move(parked / f"{wid}_{suffix}", images / f"{wid}_{suffix}")
-            overlay = overlay_image(w, dets, cv2.imread(str(images / f"{wid}_colour.png"), cv2.IMREAD_COLOR))
-        cv2.imwrite(str(images / f"{wid}_overlay.png"), overlay)
+            if wid in drawn:
+                shutil.move(parked / f"{wid}_overlay.png", images / f"{wid}_overlay.png")
+            else:
+                overlay = overlay_image(w, dets, cv2.imread(str(images / f"{wid}_colour.png"), cv2.IMREAD_COLOR))
+                cv2.imwrite(str(images / f"{wid}_overlay.png"), overlay)
         rois[wid] = {"depth": [_box_uv(w.ortho, b) for b in w.depth_rois],
                      "colour": [_box_uv(w.ortho, b) for b in w.colour_rois]}
     seg = result.segmentation

@@ -85,7 +85,9 @@ def test_a_points_nearest_plane_wins_over_a_brute_force_check(scene):
     np.testing.assert_array_equal(owner[pick], want)
 
 
-def test_partition_orthoimage_equals_the_in_memory_one(scene, tmp_path):
+@pytest.mark.parametrize("band_pixels", [1 << 19, 3000])
+def test_partition_orthoimage_equals_the_in_memory_one(scene, tmp_path, monkeypatch, band_pixels):
+    monkeypatch.setattr(partition, "BAND_PIXELS", band_pixels)  # 3000: a few rows a band, many bands
     cloud, seg = scene
     s = DetectionSettings()
     path = tmp_path / "room.ply"
@@ -105,6 +107,9 @@ def test_partition_orthoimage_equals_the_in_memory_one(scene, tmp_path):
     from sbsc_core.types import PointCloud
 
     moved = PointCloud(local.astype(np.float32), cloud.rgb, origin)
+    bands = [len(list((tmp_path / f"wall-{w:04d}").glob("b*"))) for w in range(len(seg.walls))]
+    if band_pixels < 1e4:
+        assert min(bands) > 5
     for w, wall in enumerate(seg.walls):
         a = wall_orthoimage(tmp_path, w, wall.id, wall.frame, s.orthoimage)
         b = build_orthoimage(moved, Wall(wall.id, wall.frame, mine[w]), s.orthoimage)
