@@ -45,8 +45,7 @@ from .colour_recognition import (
     learn_prototypes,
     match_colour,
 )
-from .confidence import screen_hits, unexplained_regions
-from .consensus import consensus_all
+from .confidence import screened_consensus, unexplained_regions
 from .cpu_features import numpy_environment
 from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
@@ -294,9 +293,8 @@ def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[
     t = time.perf_counter()
     depth_c = [c for w in walls.values() for c in w.depth_candidates]
     colour_c = [c for w in walls.values() for c in w.colour_candidates]
-    hits = consensus_all(depth_c, colour_c, expected, s.consensus, classes)
     orthos = {k: w.ortho for k, w in walls.items()}
-    chosen = screen_hits([h for cls in classes for h in hits.get(cls, [])], depth_c, colour_c, s.confidence)
+    chosen = screened_consensus(depth_c, colour_c, expected, classes, s.consensus, s.confidence)
     if s.confidence.enabled and s.confidence.report_unknown:  # regions like no class, for review
         chosen += unexplained_regions({k: w.depth_rois for k, w in walls.items()}, chosen, templates)
     detections = place_hits(chosen, orthos, templates)
