@@ -35,7 +35,14 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from sbsc_core.confidence import CALIBRATION_PATH, FEATURES, fit_logistic, hit_features, reliability  # noqa: E402
+from sbsc_core.confidence import (  # noqa: E402
+    CALIBRATION_PATH,
+    FEATURES,
+    fit_logistic,
+    hit_features,
+    model_reliefs,
+    reliability,
+)
 from sbsc_core.consensus import consensus_all  # noqa: E402
 from sbsc_core.io.models import load_model_library  # noqa: E402
 from sbsc_core.io.scans import read_scans  # noqa: E402
@@ -44,6 +51,7 @@ from sbsc_core.pipeline import detect  # noqa: E402
 from sbsc_core.settings import DetectionSettings  # noqa: E402
 from sbsc_core.simulate.designs import design_builder  # noqa: E402
 from sbsc_core.simulate.scenarios import simulate_scene  # noqa: E402
+from sbsc_core.templates import make_templates  # noqa: E402
 from sbsc_core.types import Orthoimage  # noqa: E402
 
 FIT_SEEDS = (11, 12, 13)
@@ -88,10 +96,12 @@ def rows_of(scan: Path, settings: DetectionSettings, radius: float) -> list[tupl
     truth = json.loads((scan / "ground_truth.json").read_text())["objects"]
     expected = json.loads((scan / "expected.json").read_text())["counts"]
     depth, colour = data["depth"], data["colour"]
+    data["reliefs"] = model_reliefs(make_templates(load_model_library(scan / "models"), settings.orthoimage.pixel_m,
+                                                   data["classes"]))
     out = []
     for exp in (None, expected):
         hits = [h for v in consensus_all(depth, colour, exp, settings.consensus, data["classes"]).values() for h in v]
-        feats = [hit_features(h, depth, colour) for h in hits]
+        feats = [hit_features(h, depth, colour, data["reliefs"]) for h in hits]
         pos = []
         for h in hits:
             frame, pixel_m = data["frames"][h.wall_id]
@@ -128,6 +138,9 @@ def main() -> int:
     ap.add_argument("--turned", nargs="+", type=float, default=list(TURNED), help="shares of objects turned")
     ap.add_argument("--fit-seeds", nargs="+", type=int, default=list(FIT_SEEDS))
     ap.add_argument("--eval-seeds", nargs="+", type=int, default=list(EVAL_SEEDS))
+    ap.add_argument("--fit-scenes", nargs="+", type=Path, default=[],
+                    help="simulated scenes (any layout, e.g. bench_realism.py --full runs) also fitted on")
+    ap.add_argument("--eval-scenes", nargs="+", type=Path, default=[], help="simulated scenes also evaluated on")
     ap.add_argument("--write", action="store_true", help="store the fitted model in the package")
     args = ap.parse_args()
     if set(args.fit_seeds) & set(args.eval_seeds):
@@ -157,6 +170,12 @@ def main() -> int:
                         n_right = sum(r for _, r in rows)
                         print(f"{part:4s} {scan.name:44s} hits {len(rows):3d} right {n_right:3d} "
                               f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    for part, scans in (("fit", args.fit_scenes), ("eval", args.eval_scenes)):
+        for scan in scans:
+            rows = rows_of(scan, settings, args.radius)
+            data[part].extend(rows)
+            print(f"{part:4s} {str(scan):44s} hits {len(rows):3d} right {sum(r for _, r in rows):3d} "
+                  f"({time.perf_counter() - t0:.0f} s)", flush=True)
     xf = np.stack([f for f, _ in data["fit"]])
     yf = np.array([r for _, r in data["fit"]], float)
     xe = np.stack([f for f, _ in data["eval"]])
@@ -179,6 +198,7 @@ def main() -> int:
                     "variants": list(args.variants), "pairs": list(args.pairs),
                     "eval_pairs": list(args.eval_pairs or args.pairs), "turned": list(args.turned),
                     "radius_m": args.radius,
+                    "fit_scenes": [p.name for p in args.fit_scenes], "eval_scenes": [p.name for p in args.eval_scenes],
                     "fit_hits": int(len(yf)), "eval_hits": int(len(ye)), "eval_ece": round(ece, 4)}
         CALIBRATION_PATH.parent.mkdir(parents=True, exist_ok=True)
         CALIBRATION_PATH.write_text(json.dumps(cal.to_dict(), indent=1) + "\n", encoding="utf-8")

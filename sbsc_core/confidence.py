@@ -32,12 +32,14 @@ UNKNOWN_CLASS = "unknown"
 
 CALIBRATION_PATH = Path(__file__).with_name("calibration") / "confidence.json"
 FEATURES = ("in_depth", "in_colour", "rho_depth", "colour_goodness", "alpha", "class_margin",
-            "lookalike_margin", "gain_misfit", "relief_misfit")
+            "lookalike_margin", "gain_misfit", "relief_misfit", "unmatched_relief")
 _MARGIN_CAP = 0.3  # margins beyond this say nothing more
 _GAIN_CAP = 1.0  # |ln gain| beyond this (a relief e times too deep or too flat) says nothing more
+_RELIEF_CAP_M = 0.02  # a model standing out this far would surely have been matched in depth
 
 
-def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candidate]) -> np.ndarray:
+def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candidate],
+                 reliefs: dict[str, float] | None = None) -> np.ndarray:
     """The features (:data:`FEATURES`) of one consensus hit among all the candidates of its wall.
 
     ``class_margin``: the hit's rho_D minus the best rho_D of another class at its place
@@ -51,6 +53,12 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
     object), capped to 1; ``relief_misfit`` is 1 minus the IoU of where the scene and the
     model stand out in the footprint and the wall around it (relief outside the footprint:
     a bigger object; missing inside: a smaller one). Both are 0 without a depth match.
+
+    ``unmatched_relief``: for a hit found in colour only, how far its class's depth model
+    stands out (``reliefs``: metres per class), as a share of 2 cm (capped to 1): a flat
+    sign is often missed in depth on a noisy scan, a 12 mm switch plate is not, so a
+    colour-only switch is more likely something else of its colour. 0 with a depth match
+    or without ``reliefs``.
     """
     here = hit.box
 
@@ -69,11 +77,14 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
     d = hit.depth
     gain = 0.0 if d is None or d.gain is None else min(_GAIN_CAP, abs(float(np.log(max(d.gain, 1e-6)))))
     relief = 0.0 if d is None or d.relief_iou is None else float(np.clip(1.0 - d.relief_iou, 0.0, 1.0))
+    unmatched = 0.0
+    if d is None and reliefs:
+        unmatched = min(1.0, float(reliefs.get(hit.class_id, 0.0)) / _RELIEF_CAP_M)
     return np.array([
         float(hit.rho_depth is not None), float(hit.rho_colour is not None),
         float(hit.rho_depth or 0.0), 0.0 if hit.rho_colour is None else 1.0 - float(hit.rho_colour),
         float(hit.alpha), float(np.clip(margin, 0.0, _MARGIN_CAP)), float(np.clip(look, -_MARGIN_CAP, _MARGIN_CAP)),
-        gain, relief,
+        gain, relief, unmatched,
     ])
 
 
@@ -159,12 +170,18 @@ def reliability(p: np.ndarray, y: np.ndarray, bins: int = 10) -> tuple[list[tupl
 
 
 def score_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[Candidate],
-               calibration: Calibration | None) -> list[float | None]:
-    """The confidence of every hit (None for all without a calibration)."""
+               calibration: Calibration | None, reliefs: dict[str, float] | None = None) -> list[float | None]:
+    """The confidence of every hit (None for all without a calibration); ``reliefs`` as in
+    :func:`hit_features`."""
     if calibration is None or not hits:
         return [None] * len(hits)
-    x = np.stack([hit_features(h, depth, colour) for h in hits])
+    x = np.stack([hit_features(h, depth, colour, reliefs) for h in hits])
     return [float(v) for v in calibration.predict(x)]
+
+
+def model_reliefs(templates: dict[str, ModelTemplate]) -> dict[str, float]:
+    """How far each class's depth model stands out (metres), for :func:`hit_features`."""
+    return {cid: t.relief_m() for cid, t in templates.items()}
 
 
 def screen_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[Candidate],
@@ -187,7 +204,7 @@ def screen_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[C
 
 def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected: dict[str, int] | None,
                        classes: list[str], consensus_settings: ConsensusSettings, settings: ConfidenceSettings,
-                       *, max_rounds: int = 4) -> list[ConsensusHit]:
+                       *, reliefs: dict[str, float] | None = None, max_rounds: int = 4) -> list[ConsensusHit]:
     """The consensus of every class (:func:`~sbsc_core.consensus.consensus_all`) with the
     "none of these" rule inside it, in class order.
 
@@ -197,7 +214,8 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
     expected count (a room controller taken for a switch, while a real switch waits) nor
     passes to its next-best class. At most ``max_rounds`` rounds; the hits refused on the
     way come back as ``unknown`` with ``report_unknown`` (when no kept hit covers them).
-    Without a calibration or with screening off this is the plain consensus.
+    Without a calibration or with screening off this is the plain consensus. ``reliefs``:
+    see :func:`hit_features` (:func:`model_reliefs` of the templates searched).
     """
     def run(d: list[Candidate], c: list[Candidate]) -> list[ConsensusHit]:
         hits = consensus_all(d, c, expected, consensus_settings, classes)
@@ -209,7 +227,7 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
     refused: list[ConsensusHit] = []
     for _ in range(max(1, max_rounds)):
         hits = run(depth, colour)
-        for h, conf in zip(hits, score_hits(hits, depth, colour, cal), strict=True):
+        for h, conf in zip(hits, score_hits(hits, depth, colour, cal, reliefs), strict=True):
             h.confidence = conf
         weak = [h for h in hits if h.confidence is not None and h.confidence < settings.min_confidence]
         if not weak:

@@ -45,7 +45,7 @@ from .colour_recognition import (
     learn_prototypes,
     match_colour,
 )
-from .confidence import screened_consensus, unexplained_regions
+from .confidence import model_reliefs, screened_consensus, unexplained_regions
 from .cpu_features import numpy_environment
 from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
@@ -294,7 +294,8 @@ def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[
     depth_c = [c for w in walls.values() for c in w.depth_candidates]
     colour_c = [c for w in walls.values() for c in w.colour_candidates]
     orthos = {k: w.ortho for k, w in walls.items()}
-    chosen = screened_consensus(depth_c, colour_c, expected, classes, s.consensus, s.confidence)
+    chosen = screened_consensus(depth_c, colour_c, expected, classes, s.consensus, s.confidence,
+                                reliefs=model_reliefs(templates))
     if s.confidence.enabled and s.confidence.report_unknown:  # regions like no class, for review
         chosen += unexplained_regions({k: w.depth_rois for k, w in walls.items()}, chosen, templates)
     detections = place_hits(chosen, orthos, templates)

@@ -111,7 +111,10 @@ def test_depth_residual_features() -> None:
     f = dict(zip(FEATURES, hit_features(make_hit(d, None, 0.5), [d], []), strict=True))
     assert f["gain_misfit"] == pytest.approx(np.log(1.8)) and f["relief_misfit"] == pytest.approx(0.25)
     c = dict(zip(FEATURES, hit_features(make_hit(None, _cand("socket", "colour", 0.1), 0.5), [], []), strict=True))
-    assert c["gain_misfit"] == 0 and c["relief_misfit"] == 0
+    assert c["gain_misfit"] == 0 and c["relief_misfit"] == 0 and c["unmatched_relief"] == 0
+    deep = dict(zip(FEATURES, hit_features(make_hit(None, _cand("socket", "colour", 0.1), 0.5), [], [],
+                                           {"socket": 0.012}), strict=True))
+    assert deep["unmatched_relief"] == pytest.approx(0.6)
 
 
 def test_a_calibration_of_fewer_features_still_loads_and_predicts() -> None:
@@ -131,7 +134,7 @@ def test_screened_consensus_does_not_spend_the_count_on_a_place_like_no_class(tm
     from sbsc_core.confidence import screened_consensus
     from sbsc_core.settings import ConsensusSettings
 
-    cal = Calibration(np.array([0, 0, 0, 0, 0, 0, 0, -20.0, 0]), 5.0)  # a deep misfit is wrong
+    cal = Calibration(np.array([0, 0, 0, 0, 0, 0, 0, -20.0]), 5.0)  # a deep misfit is wrong
     path = tmp_path / "cal.json"
     path.write_text(json.dumps(cal.to_dict()))
     controller = _cand("switch", "depth", 0.99, 50.0, 50.0)
