@@ -3,22 +3,28 @@
 Usage (heavy: run under the shared lock)::
 
     flock /tmp/sbsc-heavy.lock python benchmarks/bench_confidence.py [--work DIR] [--write]
+        [--variants acceptance clutter ...] [--pairs standard/standard alt/alt ...]
+        [--turned 0 0.34] [--fit-seeds 11 12] [--eval-seeds 21 22] [--eval-pairs third/third]
 
-Scenes: ``one_room.yaml`` in every pairing of scene and library design sets (standard /
-standard, alt / alt and the two crosses, which give real mistakes to learn from), upright
-and with a third of the rotatable objects turned, at several seeds. The FIT seeds and the
-EVALUATION seeds are disjoint and listed below; each scene is detected once and its
-candidates go through consensus both with and without the expected counts. A hit is right
-when a ground-truth object of its class lies within ``--radius`` of it (each object counts
-once). The logistic model is fitted on the FIT scenes only; the reliability table and the
-expected calibration error (ECE) are printed for the EVALUATION scenes. ``--write`` stores
-the fitted model as ``sbsc_core/calibration/confidence.json``.
+Scenes: ``one_room.yaml`` for every realism VARIANT (as in ``bench_realism.py``: ``baseline``,
+``clutter``, ``realistic``, ``acceptance``, ...), every pairing of scene and library design
+sets (``standard/standard``, ``alt/alt`` and the crosses, which give real mistakes to learn
+from), upright and with a share of the rotatable objects turned, at several seeds. The FIT
+seeds and the EVALUATION seeds are disjoint; ``--eval-pairs`` may name other design sets
+for the evaluation only (the third family is never fitted on). Each scene is detected once
+(its candidates are kept in ``--work``) and its candidates go through consensus both with
+and without the expected counts. A hit is right when a ground-truth object of its class
+lies within ``--radius`` of it (each object counts once). The logistic model is fitted on
+the FIT scenes only; the reliability table and the expected calibration error (ECE) are
+printed for the EVALUATION scenes. ``--write`` stores the fitted model as
+``sbsc_core/calibration/confidence.json``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import pickle
 import sys
 import time
 from pathlib import Path
@@ -29,7 +35,14 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from sbsc_core.confidence import CALIBRATION_PATH, FEATURES, fit_logistic, hit_features, reliability  # noqa: E402
+from sbsc_core.confidence import (  # noqa: E402
+    CALIBRATION_PATH,
+    FEATURES,
+    fit_logistic,
+    hit_features,
+    model_reliefs,
+    reliability,
+)
 from sbsc_core.consensus import consensus_all  # noqa: E402
 from sbsc_core.io.models import load_model_library  # noqa: E402
 from sbsc_core.io.scans import read_scans  # noqa: E402
@@ -38,11 +51,20 @@ from sbsc_core.pipeline import detect  # noqa: E402
 from sbsc_core.settings import DetectionSettings  # noqa: E402
 from sbsc_core.simulate.designs import design_builder  # noqa: E402
 from sbsc_core.simulate.scenarios import simulate_scene  # noqa: E402
+from sbsc_core.templates import make_templates  # noqa: E402
+from sbsc_core.types import Orthoimage  # noqa: E402
 
-FIT_SEEDS = (11, 12)
+FIT_SEEDS = (11, 12, 13)
 EVAL_SEEDS = (21, 22)
-PAIRS = (("standard", "standard"), ("alt", "alt"), ("standard", "alt"), ("alt", "standard"))
-TURNED = (0.0, 0.34)
+PAIRS = ("standard/standard", "alt/alt")
+VARIANTS: dict[str, dict[str, bool]] = {
+    "baseline": {},
+    "clutter": {"clutter": True},
+    "furniture": {"furniture": True},
+    "realistic": {"realistic": True},
+    "acceptance": {"realistic": True, "clutter": True},
+}
+TURNED = (0.0,)
 
 
 def scene_file(work: Path, turned: float, seed: int) -> Path:
@@ -54,20 +76,37 @@ def scene_file(work: Path, turned: float, seed: int) -> Path:
     return path
 
 
+def candidates_of(scan: Path, settings: DetectionSettings) -> dict:
+    """Depth and colour candidates, classes and wall frames of a detected scene (cached in the scene)."""
+    cache = scan / "candidates.pkl"
+    if cache.is_file():
+        return pickle.loads(cache.read_bytes())
+    res = detect(read_scans([scan / "scan.ply"]), load_model_library(scan / "models"), None, settings)
+    data = {"depth": [c for w in res.walls.values() for c in w.depth_candidates],
+            "colour": [c for w in res.walls.values() for c in w.colour_candidates],
+            "classes": res.classes,
+            "frames": {k: (w.ortho.frame, w.ortho.pixel_m) for k, w in res.walls.items()}}
+    cache.write_bytes(pickle.dumps(data))
+    return data
+
+
 def rows_of(scan: Path, settings: DetectionSettings, radius: float) -> list[tuple[np.ndarray, int]]:
     """(features, right) of every hit, with and without the expected counts."""
-    res = detect(read_scans([scan / "scan.ply"]), load_model_library(scan / "models"), None, settings)
+    data = candidates_of(scan, settings)
     truth = json.loads((scan / "ground_truth.json").read_text())["objects"]
     expected = json.loads((scan / "expected.json").read_text())["counts"]
-    depth = [c for w in res.walls.values() for c in w.depth_candidates]
-    colour = [c for w in res.walls.values() for c in w.colour_candidates]
+    depth, colour = data["depth"], data["colour"]
+    data["reliefs"] = model_reliefs(make_templates(load_model_library(scan / "models"), settings.orthoimage.pixel_m,
+                                                   data["classes"]))
     out = []
     for exp in (None, expected):
-        hits = [h for v in consensus_all(depth, colour, exp, settings.consensus, res.classes).values() for h in v]
-        feats = [hit_features(h, depth, colour) for h in hits]
+        hits = [h for v in consensus_all(depth, colour, exp, settings.consensus, data["classes"]).values() for h in v]
+        feats = [hit_features(h, depth, colour, data["reliefs"]) for h in hits]
         pos = []
         for h in hits:
-            o = res.walls[h.wall_id].ortho
+            frame, pixel_m = data["frames"][h.wall_id]
+            o = Orthoimage(wall_id=h.wall_id, frame=frame, pixel_m=pixel_m, colour=np.zeros((0, 0, 3), np.uint8),
+                           depth=np.zeros((0, 0), np.float32), mask=np.zeros((0, 0), bool))
             u, v = o.pixel_to_uv(h.centre[0], h.centre[1])
             pos.append(o.frame.to_world(u, v, 0.0))
         order = np.argsort([-f[2] - f[3] for f in feats])  # the best evidence takes an object first
@@ -93,27 +132,50 @@ def main() -> int:
     ap.add_argument("--work", type=Path, default=Path("/tmp/sbsc-bench-confidence"))
     ap.add_argument("--radius", type=float, default=0.05, help="a hit within this of its object is right (m)")
     ap.add_argument("--step", type=float, default=0.15, help="scanner angular step (degrees)")
+    ap.add_argument("--variants", nargs="+", default=["acceptance", "clutter"], choices=list(VARIANTS))
+    ap.add_argument("--pairs", nargs="+", default=list(PAIRS), help="SCENE/LIBRARY design sets fitted on")
+    ap.add_argument("--eval-pairs", nargs="+", default=None, help="design sets evaluated on (default: --pairs)")
+    ap.add_argument("--turned", nargs="+", type=float, default=list(TURNED), help="shares of objects turned")
+    ap.add_argument("--fit-seeds", nargs="+", type=int, default=list(FIT_SEEDS))
+    ap.add_argument("--eval-seeds", nargs="+", type=int, default=list(EVAL_SEEDS))
+    ap.add_argument("--fit-scenes", nargs="+", type=Path, default=[],
+                    help="simulated scenes (any layout, e.g. bench_realism.py --full runs) also fitted on")
+    ap.add_argument("--eval-scenes", nargs="+", type=Path, default=[], help="simulated scenes also evaluated on")
     ap.add_argument("--write", action="store_true", help="store the fitted model in the package")
     args = ap.parse_args()
+    if set(args.fit_seeds) & set(args.eval_seeds):
+        ap.error("--fit-seeds and --eval-seeds must be disjoint")
+    if any(p.split("/")[0] == "third" or p.endswith("/third") for p in args.pairs):
+        ap.error("the third design family is for testing only: never fit on it")
     args.work.mkdir(parents=True, exist_ok=True)
     settings = DetectionSettings()
     settings.confidence.enabled = False
     data: dict[str, list[tuple[np.ndarray, int]]] = {"fit": [], "eval": []}
     t0 = time.perf_counter()
-    for part, seeds in (("fit", FIT_SEEDS), ("eval", EVAL_SEEDS)):
+    plan = (("fit", args.fit_seeds, args.pairs), ("eval", args.eval_seeds, args.eval_pairs or args.pairs))
+    for part, seeds, pairs in plan:
         for seed in seeds:
-            for scene_d, lib_d in PAIRS:
-                for turned in TURNED:
-                    scan = args.work / f"{scene_d}-{lib_d}-t{turned:g}-s{seed}"
-                    if not (scan / "ground_truth.json").is_file():
-                        simulate_scene(scene_file(args.work, turned, seed), scan, seed=seed,
-                                       angular_step_deg=args.step, design=False,
-                                       object_builder=design_builder(scene_d), library_builder=design_builder(lib_d))
-                    rows = rows_of(scan, settings, args.radius)
-                    data[part].extend(rows)
-                    n_right = sum(r for _, r in rows)
-                    print(f"{part:4s} {scan.name:32s} hits {len(rows):3d} right {n_right:3d} "
-                          f"({time.perf_counter() - t0:.0f} s)", flush=True)
+            for pair in pairs:
+                scene_d, lib_d = pair.split("/")
+                for variant in args.variants:
+                    for turned in args.turned:
+                        scan = args.work / f"{variant}-{scene_d}-{lib_d}-t{turned:g}-s{seed}"
+                        if not (scan / "ground_truth.json").is_file():
+                            simulate_scene(scene_file(args.work, turned, seed), scan, seed=seed,
+                                           angular_step_deg=args.step, design=False,
+                                           object_builder=design_builder(scene_d),
+                                           library_builder=design_builder(lib_d), **VARIANTS[variant])
+                        rows = rows_of(scan, settings, args.radius)
+                        data[part].extend(rows)
+                        n_right = sum(r for _, r in rows)
+                        print(f"{part:4s} {scan.name:44s} hits {len(rows):3d} right {n_right:3d} "
+                              f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    for part, scans in (("fit", args.fit_scenes), ("eval", args.eval_scenes)):
+        for scan in scans:
+            rows = rows_of(scan, settings, args.radius)
+            data[part].extend(rows)
+            print(f"{part:4s} {str(scan):44s} hits {len(rows):3d} right {sum(r for _, r in rows):3d} "
+                  f"({time.perf_counter() - t0:.0f} s)", flush=True)
     xf = np.stack([f for f, _ in data["fit"]])
     yf = np.array([r for _, r in data["fit"]], float)
     xe = np.stack([f for f, _ in data["eval"]])
@@ -121,8 +183,9 @@ def main() -> int:
     cal = fit_logistic(xf, yf)
     table, ece = reliability(cal.predict(xe), ye)
     _, ece_fit = reliability(cal.predict(xf), yf)
-    print(f"\nfitted on {len(yf)} hits ({int(yf.sum())} right) of seeds {FIT_SEEDS}; "
-          f"evaluated on {len(ye)} hits ({int(ye.sum())} right) of seeds {EVAL_SEEDS}")
+    print(f"\nfitted on {len(yf)} hits ({int(yf.sum())} right) of seeds {args.fit_seeds} {args.pairs}; "
+          f"evaluated on {len(ye)} hits ({int(ye.sum())} right) of seeds {args.eval_seeds} "
+          f"{args.eval_pairs or args.pairs}; variants {args.variants}")
     print("coefficients: " + ", ".join(f"{n} {c:+.3f}" for n, c in zip(FEATURES, cal.coef, strict=True))
           + f", intercept {cal.intercept:+.3f}")
     print("\nreliability on the evaluation scenes")
@@ -131,8 +194,11 @@ def main() -> int:
         print(f"{lo:5.1f}-{hi:4.1f}   {n:6d} {conf:10.3f} {acc:9.3f}")
     print(f"\nECE (evaluation scenes, 10 bins): {ece:.4f}   (fit scenes: {ece_fit:.4f})")
     if args.write:
-        cal.info = {"fit_seeds": list(FIT_SEEDS), "eval_seeds": list(EVAL_SEEDS), "scenes": "one_room.yaml",
-                    "pairs": [f"{a}/{b}" for a, b in PAIRS], "turned": list(TURNED), "radius_m": args.radius,
+        cal.info = {"fit_seeds": list(args.fit_seeds), "eval_seeds": list(args.eval_seeds), "scenes": "one_room.yaml",
+                    "variants": list(args.variants), "pairs": list(args.pairs),
+                    "eval_pairs": list(args.eval_pairs or args.pairs), "turned": list(args.turned),
+                    "radius_m": args.radius,
+                    "fit_scenes": [p.name for p in args.fit_scenes], "eval_scenes": [p.name for p in args.eval_scenes],
                     "fit_hits": int(len(yf)), "eval_hits": int(len(ye)), "eval_ece": round(ece, 4)}
         CALIBRATION_PATH.parent.mkdir(parents=True, exist_ok=True)
         CALIBRATION_PATH.write_text(json.dumps(cal.to_dict(), indent=1) + "\n", encoding="utf-8")

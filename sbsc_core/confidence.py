@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize
 
-from .consensus import ConsensusHit
+from .consensus import ConsensusHit, consensus_all
 from .matching import box_overlap
-from .settings import ConfidenceSettings
+from .settings import ConfidenceSettings, ConsensusSettings
 from .templates import ModelTemplate
 from .types import Box, Candidate
 
@@ -32,16 +32,33 @@ UNKNOWN_CLASS = "unknown"
 
 CALIBRATION_PATH = Path(__file__).with_name("calibration") / "confidence.json"
 FEATURES = ("in_depth", "in_colour", "rho_depth", "colour_goodness", "alpha", "class_margin",
-            "lookalike_margin")
+            "lookalike_margin", "gain_misfit", "relief_misfit", "unmatched_relief")
 _MARGIN_CAP = 0.3  # margins beyond this say nothing more
+_GAIN_CAP = 1.0  # |ln gain| beyond this (a relief e times too deep or too flat) says nothing more
+_RELIEF_CAP_M = 0.02  # a model standing out this far would surely have been matched in depth
 
 
-def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candidate]) -> np.ndarray:
+def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candidate],
+                 reliefs: dict[str, float] | None = None) -> np.ndarray:
     """The features (:data:`FEATURES`) of one consensus hit among all the candidates of its wall.
 
     ``class_margin``: the hit's rho_D minus the best rho_D of another class at its place
     (footprints overlapping by more than a quarter), or, without depth, the best other
     class's rho_C minus the hit's; capped to [0, 0.3] (0.3 when no other class is there).
+
+    The depth match's own residual tells an object of another size or depth that happens to
+    correlate well (a thermostat or a room controller taken for a switch: a plate of nearly
+    the switch's outline, twice as deep): ``gain_misfit`` is |ln gain|, the least-squares
+    relief amplitude of the scene over the model's (depth is metric: 0 for the right
+    object), capped to 1; ``relief_misfit`` is 1 minus the IoU of where the scene and the
+    model stand out in the footprint and the wall around it (relief outside the footprint:
+    a bigger object; missing inside: a smaller one). Both are 0 without a depth match.
+
+    ``unmatched_relief``: for a hit found in colour only, how far its class's depth model
+    stands out (``reliefs``: metres per class), as a share of 2 cm (capped to 1): a flat
+    sign is often missed in depth on a noisy scan, a 12 mm switch plate is not, so a
+    colour-only switch is more likely something else of its colour. 0 with a depth match
+    or without ``reliefs``.
     """
     here = hit.box
 
@@ -57,24 +74,49 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
         margin = min(c.score for c in rivals) - float(hit.rho_colour or 0.0) if rivals else _MARGIN_CAP
     looks = [c.lookalike_margin for c in (hit.depth, hit.colour) if c is not None and c.lookalike_margin is not None]
     look = min(looks) if looks else _MARGIN_CAP
+    d = hit.depth
+    gain = 0.0 if d is None or d.gain is None else min(_GAIN_CAP, abs(float(np.log(max(d.gain, 1e-6)))))
+    relief = 0.0 if d is None or d.relief_iou is None else float(np.clip(1.0 - d.relief_iou, 0.0, 1.0))
+    unmatched = 0.0
+    if d is None and reliefs:
+        unmatched = min(1.0, float(reliefs.get(hit.class_id, 0.0)) / _RELIEF_CAP_M)
     return np.array([
         float(hit.rho_depth is not None), float(hit.rho_colour is not None),
         float(hit.rho_depth or 0.0), 0.0 if hit.rho_colour is None else 1.0 - float(hit.rho_colour),
         float(hit.alpha), float(np.clip(margin, 0.0, _MARGIN_CAP)), float(np.clip(look, -_MARGIN_CAP, _MARGIN_CAP)),
+        gain, relief, unmatched,
     ])
 
 
 @dataclass
 class Calibration:
-    """A logistic model: confidence = 1 / (1 + exp(-(intercept + coef . features)))."""
+    """A logistic model: confidence = 1 / (1 + exp(-(intercept + coef . features))).
+
+    ``features`` names the model's inputs, a subset of :data:`FEATURES` (default: the
+    first ``len(coef)`` of them, so a calibration fitted before a feature was added still
+    loads). :meth:`predict` takes either those columns or all of :data:`FEATURES`.
+    """
 
     coef: np.ndarray
     intercept: float
-    features: tuple[str, ...] = FEATURES
+    features: tuple[str, ...] | None = None
     info: dict | None = None
 
+    def __post_init__(self) -> None:
+        self.coef = np.asarray(self.coef, float)
+        if self.features is None:
+            self.features = FEATURES[: len(self.coef)]
+        self.features = tuple(self.features)
+        unknown = [f for f in self.features if f not in FEATURES]
+        if unknown or len(self.features) != len(self.coef):
+            raise ValueError(f"calibration features {list(self.features)} do not fit {list(FEATURES)} "
+                             f"and {len(self.coef)} coefficients")
+
     def predict(self, x: np.ndarray) -> np.ndarray:
-        z = self.intercept + np.asarray(x, float) @ self.coef
+        x = np.atleast_2d(np.asarray(x, float))
+        if x.shape[1] != len(self.features):  # every feature given: take the model's own
+            x = x[:, [FEATURES.index(f) for f in self.features]]
+        z = self.intercept + x @ self.coef
         return 1.0 / (1.0 + np.exp(-np.clip(z, -40, 40)))
 
     def to_dict(self) -> dict:
@@ -84,9 +126,7 @@ class Calibration:
 
     @classmethod
     def from_dict(cls, d: dict) -> Calibration:
-        if tuple(d.get("features", ())) != FEATURES:
-            raise ValueError(f"calibration features {d.get('features')} are not {list(FEATURES)}")
-        return cls(np.asarray(d["coef"], float), float(d["intercept"]), FEATURES, d.get("info"))
+        return cls(np.asarray(d["coef"], float), float(d["intercept"]), tuple(d.get("features", ())), d.get("info"))
 
 
 def load_calibration(path: Path | None = None) -> Calibration | None:
@@ -130,12 +170,18 @@ def reliability(p: np.ndarray, y: np.ndarray, bins: int = 10) -> tuple[list[tupl
 
 
 def score_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[Candidate],
-               calibration: Calibration | None) -> list[float | None]:
-    """The confidence of every hit (None for all without a calibration)."""
+               calibration: Calibration | None, reliefs: dict[str, float] | None = None) -> list[float | None]:
+    """The confidence of every hit (None for all without a calibration); ``reliefs`` as in
+    :func:`hit_features`."""
     if calibration is None or not hits:
         return [None] * len(hits)
-    x = np.stack([hit_features(h, depth, colour) for h in hits])
+    x = np.stack([hit_features(h, depth, colour, reliefs) for h in hits])
     return [float(v) for v in calibration.predict(x)]
+
+
+def model_reliefs(templates: dict[str, ModelTemplate]) -> dict[str, float]:
+    """How far each class's depth model stands out (metres), for :func:`hit_features`."""
+    return {cid: t.relief_m() for cid, t in templates.items()}
 
 
 def screen_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[Candidate],
@@ -154,6 +200,56 @@ def screen_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[C
             h.unknown = True
         out.append(h)
     return out
+
+
+def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected: dict[str, int] | None,
+                       classes: list[str], consensus_settings: ConsensusSettings, settings: ConfidenceSettings,
+                       *, reliefs: dict[str, float] | None = None, max_rounds: int = 4) -> list[ConsensusHit]:
+    """The consensus of every class (:func:`~sbsc_core.consensus.consensus_all`) with the
+    "none of these" rule inside it, in class order.
+
+    A hit below ``min_confidence`` is a place like no class well enough: every candidate
+    (of any class) whose footprint overlaps it by more than ``suppress_overlap`` is taken
+    out, and the consensus runs again, so that such a place neither uses up its class's
+    expected count (a room controller taken for a switch, while a real switch waits) nor
+    passes to its next-best class. At most ``max_rounds`` rounds; the hits refused on the
+    way come back as ``unknown`` with ``report_unknown`` (when no kept hit covers them).
+    Without a calibration or with screening off this is the plain consensus. ``reliefs``:
+    see :func:`hit_features` (:func:`model_reliefs` of the templates searched).
+    """
+    def run(d: list[Candidate], c: list[Candidate]) -> list[ConsensusHit]:
+        hits = consensus_all(d, c, expected, consensus_settings, classes)
+        return [h for cls in classes for h in hits.get(cls, [])]
+
+    cal = load_calibration(Path(settings.calibration) if settings.calibration else None) if settings.enabled else None
+    if cal is None:
+        return run(depth, colour)
+    refused: list[ConsensusHit] = []
+    for _ in range(max(1, max_rounds)):
+        hits = run(depth, colour)
+        for h, conf in zip(hits, score_hits(hits, depth, colour, cal, reliefs), strict=True):
+            h.confidence = conf
+        weak = [h for h in hits if h.confidence is not None and h.confidence < settings.min_confidence]
+        if not weak:
+            break
+        refused.extend(weak)
+
+        depth = _clear_of(depth, weak, consensus_settings.suppress_overlap)
+        colour = _clear_of(colour, weak, consensus_settings.suppress_overlap)
+    hits = [h for h in hits if h.confidence is None or h.confidence >= settings.min_confidence]
+    if settings.report_unknown:
+        for h in refused:
+            if not any(k.wall_id == h.wall_id and k.box is not None and h.box is not None
+                       and box_overlap(k.box, h.box) > consensus_settings.suppress_overlap for k in hits):
+                h.unknown = True
+                hits.append(h)
+    return hits
+
+
+def _clear_of(cands: list[Candidate], hits: list[ConsensusHit], overlap: float) -> list[Candidate]:
+    """The candidates whose footprint overlaps none of ``hits`` by more than ``overlap``."""
+    return [c for c in cands if not any(c.wall_id == h.wall_id and h.box is not None
+                                        and box_overlap(c.box, h.box) > overlap for h in hits)]
 
 
 def unexplained_regions(rois: dict[str, list[Box]], hits: list[ConsensusHit], templates: dict[str, ModelTemplate],

@@ -442,15 +442,17 @@ def match_depth(
         relief = float(np.median(np.abs(rot[np.abs(rot) > 0.1 * np.abs(rot).max()])))
         smooth_model = padded_template(rot, settings.template_pad_px, settings.match_sigma_px)
 
+        def overlap(r: float, c: float, gain: float) -> float:
+            return relief_overlap(jml, smooth_model, box_at((r, c), h, w), settings.template_pad_px,
+                                  settings.isolation_relief_fraction * relief, gain, known)
+
         def plausible(r: float, c: float, gain: float) -> bool:
             box = box_at((r, c), h, w)
             thr = max(settings.isolation_relief_fraction * relief * gain, noise_relief)
             if isolation(jml, box, thr, settings.isolation_gap_px, settings.isolation_width_px,
                          known, settings.min_known_share) > settings.isolation_max_occupancy:
                 return False
-            return relief_overlap(jml, smooth_model, box, settings.template_pad_px,
-                                  settings.isolation_relief_fraction * relief,
-                                  gain, known) >= settings.min_relief_iou
+            return overlap(r, c, gain) >= settings.min_relief_iou
 
         peaks = match_in_rois(jm, rot, where, threshold=settings.mu_d, pad_px=settings.template_pad_px,
                               margin_px=settings.search_margin_px, max_peaks=settings.max_peaks_per_roi,
@@ -459,7 +461,7 @@ def match_depth(
                               min_known=settings.min_known_share, full_known=settings.full_known_share,
                               masked_pre=settings.masked_pre_threshold)
         return [Candidate(cid, ortho.wall_id, "depth", box_at((m.row, m.col), h, w), (m.row, m.col), m.score,
-                          m.roi, deg) for m in peaks]
+                          m.roi, deg, gain=m.gain, relief_iou=overlap(m.row, m.col, m.gain)) for m in peaks]
 
     out: list[Candidate] = []
     for cid in sorted(templates):

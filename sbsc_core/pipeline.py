@@ -45,8 +45,8 @@ from .colour_recognition import (
     learn_prototypes,
     match_colour,
 )
-from .confidence import screen_hits, unexplained_regions
-from .consensus import consensus_all
+from .confidence import model_reliefs, screened_consensus, unexplained_regions
+from .consensus import ConsensusHit
 from .cpu_features import numpy_environment
 from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
@@ -332,22 +332,25 @@ def storey_counts(seg: Segmentation, expected: ExpectedCounts | None,
 
 
 def consensus_by_storey(depth: list[Candidate], colour: list[Candidate], wall_storey: dict[str, str],
-                        counts: dict[str, dict[str, int]], settings: DetectionSettings,
-                        classes: list[str]) -> dict[str, list]:
-    """:func:`~sbsc_core.consensus.consensus_all` on each storey with that storey's expected counts.
+                        counts: dict[str, dict[str, int]], classes: list[str],
+                        run: Callable[[list[Candidate], list[Candidate], dict[str, int]], list[ConsensusHit]],
+                        ) -> list[ConsensusHit]:
+    """The consensus ``run(depth, colour, counts)`` on each storey with that storey's expected counts.
 
-    ``wall_storey`` maps a wall id to its storey. A storey's expected counts limit only the
-    instances on its own walls, so a storey whose candidates are weaker is not starved by
-    another's. Returns the hits per class, storey by storey in the order of ``counts``.
+    ``wall_storey`` maps a wall id to its storey; a surface that is not a wall (a ceiling tile,
+    a column face) belongs to the storey its id starts with (``S2-...``). A storey's expected
+    counts limit only the instances on its own surfaces, so a storey whose candidates are
+    weaker is not starved by another's. Returns the hits in class order, storey by storey.
     """
-    out: dict[str, list] = {c: [] for c in classes}
+    def storey_of(wall_id: str) -> str | None:
+        return wall_storey.get(wall_id) or next((sid for sid in counts if wall_id.startswith(f"{sid}-")), None)
+
+    hits: list[ConsensusHit] = []
     for sid, cnt in counts.items():
-        on = {w for w, st in wall_storey.items() if st == sid}
-        hits = consensus_all([c for c in depth if c.wall_id in on], [c for c in colour if c.wall_id in on],
-                             {c: int(cnt.get(c, 0)) for c in classes}, settings.consensus, classes)
-        for cls, hs in hits.items():
-            out.setdefault(cls, []).extend(hs)
-    return out
+        hits += run([c for c in depth if storey_of(c.wall_id) == sid], [c for c in colour if storey_of(c.wall_id) == sid],
+                    {c: int(cnt.get(c, 0)) for c in classes})
+    rank = {c: i for i, c in enumerate(classes)}
+    return sorted(hits, key=lambda h: rank.get(h.class_id, len(rank)))
 
 
 def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[str, ModelTemplate],
@@ -357,13 +360,17 @@ def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[
     t = time.perf_counter()
     depth_c = [c for w in walls.values() for c in w.depth_candidates]
     colour_c = [c for w in walls.values() for c in w.colour_candidates]
+    reliefs = model_reliefs(templates)
+
+    def run(d: list[Candidate], c: list[Candidate], counts: dict[str, int] | None) -> list[ConsensusHit]:
+        return screened_consensus(d, c, counts, classes, s.consensus, s.confidence, reliefs=reliefs)
+
     per_storey = storey_counts(seg, expected, log)
     if per_storey is not None:
-        hits = consensus_by_storey(depth_c, colour_c, {w.id: w.storey for w in seg.walls}, per_storey, s, classes)
+        chosen = consensus_by_storey(depth_c, colour_c, {w.id: w.storey for w in seg.walls}, per_storey, classes, run)
     else:
-        hits = consensus_all(depth_c, colour_c, None if expected is None else expected.counts, s.consensus, classes)
+        chosen = run(depth_c, colour_c, None if expected is None else expected.counts)
     orthos = {k: w.ortho for k, w in walls.items()}
-    chosen = screen_hits([h for cls in classes for h in hits.get(cls, [])], depth_c, colour_c, s.confidence)
     if s.confidence.enabled and s.confidence.report_unknown:  # regions like no class, for review
         chosen += unexplained_regions({k: w.depth_rois for k, w in walls.items()}, chosen, templates)
     detections = place_hits(chosen, orthos, templates)

@@ -242,6 +242,8 @@ class Candidate:
     roi: Box | None = None  # the RoI the match came from
     rotation_deg: float = 0  # the model's in-plane rotation at the match (degrees, counter-clockwise)
     lookalike_margin: float | None = None  # print NCC of its class minus the best other look-alike's
+    gain: float | None = None  # depth: least-squares relief amplitude of the scene over the model's
+    relief_iou: float | None = None  # depth: IoU of where the scene and the model stand out
 
 
 @dataclass

@@ -103,3 +103,53 @@ def test_regions_like_no_class_become_unknown_for_review() -> None:
     dets = place_hits([socket, *unknown], {"W01": ortho}, templates)
     u = next(d for d in dets if d.class_id == UNKNOWN)
     assert (u.width_m, u.height_m) == pytest.approx((20 * ortho.pixel_m, 25 * ortho.pixel_m))
+
+
+def test_depth_residual_features() -> None:
+    d = _cand("socket", "depth", 0.97)
+    d.gain, d.relief_iou = 1.8, 0.75
+    f = dict(zip(FEATURES, hit_features(make_hit(d, None, 0.5), [d], []), strict=True))
+    assert f["gain_misfit"] == pytest.approx(np.log(1.8)) and f["relief_misfit"] == pytest.approx(0.25)
+    c = dict(zip(FEATURES, hit_features(make_hit(None, _cand("socket", "colour", 0.1), 0.5), [], []), strict=True))
+    assert c["gain_misfit"] == 0 and c["relief_misfit"] == 0 and c["unmatched_relief"] == 0
+    deep = dict(zip(FEATURES, hit_features(make_hit(None, _cand("socket", "colour", 0.1), 0.5), [], [],
+                                           {"socket": 0.012}), strict=True))
+    assert deep["unmatched_relief"] == pytest.approx(0.6)
+
+
+def test_a_calibration_of_fewer_features_still_loads_and_predicts() -> None:
+    old = Calibration.from_dict({"features": list(FEATURES[:7]), "coef": [0, 0, 10.0, 0, 0, 0, 0], "intercept": -9.0})
+    full = np.zeros(len(FEATURES))
+    full[2] = 0.95
+    assert old.predict(full[None])[0] == pytest.approx(1 / (1 + np.exp(-0.5)))
+    with pytest.raises(ValueError):
+        Calibration.from_dict({"features": ["in_depth", "nonsense"], "coef": [1.0, 1.0], "intercept": 0.0})
+
+
+def test_screened_consensus_does_not_spend_the_count_on_a_place_like_no_class(tmp_path) -> None:
+    """Expected one switch: a room controller correlating better but twice as deep is refused,
+    and the count goes to the real switch; its place gives no other class either."""
+    import json
+
+    from sbsc_core.confidence import screened_consensus
+    from sbsc_core.settings import ConsensusSettings
+
+    cal = Calibration(np.array([0, 0, 0, 0, 0, 0, 0, -20.0]), 5.0)  # a deep misfit is wrong
+    path = tmp_path / "cal.json"
+    path.write_text(json.dumps(cal.to_dict()))
+    controller = _cand("switch", "depth", 0.99, 50.0, 50.0)
+    controller.gain = 1.9
+    other = _cand("socket", "depth", 0.9, 50.0, 50.0)
+    other.gain = 1.0
+    switch = _cand("switch", "depth", 0.96, 150.0, 150.0)
+    switch.gain = 1.02
+    s = ConfidenceSettings(calibration=str(path))
+    hits = screened_consensus([controller, other, switch], [], {"switch": 1, "socket": 1}, ["socket", "switch"],
+                              ConsensusSettings(), s)
+    assert [(h.class_id, h.centre) for h in hits] == [("switch", (150.0, 150.0))]
+    plain = screened_consensus([controller, other, switch], [], {"switch": 1, "socket": 1}, ["socket", "switch"],
+                               ConsensusSettings(), ConfidenceSettings(enabled=False))
+    assert ("switch", (50.0, 50.0)) in [(h.class_id, h.centre) for h in plain]
+    review = screened_consensus([controller, other, switch], [], {"switch": 1, "socket": 1}, ["socket", "switch"],
+                                ConsensusSettings(), ConfidenceSettings(calibration=str(path), report_unknown=True))
+    assert sorted((h.unknown, h.centre) for h in review) == [(False, (150.0, 150.0)), (True, (50.0, 50.0))]

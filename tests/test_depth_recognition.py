@@ -296,3 +296,17 @@ def test_a_further_depth_model_finds_another_design_of_the_class() -> None:
     after = near(match_depth(ortho, area, rois, learnt, s))
     assert not before or max(x.score for x in before) < 0.9
     assert after and max(x.score for x in after) > 0.9
+
+
+def test_candidates_carry_their_relief_gain_and_fit(scene) -> None:
+    """A true object: gain ~1 and the reliefs overlap; an object 1.6x as deep but of the same
+    outline still correlates, and its candidate says so (the confidence reads both)."""
+    templates, ortho, area = scene
+    s = DepthRecognitionSettings()
+    panels = [x for x in match_depth(ortho, area, depth_rois(ortho, area, s), templates, s) if x.class_id == "panel"]
+    assert panels and panels[0].gain == pytest.approx(1.0, abs=0.15) and panels[0].relief_iou > 0.8
+    deep_ortho, deep_area = make_wall(seed=5, holes=0)
+    paste(deep_ortho, deep_area, replace(templates["panel"], depth=templates["panel"].depth * 1.6), (120.0, 250.0))
+    deep = [x for x in match_depth(deep_ortho, deep_area, depth_rois(deep_ortho, deep_area, s), templates, s)
+            if x.class_id == "panel"]
+    assert deep and deep[0].gain == pytest.approx(1.6, abs=0.2)

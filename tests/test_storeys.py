@@ -270,6 +270,7 @@ def test_a_sparse_las_spanning_kilometres_is_refused_in_one_line(tmp_path, capsy
 def test_each_storey_keeps_its_own_expected_counts() -> None:
     """With per-storey counts (contract 3's ``storeys``) a storey whose candidates are weaker is
     not starved by another storey's: each storey takes its own count, as when scanned alone."""
+    from sbsc_core.consensus import consensus_all
     from sbsc_core.io.documents import ExpectedCounts
     from sbsc_core.matching import box_at
     from sbsc_core.pipeline import consensus_by_storey, storey_counts
@@ -290,11 +291,12 @@ def test_each_storey_keeps_its_own_expected_counts() -> None:
     per_storey = ExpectedCounts({"switch": 2}, {"S1": {"switch": 1}, "S2": {"switch": 1}})
     counts = storey_counts(seg, per_storey)
     assert counts == {"S1": {"switch": 1}, "S2": {"switch": 1}}
-    hits = consensus_by_storey(depth, colour, {"S1-W01": "S1", "S2-W01": "S2"}, counts, s, ["switch"])
-    assert sorted(h.wall_id for h in hits["switch"]) == ["S1-W01", "S2-W01"]
-    # the building's counts alone: both places go to S2's stronger candidates
-    from sbsc_core.consensus import consensus_all
+    def run(d: list, c: list, n: dict) -> list:
+        return consensus_all(d, c, n, s.consensus, ["switch"])["switch"]
 
+    hits = consensus_by_storey(depth, colour, {"S1-W01": "S1", "S2-W01": "S2"}, counts, ["switch"], run)
+    assert sorted(h.wall_id for h in hits) == ["S1-W01", "S2-W01"]
+    # the building's counts alone: both places go to S2's stronger candidates
     assert [h.wall_id for h in consensus_all(depth, colour, {"switch": 2}, s.consensus, ["switch"])["switch"]] == [
         "S2-W01", "S2-W01"]
     # storeys that do not match the scan's: the building's counts, and a warning naming both
