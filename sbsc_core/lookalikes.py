@@ -1,17 +1,20 @@
 """Look-alike classes, told apart at the level of the pictogram (issue 13, item 1).
 
 Two classes are look-alikes when the library itself says that the paper's recognizers
-cannot tell them apart: footprints of the same size (``size_tolerance``), depth models
-that correlate highly with each other (``min_depth_ncc``, best of the quarter turns; two
-flat plates correlate ~1) and colour footprints of about the same mean colour
-(``max_colour_delta_e``, CIE76 in Lab). An extinguisher sign and a fire-alarm call-point
+cannot tell them apart: objects of the same size (``size_tolerance``), depth models that
+correlate highly with each other (``min_depth_ncc``, best of the quarter turns; two flat
+plates correlate ~1) and colour footprints of about the same mean colour
+(``max_colour_delta_e``, CIE76 in Lab). Size and depth are those of the model's content
+(:func:`content_box`: its colour view's alpha, else its relief), not of the catalogue
+footprint it was given: a 0.20 m square plate in a 0.21 x 0.30 m footprint and the same
+plate in a 0.21 x 0.21 m one look alike on a wall. An extinguisher sign and a fire-alarm call-point
 sign, both square red plates, are such a pair: depth correlates 0.94-0.97 with either and
 the 15 global colour descriptors are alike.
 
 For a candidate of a class in such a set, the colour orthoimage patch (Lab difference to
 the local wall colour, the foreground only: what the colour recognizer sees) is compared
 with each class's front view as seen on that wall (:class:`~sbsc_core.colour_recognition.
-WallPrototype`), at the candidate's position (within ``search_px``) and turn (and its
+WallPrototype`, cropped to the content), at the candidate's position (within ``search_px``) and turn (and its
 quarter turns: a square plate's relief does not tell them), by normalised
 cross-correlation: the pictogram decides. A candidate whose own class's print correlates
 less than another look-alike's by more than ``min_margin`` is relabelled to that class,
