@@ -1,17 +1,20 @@
 """Look-alike classes, told apart at the level of the pictogram (issue 13, item 1).
 
 Two classes are look-alikes when the library itself says that the paper's recognizers
-cannot tell them apart: footprints of the same size (``size_tolerance``), depth models
-that correlate highly with each other (``min_depth_ncc``, best of the quarter turns; two
-flat plates correlate ~1) and colour footprints of about the same mean colour
-(``max_colour_delta_e``, CIE76 in Lab). An extinguisher sign and a fire-alarm call-point
+cannot tell them apart: objects of the same size (``size_tolerance``), depth models that
+correlate highly with each other (``min_depth_ncc``, best of the quarter turns; two flat
+plates correlate ~1) and colour footprints of about the same mean colour
+(``max_colour_delta_e``, CIE76 in Lab). Size and depth are those of the model's content
+(:func:`content_box`: its colour view's alpha, else its relief), not of the catalogue
+footprint it was given: a 0.20 m square plate in a 0.21 x 0.30 m footprint and the same
+plate in a 0.21 x 0.21 m one look alike on a wall. An extinguisher sign and a fire-alarm call-point
 sign, both square red plates, are such a pair: depth correlates 0.94-0.97 with either and
 the 15 global colour descriptors are alike.
 
 For a candidate of a class in such a set, the colour orthoimage patch (Lab difference to
 the local wall colour, the foreground only: what the colour recognizer sees) is compared
 with each class's front view as seen on that wall (:class:`~sbsc_core.colour_recognition.
-WallPrototype`), at the candidate's position (within ``search_px``) and turn (and its
+WallPrototype`, cropped to the content), at the candidate's position (within ``search_px``) and turn (and its
 quarter turns: a square plate's relief does not tell them), by normalised
 cross-correlation: the pictogram decides. A candidate whose own class's print correlates
 less than another look-alike's by more than ``min_margin`` is relabelled to that class,
@@ -31,7 +34,32 @@ from .colour_recognition import ColourImage, ColourPrototypes
 from .matching import box_at, crop_padded, ncc_map, nms, padded_template, rotate_template
 from .settings import LookalikeSettings
 from .templates import ModelTemplate
-from .types import Candidate
+from .types import Box, Candidate
+
+
+def content_box(t: ModelTemplate) -> Box:
+    """The part of a model's footprint that is the object: the bounding box of its colour
+    view's alpha (else of its depth relief above a fifth of the largest), in footprint pixels.
+
+    A product smaller than its catalogue footprint (a 0.20 m plate in a 0.21 x 0.30 m
+    footprint) is compared by what it is, not by the footprint it was given.
+    """
+    mask = None
+    if t.colour_views:
+        mask = t.colour_views[0][..., 3] > 127
+    if (mask is None or not mask.any()) and t.depth is not None:
+        d = np.abs(t.depth_filled())
+        mask = d > 0.2 * float(d.max()) if float(d.max()) > 0 else None
+    if mask is None or not mask.any():
+        return Box(0, 0, t.height_px, t.width_px)
+    rr, cc = np.nonzero(mask)
+    return Box(int(rr.min()), int(cc.min()), int(rr.max()) + 1, int(cc.max()) + 1)
+
+
+def content_offset(t: ModelTemplate) -> tuple[float, float]:
+    """(row, col) of the content box's centre minus the footprint's centre, in pixels."""
+    b = content_box(t)
+    return (b.r0 + b.r1 - t.height_px) / 2.0, (b.c0 + b.c1 - t.width_px) / 2.0
 
 
 def _mean_lab(t: ModelTemplate) -> np.ndarray | None:
@@ -46,21 +74,28 @@ def _mean_lab(t: ModelTemplate) -> np.ndarray | None:
 
 
 def _same_size(a: ModelTemplate, b: ModelTemplate, tol: float) -> bool:
+    """Whether the two models' contents (:func:`content_box`) have the same sides within
+    ``tol`` (a share of the longer), in either orientation."""
     def close(x: float, y: float) -> bool:
         return abs(x - y) <= tol * max(x, y)
 
-    return (close(a.height_m, b.height_m) and close(a.width_m, b.width_m)) or \
-        (close(a.height_m, b.width_m) and close(a.width_m, b.height_m))
+    ba, bb = content_box(a), content_box(b)
+    ha, wa, hb, wb = ba.height, ba.width, bb.height, bb.width
+    return (close(ha, hb) and close(wa, wb)) or (close(ha, wb) and close(wa, hb))
 
 
 def depth_similarity(a: ModelTemplate, b: ModelTemplate, pad_px: int = 4) -> float:
-    """Best NCC over quarter turns of ``b``'s depth model (resampled to ``a``'s footprint) with
-    ``a``'s, both padded with wall; 1 when neither has depth, 0 when only one has."""
+    """Best NCC over quarter turns of ``b``'s depth model with ``a``'s, each cropped to its
+    content (:func:`content_box`, ``b``'s resampled to ``a``'s), both padded with wall;
+    1 when neither has depth, 0 when only one has."""
     da, db = a.depth_filled(), b.depth_filled()
     if da is None and db is None:
         return 1.0
     if da is None or db is None:
         return 0.0
+    ba, bb = content_box(a), content_box(b)
+    da = np.ascontiguousarray(da[ba.r0:ba.r1, ba.c0:ba.c1])
+    db = np.ascontiguousarray(db[bb.r0:bb.r1, bb.c0:bb.c1])
     best = -1.0
     ta = padded_template(da, pad_px)
     for k in range(4):
@@ -114,11 +149,13 @@ def print_score(diff: np.ndarray, view: np.ndarray, centre: tuple[float, float],
 
 
 def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str, np.ndarray],
-                       groups: list[frozenset[str]], settings: LookalikeSettings) -> list[Candidate]:
+                       groups: list[frozenset[str]], settings: LookalikeSettings, *,
+                       offsets: dict[str, tuple[float, float]] | None = None) -> list[Candidate]:
     """Candidates with every look-alike class decided by its print (see the module).
 
     ``diff`` is the wall's Lab difference to the local wall colour (0 off the foreground);
-    ``views`` the upright front view of each class as seen on this wall. Candidates of a
+    ``views`` the upright front view of each class as seen on this wall, ``offsets`` (row,
+    col) of each view's centre from its footprint's centre (0 when not given). Candidates of a
     class outside every group, or whose group has fewer than two views here, are kept as
     they are. Relabelled candidates that then coincide with another of the same class and
     source are folded (:func:`~sbsc_core.matching.nms`).
@@ -134,7 +171,8 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
         if g is None or len(seen) < 2 or cand.class_id not in views:
             out.append(cand)
             continue
-        scores = {c: print_score(diff, views[c], cand.centre, cand.rotation_deg, search_px=settings.search_px)
+        scores = {c: print_score(diff, views[c], _shifted(cand.centre, (offsets or {}).get(c), cand.rotation_deg),
+                                 cand.rotation_deg, search_px=settings.search_px)
                   for c in seen}
         own = scores[cand.class_id]
         other, other_score = max(((c, s) for c, s in scores.items() if c != cand.class_id), key=lambda x: x[1])
@@ -150,6 +188,35 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
         same = [c for c in out if c.source == source]
         folded.extend(nms(same, 0.5, higher_is_better=source == "depth"))
     return folded
+
+
+def _shifted(centre: tuple[float, float], offset: tuple[float, float] | None,
+             rotation_deg: float) -> tuple[float, float]:
+    if offset is None or (offset[0] == 0 and offset[1] == 0):
+        return centre
+    a = np.deg2rad(float(rotation_deg))
+    dr, dc = offset
+    return (centre[0] + dr * np.cos(a) - dc * np.sin(a), centre[1] + dr * np.sin(a) + dc * np.cos(a))
+
+
+def print_views(protos: dict, templates: dict[str, ModelTemplate]
+                ) -> tuple[dict[str, np.ndarray], dict[str, tuple[float, float]]]:
+    """Each class's upright front view as seen on a wall (its
+    :class:`~sbsc_core.colour_recognition.WallPrototype`'s unturned view), cropped to the
+    model's content (:func:`content_box`), and the content's offset from the footprint centre."""
+    views, offsets = {}, {}
+    for c, p in protos.items():
+        upright = [v for deg, v in p.views if float(deg) % 360.0 == 0.0]
+        if not upright or c not in templates:
+            continue
+        b = content_box(templates[c])
+        v = upright[0]
+        if v.shape[:2] != (templates[c].height_px, templates[c].width_px):
+            views[c], offsets[c] = v, (0.0, 0.0)
+            continue
+        views[c] = np.ascontiguousarray(v[b.r0:b.r1, b.c0:b.c1])
+        offsets[c] = content_offset(templates[c])
+    return views, offsets
 
 
 def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: ColourImage,
@@ -169,8 +236,8 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
     if not groups:
         return depth, colour
     protos = prototypes.for_wall(image.wall_rgb, image.threshold, image.noise_rgb)
-    views = {c: p.views[0][1] for c, p in protos.items() if p.views}
+    views, offsets = print_views(protos, prototypes.templates)
     diff = np.ascontiguousarray(image.lab - image.background, dtype=np.float32)
     diff[~image.foreground] = 0.0
-    return (resolve_lookalikes(depth, diff, views, groups, settings),
-            resolve_lookalikes(colour, diff, views, groups, settings))
+    return (resolve_lookalikes(depth, diff, views, groups, settings, offsets=offsets),
+            resolve_lookalikes(colour, diff, views, groups, settings, offsets=offsets))
