@@ -137,10 +137,25 @@ def load_calibration(path: Path | None = None) -> Calibration | None:
     return Calibration.from_dict(json.loads(p.read_text(encoding="utf-8")))
 
 
-def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2) -> Calibration:
-    """Maximum-likelihood logistic regression with a small L2 penalty on the coefficients."""
+# The sign each feature's coefficient must have: better evidence never lowers the confidence.
+MONOTONE = {"rho_depth": 1, "colour_goodness": 1, "alpha": 1, "class_margin": 1, "lookalike_margin": 1,
+            "gain_misfit": -1, "relief_misfit": -1, "unmatched_relief": -1}
+
+
+def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int] | None = None) -> Calibration:
+    """Maximum-likelihood logistic regression with a small L2 penalty on the coefficients.
+
+    ``signs`` (one per column: +1, -1 or 0) bounds each coefficient to be >= 0, <= 0 or
+    free (e.g. from :data:`MONOTONE`): a few scenes with correlated features must not teach
+    that a worse match is more likely right.
+    """
     x = np.asarray(x, float)
     y = np.asarray(y, float)
+    bounds = None
+    if signs is not None:
+        if len(signs) != x.shape[1]:
+            raise ValueError(f"{len(signs)} signs for {x.shape[1]} features")
+        bounds = [(None, None)] + [(0.0, None) if k > 0 else (None, 0.0) if k < 0 else (None, None) for k in signs]
 
     def loss(w: np.ndarray) -> tuple[float, np.ndarray]:
         z = w[0] + x @ w[1:]
@@ -149,7 +164,7 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2) -> Calibration:
         g = np.concatenate([[np.sum(p - y)], x.T @ (p - y) + l2 * w[1:]])
         return nll, g
 
-    res = minimize(loss, np.zeros(x.shape[1] + 1), jac=True, method="L-BFGS-B")
+    res = minimize(loss, np.zeros(x.shape[1] + 1), jac=True, method="L-BFGS-B", bounds=bounds)
     return Calibration(res.x[1:], float(res.x[0]))
 
 
