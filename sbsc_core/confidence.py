@@ -227,8 +227,11 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
     (of any class) whose footprint overlaps it by more than ``suppress_overlap`` is taken
     out, and the consensus runs again, so that such a place neither uses up its class's
     expected count (a room controller taken for a switch, while a real switch waits) nor
-    passes to its next-best class. At most ``max_rounds`` rounds; the hits refused on the
-    way come back as ``unknown`` with ``report_unknown`` (when no kept hit covers them).
+    passes to its next-best class. At most ``max_rounds`` rounds. With expected counts,
+    the as-designed model vouches for the objects still missing at the end: the refused
+    hits fill their class's count, best confidence first, where their place is free (a
+    real object seen in colour only is then kept). The hits still refused come back as
+    ``unknown`` with ``report_unknown`` (when no kept hit covers them).
     Without a calibration or with screening off this is the plain consensus. ``reliefs``:
     see :func:`hit_features` (:func:`model_reliefs` of the templates searched).
     """
@@ -252,13 +255,25 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
         depth = _clear_of(depth, weak, consensus_settings.suppress_overlap)
         colour = _clear_of(colour, weak, consensus_settings.suppress_overlap)
     hits = [h for h in hits if h.confidence is None or h.confidence >= settings.min_confidence]
+    if expected is not None:  # the as-designed counts vouch for objects still missing: the best refused fill them
+        left = {n: int(expected.get(n, 0)) - sum(h.class_id == n for h in hits) for n in classes}
+        for h in sorted(refused, key=lambda h: -(h.confidence or 0.0)):
+            if left.get(h.class_id, 0) > 0 and not _overlaps(h, hits, consensus_settings.suppress_overlap):
+                hits.append(h)
+                left[h.class_id] -= 1
+        refused = [h for h in refused if not any(h is k for k in hits)]
     if settings.report_unknown:
         for h in refused:
-            if not any(k.wall_id == h.wall_id and k.box is not None and h.box is not None
-                       and box_overlap(k.box, h.box) > consensus_settings.suppress_overlap for k in hits):
+            if not _overlaps(h, hits, consensus_settings.suppress_overlap):
                 h.unknown = True
                 hits.append(h)
     return hits
+
+
+def _overlaps(hit: ConsensusHit, hits: list[ConsensusHit], overlap: float) -> bool:
+    """Whether ``hit``'s footprint overlaps one of ``hits`` on its wall by more than ``overlap``."""
+    return any(k.wall_id == hit.wall_id and k.box is not None and hit.box is not None
+               and box_overlap(k.box, hit.box) > overlap for k in hits)
 
 
 def _clear_of(cands: list[Candidate], hits: list[ConsensusHit], overlap: float) -> list[Candidate]:

@@ -153,6 +153,10 @@ def test_screened_consensus_does_not_spend_the_count_on_a_place_like_no_class(tm
     review = screened_consensus([controller, other, switch], [], {"switch": 1, "socket": 1}, ["socket", "switch"],
                                 ConsensusSettings(), ConfidenceSettings(calibration=str(path), report_unknown=True))
     assert sorted((h.unknown, h.centre) for h in review) == [(False, (150.0, 150.0)), (True, (50.0, 50.0))]
+    two = screened_consensus([controller, other, switch], [], {"switch": 2}, ["switch"], ConsensusSettings(), s)
+    assert sorted(h.centre for h in two) == [(50.0, 50.0), (150.0, 150.0)]  # a count still open vouches for it
+    free = screened_consensus([controller, other, switch], [], None, ["socket", "switch"], ConsensusSettings(), s)
+    assert [(h.class_id, h.centre) for h in free] == [("switch", (150.0, 150.0))]
 
 
 def test_monotone_fit_never_rewards_worse_evidence() -> None:
