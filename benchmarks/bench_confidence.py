@@ -38,6 +38,7 @@ sys.path.insert(0, str(ROOT))
 from sbsc_core.confidence import (  # noqa: E402
     CALIBRATION_PATH,
     FEATURES,
+    MONOTONE,
     fit_logistic,
     hit_features,
     model_reliefs,
@@ -180,7 +181,7 @@ def main() -> int:
     yf = np.array([r for _, r in data["fit"]], float)
     xe = np.stack([f for f, _ in data["eval"]])
     ye = np.array([r for _, r in data["eval"]], float)
-    cal = fit_logistic(xf, yf)
+    cal = fit_logistic(xf, yf, signs=[MONOTONE.get(f, 0) for f in FEATURES])
     table, ece = reliability(cal.predict(xe), ye)
     _, ece_fit = reliability(cal.predict(xf), yf)
     print(f"\nfitted on {len(yf)} hits ({int(yf.sum())} right) of seeds {args.fit_seeds} {args.pairs}; "

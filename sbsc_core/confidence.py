@@ -137,10 +137,25 @@ def load_calibration(path: Path | None = None) -> Calibration | None:
     return Calibration.from_dict(json.loads(p.read_text(encoding="utf-8")))
 
 
-def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2) -> Calibration:
-    """Maximum-likelihood logistic regression with a small L2 penalty on the coefficients."""
+# The sign each feature's coefficient must have: better evidence never lowers the confidence.
+MONOTONE = {"rho_depth": 1, "colour_goodness": 1, "alpha": 1, "class_margin": 1, "lookalike_margin": 1,
+            "gain_misfit": -1, "relief_misfit": -1, "unmatched_relief": -1}
+
+
+def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int] | None = None) -> Calibration:
+    """Maximum-likelihood logistic regression with a small L2 penalty on the coefficients.
+
+    ``signs`` (one per column: +1, -1 or 0) bounds each coefficient to be >= 0, <= 0 or
+    free (e.g. from :data:`MONOTONE`): a few scenes with correlated features must not teach
+    that a worse match is more likely right.
+    """
     x = np.asarray(x, float)
     y = np.asarray(y, float)
+    bounds = None
+    if signs is not None:
+        if len(signs) != x.shape[1]:
+            raise ValueError(f"{len(signs)} signs for {x.shape[1]} features")
+        bounds = [(None, None)] + [(0.0, None) if k > 0 else (None, 0.0) if k < 0 else (None, None) for k in signs]
 
     def loss(w: np.ndarray) -> tuple[float, np.ndarray]:
         z = w[0] + x @ w[1:]
@@ -149,7 +164,7 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2) -> Calibration:
         g = np.concatenate([[np.sum(p - y)], x.T @ (p - y) + l2 * w[1:]])
         return nll, g
 
-    res = minimize(loss, np.zeros(x.shape[1] + 1), jac=True, method="L-BFGS-B")
+    res = minimize(loss, np.zeros(x.shape[1] + 1), jac=True, method="L-BFGS-B", bounds=bounds)
     return Calibration(res.x[1:], float(res.x[0]))
 
 
@@ -212,8 +227,11 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
     (of any class) whose footprint overlaps it by more than ``suppress_overlap`` is taken
     out, and the consensus runs again, so that such a place neither uses up its class's
     expected count (a room controller taken for a switch, while a real switch waits) nor
-    passes to its next-best class. At most ``max_rounds`` rounds; the hits refused on the
-    way come back as ``unknown`` with ``report_unknown`` (when no kept hit covers them).
+    passes to its next-best class. At most ``max_rounds`` rounds. With expected counts,
+    the as-designed model vouches for the objects still missing at the end: the refused
+    hits fill their class's count, best confidence first, where their place is free (a
+    real object seen in colour only is then kept). The hits still refused come back as
+    ``unknown`` with ``report_unknown`` (when no kept hit covers them).
     Without a calibration or with screening off this is the plain consensus. ``reliefs``:
     see :func:`hit_features` (:func:`model_reliefs` of the templates searched).
     """
@@ -237,13 +255,25 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
         depth = _clear_of(depth, weak, consensus_settings.suppress_overlap)
         colour = _clear_of(colour, weak, consensus_settings.suppress_overlap)
     hits = [h for h in hits if h.confidence is None or h.confidence >= settings.min_confidence]
+    if expected is not None:  # the as-designed counts vouch for objects still missing: the best refused fill them
+        left = {n: int(expected.get(n, 0)) - sum(h.class_id == n for h in hits) for n in classes}
+        for h in sorted(refused, key=lambda h: -(h.confidence or 0.0)):
+            if left.get(h.class_id, 0) > 0 and not _overlaps(h, hits, consensus_settings.suppress_overlap):
+                hits.append(h)
+                left[h.class_id] -= 1
+        refused = [h for h in refused if not any(h is k for k in hits)]
     if settings.report_unknown:
         for h in refused:
-            if not any(k.wall_id == h.wall_id and k.box is not None and h.box is not None
-                       and box_overlap(k.box, h.box) > consensus_settings.suppress_overlap for k in hits):
+            if not _overlaps(h, hits, consensus_settings.suppress_overlap):
                 h.unknown = True
                 hits.append(h)
     return hits
+
+
+def _overlaps(hit: ConsensusHit, hits: list[ConsensusHit], overlap: float) -> bool:
+    """Whether ``hit``'s footprint overlaps one of ``hits`` on its wall by more than ``overlap``."""
+    return any(k.wall_id == hit.wall_id and k.box is not None and hit.box is not None
+               and box_overlap(k.box, hit.box) > overlap for k in hits)
 
 
 def _clear_of(cands: list[Candidate], hits: list[ConsensusHit], overlap: float) -> list[Candidate]:

@@ -33,6 +33,15 @@ Additions to the paper, each a named setting:
   view) is unknown, not wall: a footprint partly seen is also correlated over its seen
   pixels only (masked NCC), needs ``min_known_share`` of it seen, and the plausibility
   checks ignore unseen pixels.
+* An object made of parts that do not touch (a radiator's columns with the wall showing
+  between them) gives a RoI per part: each model is also searched around the groups of
+  RoIs that fit together in its footprint (:func:`~sbsc_core.matching.group_boxes`, parts
+  at most ``part_gap_fraction`` of the model's shorter side apart), whose centre may lie
+  in a gap, out of reach of a search around any one part.
+* A see-through object (a tube radiator) shows the wall between its parts in the model's
+  front view, but its own sides in an oblique scan: a model whose relief encloses gaps
+  where the wall shows (below ``see_through_fraction`` of its relief: not a recess of
+  the object itself) is also tried with them closed (:func:`close_see_through`).
 * A slowly varying level of the plain wall (a step of a few mm where a misregistered
   station alone sees the wall) is subtracted before relief is thresholded for RoIs and
   the plausibility checks; the correlation keeps the scene's own relief.
@@ -53,6 +62,7 @@ from .matching import (
     cluster_boxes,
     crop_padded,
     estimate_turn,
+    group_boxes,
     match_in_rois,
     nms,
     padded_template,
@@ -474,8 +484,14 @@ def match_depth(
         found: list[Candidate] = []
         turners = []
         for model in models:
-            for deg, rot in rotated_variants(model, settings.rotations):
-                found.extend(search(cid, deg, rot, rois))
+            closed = close_see_through(model, settings.see_through_fraction) if settings.see_through_fraction > 0 else None
+            for deg, rot in rotated_variants(model, settings.rotations) + (
+                    rotated_variants(closed, settings.rotations) if closed is not None else []):
+                parts = group_boxes(rois, height=rot.shape[0], width=rot.shape[1],
+                                    gap_px=int(round(settings.part_gap_fraction * min(rot.shape))),
+                                    slack_px=settings.template_pad_px) \
+                    if settings.part_gap_fraction > 0 else []
+                found.extend(search(cid, deg, rot, rois + [b for b in parts if b not in rois]))
 
             def turned(a: float, where: list[Box], cid: str = cid, model: np.ndarray = model) -> list[Candidate]:
                 return search(cid, a, rotate_template(model, a), where)
@@ -489,6 +505,33 @@ def match_depth(
             kept = [refine_turn(turners[0], c, settings.turn_steps_deg, settings.min_turn_gain) for c in kept]
         out.extend(kept)
     return out
+
+
+def close_see_through(model: np.ndarray, relief_fraction: float) -> np.ndarray | None:
+    """``model`` with its see-through gaps closed, or None when it has none.
+
+    A gap enclosed by an object's relief (between a tube radiator's tubes, inside a
+    bracket) shows the wall in the model's straight front view, but a scanner looking from
+    above, below or the side sees the tubes' own sides there, so the scan shows relief
+    where the model has none. Each 8-connected region below ``relief_fraction`` of the
+    model's relief (the wall, not a recess of the object) that the rest encloses takes
+    the mean relief of its 1-pixel rim;
+    :func:`match_depth` tries this variant as well as the model itself.
+    """
+    peak = float(np.max(np.abs(model))) if model.size else 0.0
+    if peak <= 0:
+        return None
+    rel = np.abs(model) >= relief_fraction * peak
+    holes = ndimage.binary_fill_holes(rel) & ~rel
+    if not holes.any():
+        return None
+    lab, n = ndimage.label(holes, structure=np.ones((3, 3), bool))
+    rim = ndimage.grey_dilation(lab, size=(3, 3)) * rel
+    on = rim > 0
+    level = np.nan_to_num(np.asarray(ndimage.mean(model[on], labels=rim[on], index=np.arange(1, n + 1)), float))
+    out = model.copy()
+    out[holes] = level[lab[holes] - 1]
+    return out.astype(model.dtype)
 
 
 def refine_turn(search: Callable[[float, list[Box]], list[Candidate]], cand: Candidate,

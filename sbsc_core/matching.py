@@ -95,6 +95,41 @@ def nms(cands: list[Candidate], overlap: float, higher_is_better: bool = True,
     return kept
 
 
+def group_boxes(boxes: list[Box], *, height: int, width: int, gap_px: int, slack_px: int = 0) -> list[Box]:
+    """Boxes enclosing two or more of ``boxes`` that fit together in a ``height`` x ``width`` footprint.
+
+    The parts of one complex object need not touch: the columns of a radiator with the wall
+    showing between them are separate RoIs, and the object's centre may lie in a gap, out of
+    reach of a search around any one of them. Starting from each box, the nearest others
+    within ``gap_px`` are added while the enclosing box still fits the footprint (either
+    way round, with ``slack_px`` to spare: a RoI's edge is blurred). Returns each distinct
+    group's enclosing box once, sorted.
+    """
+    big, small = max(height, width) + slack_px, min(height, width) + slack_px
+
+    def fits(b: Box) -> bool:
+        return max(b.height, b.width) <= big and min(b.height, b.width) <= small
+
+    def gap(a: Box, b: Box) -> int:
+        return max(a.r0 - b.r1, b.r0 - a.r1, a.c0 - b.c1, b.c0 - a.c1, 0)
+
+    out: set[tuple[int, int, int, int]] = set()
+    for a in boxes:
+        if not fits(a):
+            continue
+        group, n, left = a, 1, [b for b in boxes if b is not a]
+        while True:  # grow by the nearest box within reach that keeps the group in the footprint
+            reach = [b for b in left if gap(group, b) <= gap_px and fits(group.union_box(b))]
+            if not reach:
+                break
+            b = min(reach, key=lambda b: gap(group, b))
+            group, n = group.union_box(b), n + 1
+            left = [o for o in left if o is not b and not group.intersection(o) == o.area]
+        if n >= 2:
+            out.add((group.r0, group.c0, group.r1, group.c1))
+    return [Box(*t) for t in sorted(out)]
+
+
 def crop_padded(image: np.ndarray, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
     """``image[r0:r1, c0:c1]`` where the parts outside the image are zeros."""
     h, w = image.shape[:2]

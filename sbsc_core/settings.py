@@ -163,6 +163,8 @@ class DepthRecognitionSettings:
     turn_steps_deg: tuple[float, ...] = (10.0, 5.0, 2.0, 1.0)  # every match's turn: local search steps
     min_turn_gain: float = 0.005  # ... a turn is taken when it raises rho_D by more than this
     max_peaks_per_roi: int = 4  # instances of one class one RoI may hold
+    see_through_fraction: float = 0.1  # gaps below this x a model's relief that it encloses are see-through (0: off)
+    part_gap_fraction: float = 0.25  # RoIs this close (x the model's shorter side) and fitting it: one object's parts (0: off)
     isolation_gap_px: int = 2  # side strips checked for relief start this far outside a match
     isolation_width_px: int = 3  # ... and are this wide
     isolation_relief_fraction: float = 0.5  # relief above this x the model's (median) counts

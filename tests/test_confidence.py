@@ -153,3 +153,19 @@ def test_screened_consensus_does_not_spend_the_count_on_a_place_like_no_class(tm
     review = screened_consensus([controller, other, switch], [], {"switch": 1, "socket": 1}, ["socket", "switch"],
                                 ConsensusSettings(), ConfidenceSettings(calibration=str(path), report_unknown=True))
     assert sorted((h.unknown, h.centre) for h in review) == [(False, (150.0, 150.0)), (True, (50.0, 50.0))]
+    two = screened_consensus([controller, other, switch], [], {"switch": 2}, ["switch"], ConsensusSettings(), s)
+    assert sorted(h.centre for h in two) == [(50.0, 50.0), (150.0, 150.0)]  # a count still open vouches for it
+    free = screened_consensus([controller, other, switch], [], None, ["socket", "switch"], ConsensusSettings(), s)
+    assert [(h.class_id, h.centre) for h in free] == [("switch", (150.0, 150.0))]
+
+
+def test_monotone_fit_never_rewards_worse_evidence() -> None:
+    """Two correlated features, one of them spuriously anti-correlated with the label: bounded
+    to a non-negative coefficient it gets 0 instead of a negative one."""
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=3000)
+    b = a + rng.normal(scale=0.1, size=3000)  # nearly a copy of a ...
+    y = (rng.random(3000) < 1 / (1 + np.exp(-(3 * a - 2 * b)))).astype(float)  # ... that the labels punish
+    free = fit_logistic(np.column_stack([a, b]), y)
+    bounded = fit_logistic(np.column_stack([a, b]), y, signs=[1, 1])
+    assert free.coef[1] < 0 and bounded.coef[1] >= 0 and bounded.coef[0] > 0

@@ -310,3 +310,30 @@ def test_candidates_carry_their_relief_gain_and_fit(scene) -> None:
     deep = [x for x in match_depth(deep_ortho, deep_area, depth_rois(deep_ortho, deep_area, s), templates, s)
             if x.class_id == "panel"]
     assert deep and deep[0].gain == pytest.approx(1.6, abs=0.2)
+
+
+def test_see_through_gaps_are_closed_and_solid_models_left_alone() -> None:
+    from sbsc_core.depth_recognition import close_see_through
+
+    rails = np.zeros((40, 60), np.float32)
+    rails[:, :4] = rails[:, -4:] = 0.09  # two posts
+    for r in range(0, 40, 10):
+        rails[r:r + 5, 4:-4] = 0.1  # and tubes between them, the wall showing in between
+    closed = close_see_through(rails, 0.1)
+    assert closed is not None
+    assert closed[7, 30] == pytest.approx(0.097, abs=0.005)  # a gap between tubes: the rim's mean relief
+    assert closed[0, 30] == pytest.approx(0.1) and closed[39, 30] == 0.0  # the open bottom stays wall
+    solid = np.full((20, 20), 0.01, np.float32)
+    assert close_see_through(solid, 0.1) is None
+    recess = np.full((20, 20), 0.01, np.float32)
+    recess[5:15, 5:15] = 0.004  # a socket's recess is part of the object, no gap
+    assert close_see_through(recess, 0.1) is None
+
+
+def test_parts_that_fit_one_footprint_are_grouped() -> None:
+    from sbsc_core.matching import group_boxes
+
+    parts = [Box(0, 0, 5, 40), Box(10, 0, 15, 40), Box(20, 0, 25, 40), Box(100, 100, 110, 110)]
+    assert group_boxes(parts, height=30, width=45, gap_px=6) == [Box(0, 0, 25, 40)]
+    assert group_boxes(parts, height=30, width=45, gap_px=3) == []  # too far apart to be one object
+    assert group_boxes(parts, height=12, width=45, gap_px=6) == []  # together too big for the model
