@@ -560,6 +560,10 @@ def detect_scans(
     for f in warm:
         f.cancel()  # not started yet: not needed (a worker that imports it runs a wall task later)
     timings["segmentation"] = time.perf_counter() - t
+    if len(seg.storeys) > 1:  # named before the long stages start
+        log(f"{len(seg.storeys)} storeys: " + ", ".join(
+            f"{st.id} (z {st.floor_z:.2f} to {st.ceiling_z:.2f} m, {sum(w.storey == st.id for w in seg.walls)} walls)"
+            for st in seg.storeys))
 
     t = time.perf_counter()
     progress("partition", 0.0)

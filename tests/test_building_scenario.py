@@ -52,11 +52,13 @@ def test_one_file_per_station_and_truth_with_storeys(two_storeys: Path) -> None:
     assert z.min() > s2["floor_z"] - 0.02 and z.max() < s2["ceiling_z"] + 0.02
 
 
-def test_detect_finds_both_storeys_and_their_walls_and_objects(two_storeys: Path, tmp_path: Path) -> None:
+def test_detect_finds_both_storeys_and_their_walls_and_objects(two_storeys: Path, tmp_path: Path, capsys) -> None:
     scans = [str(p) for p in sorted((two_storeys / "stations").iterdir())]
     out = tmp_path / "det"
-    assert main(["-q", "detect", *scans, "--models", str(two_storeys / "models"),
+    assert main(["detect", *scans, "--models", str(two_storeys / "models"),
                  "--expected", str(two_storeys / "expected.json"), "--out", str(out)]) == 0
+    err = capsys.readouterr().err  # the log names the storeys, early and with their results
+    assert "2 storeys: S1 (z 0.00 to " in err and "storey S2: floor z = " in err and " of 13 expected" in err
     doc = json.loads((out / "detections.json").read_text())
     truth = json.loads((two_storeys / "ground_truth.json").read_text())
     assert [s["id"] for s in doc["storeys"]] == ["S1", "S2"]
