@@ -2,10 +2,12 @@
 
 Every accepted object (recognized, relabelled or added by a reviewer) is cut out of its
 wall's colour and depth orthoimages over exactly its footprint. Each class of the project's
-library is copied with its own views and ``model.json``, and gets those crops as extra front
-views (``colour_<k>.png``, which the library reader loads like any other view) and as one
-further depth model (``depth_101.npy``: the per-pixel median of the upright objects' relief
-above the wall level around each, so that the scanner noise of one crop is averaged out;
+library is copied with its own views and ``model.json``, and gets one learnt front view
+(``colour_101.png``: the per-pixel median of the crops, which the library reader loads like
+any other view) and one further depth model (``depth_101.npy``: the per-pixel median of the
+upright objects' relief above the wall level around each). Medians average the scanner noise
+of single crops out, and one view and one model per class keep recognition's cost low
+(each further view or model is one more correlation per class and wall);
 the reader loads ``depth_<k>.npy`` as further depth models and recognition keeps the best
 match of all a class's models, see docs/model-library.md). The result is a library a
 re-run of the project, or a run on another floor of the same building, can use like any
@@ -27,7 +29,7 @@ from sqlalchemy.orm import Session
 from .models import DetectionRow, Project, WallRow
 
 MIN_SEEN = 0.6  # a crop with less of its footprint scanned is left out
-MAX_VIEWS = 4  # extra colour views per class at most (the surest first): each is a further correlation
+MAX_VIEWS = 12  # crops per class at most (the surest first), merged into one view and one depth model
 MAX_TURN_DEG = 5.0  # an object turned by more (from upright or upside down) gives no crop
 MIN_DEPTH_SAMPLES = 1  # crops a learnt depth model needs at least
 EXEMPLAR_BASE = 100  # exemplar views are colour_101.png, colour_102.png, ...
@@ -89,6 +91,7 @@ def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_
 
     added: dict[str, int] = {}
     reliefs: dict[str, list[np.ndarray]] = {}
+    views: dict[str, list[np.ndarray]] = {}
     # the surest first: reviewer-added objects, then by confidence / alpha
     dets.sort(key=lambda d: -(2.0 if d.source == "reviewer" else
                               (d.confidence if d.confidence is not None else (d.alpha or 0.0))))
@@ -111,17 +114,34 @@ def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_
         relief = _relief(depth, win, ring_px=max(2, (r1 - r0) // 4)) if depth is not None else None
         if depth is not None and relief is None:
             continue  # mostly unseen
-        k = added.get(d.class_id, 0) + 1
-        # numbered after the library's own views: colour_101.png, colour_102.png, ...
-        cv2.imwrite(str(cdir / f"colour_{EXEMPLAR_BASE + k}.png"), colour[r0:r1, c0:c1])
+        views.setdefault(d.class_id, []).append(colour[r0:r1, c0:c1])
         if relief is not None:
             reliefs.setdefault(d.class_id, []).append(relief.astype(np.float32))
-        added[d.class_id] = k
+        added[d.class_id] = added.get(d.class_id, 0) + 1
+    # numbered after the library's own views: colour_101.png, depth_101.npy
+    for cid, crops in views.items():
+        view = learnt_view(crops)
+        if view is not None:
+            cv2.imwrite(str(dest / cid / f"colour_{EXEMPLAR_BASE + 1}.png"), view)
     for cid, crops in reliefs.items():
         model = learnt_depth(crops)
         if model is not None:
             np.save(dest / cid / f"depth_{EXEMPLAR_BASE + 1}.npy", model)
     return added
+
+
+def _common(crops: list[np.ndarray]) -> list[np.ndarray]:
+    """The crops of the most common size (a wall of another pixel size gives another)."""
+    shapes = [c.shape for c in crops]
+    shape = max(set(shapes), key=shapes.count)
+    return [c for c in crops if c.shape == shape]
+
+
+def learnt_view(crops: list[np.ndarray]) -> np.ndarray | None:
+    """The per-pixel median of the colour crops of one class (BGR uint8); None without crops."""
+    if not crops:
+        return None
+    return np.median(np.stack(_common(crops)), axis=0).round().astype(np.uint8)
 
 
 def upright(rotation_deg: float) -> bool:
@@ -137,9 +157,7 @@ def learnt_depth(crops: list[np.ndarray]) -> np.ndarray | None:
     one (a wall of another pixel size) are left out."""
     if len(crops) < MIN_DEPTH_SAMPLES:
         return None
-    shapes = [c.shape for c in crops]
-    shape = max(set(shapes), key=shapes.count)
-    stack = np.stack([c for c in crops if c.shape == shape])
+    stack = np.stack(_common(crops))
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pixels stay NaN
         model = np.nanmedian(stack, axis=0).astype(np.float32)

@@ -25,3 +25,13 @@ def test_learnt_depth_is_the_median_of_the_crops_of_the_common_size() -> None:
     assert model.shape == (16, 16) and np.isfinite(model).all()
     assert np.abs(model - relief).max() < np.abs(crops[1] - relief).max()  # less noisy than one crop
     assert learnt_depth([]) is None
+
+
+def test_learnt_view_is_the_median_colour_crop() -> None:
+    from app.exemplars import learnt_view
+
+    crops = [np.full((16, 16, 3), v, np.uint8) for v in (10, 30, 200)]
+    crops.append(np.zeros((8, 8, 3), np.uint8))  # another size: left out
+    view = learnt_view(crops)
+    assert view.dtype == np.uint8 and view.shape == (16, 16, 3) and int(view[0, 0, 0]) == 30
+    assert learnt_view([]) is None
