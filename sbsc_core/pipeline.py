@@ -491,6 +491,18 @@ def _as_done(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int) 
             f.cancel()
 
 
+def _in_order(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int) -> Iterator:
+    """Results of ``fn(*job)`` in job order, computed as by :func:`_as_done` (a result that is
+    ready early waits for the ones before it)."""
+    ready: dict[int, object] = {}
+    nxt = 0
+    for k, res in _as_done(ex, jobs, fn, in_flight):
+        ready[k] = res
+        while nxt in ready:
+            yield ready.pop(nxt)
+            nxt += 1
+
+
 def detect_scans(
     scans: Sequence[Path],
     library: ModelLibrary,
