@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
-from .partition import RECORD, ScanPart, _part_chunks
+from .partition import ScanPart, _part_chunks, append_records, folder_records
 from .settings import CeilingSettings, OrthoimageSettings
 from .types import Candidate, Orthoimage, Segmentation, WallFrame
 
@@ -129,23 +129,13 @@ def ceiling_part(part: ScanPart, origin: np.ndarray, tiles: list[CeilingTile], w
             keep, pixel = ortho_pixels(uvd, t.frame, ortho)
             if not len(pixel):
                 continue
-            rec = np.empty(len(pixel), RECORD)
-            rec["pixel"] = pixel
-            rec["depth"] = uvd[keep, 2]
-            rec["rgb"] = chunk.rgb[idx[keep]]
-            d = _tile_dir(root, k)
-            d.mkdir(parents=True, exist_ok=True)
-            with open(d / f"{part.key}.rec", "ab") as fh:
-                rec.tofile(fh)
-            written[k] += len(rec)
+            written[k] += append_records(_tile_dir(root, k), part.key, pixel, uvd[keep, 2], chunk.rgb[idx[keep]])
     return written
 
 
 def tile_orthoimage(scratch: str | Path, k: int, tile: CeilingTile, ortho: OrthoimageSettings) -> Orthoimage:
     """The orthoimage of tile number ``k`` from its partition."""
-    d = _tile_dir(Path(scratch), k)
-    files = sorted(d.glob("*.rec")) if d.is_dir() else []
-    rec = np.concatenate([np.fromfile(f, RECORD) for f in files]) if files else np.zeros(0, RECORD)
+    rec = folder_records(_tile_dir(Path(scratch), k))
     return orthoimage_from_pixels(tile.id, tile.frame, rec["pixel"].astype(np.int64), rec["depth"], rec["rgb"], ortho)
 
 

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
-from .partition import RECORD, ScanPart, _part_chunks
+from .partition import ScanPart, _part_chunks, append_records, folder_records
 from .settings import ColumnSettings, OrthoimageSettings
 from .types import Orthoimage, PointCloud, Segmentation, WallFrame
 
@@ -251,15 +251,7 @@ def column_part(part: ScanPart, origin: np.ndarray, faces: list[ColumnFace], rea
             keep, pixel = ortho_pixels(uvd, f.frame, ortho)
             if not len(pixel):
                 continue
-            rec = np.empty(len(pixel), RECORD)
-            rec["pixel"] = pixel
-            rec["depth"] = uvd[keep, 2]
-            rec["rgb"] = chunk.rgb[near[keep]]
-            d = _face_dir(root, k)
-            d.mkdir(parents=True, exist_ok=True)
-            with open(d / f"{part.key}.rec", "ab") as fh:
-                rec.tofile(fh)
-            written[k] += len(rec)
+            written[k] += append_records(_face_dir(root, k), part.key, pixel, uvd[keep, 2], chunk.rgb[near[keep]])
     return written
 
 
@@ -269,9 +261,7 @@ def _face_centre(f: ColumnFace) -> tuple[float, float]:
 
 
 def face_orthoimage(scratch: str | Path, k: int, face: ColumnFace, ortho: OrthoimageSettings) -> Orthoimage:
-    d = _face_dir(Path(scratch), k)
-    files = sorted(d.glob("*.rec")) if d.is_dir() else []
-    rec = np.concatenate([np.fromfile(f, RECORD) for f in files]) if files else np.zeros(0, RECORD)
+    rec = folder_records(_face_dir(Path(scratch), k))
     return orthoimage_from_pixels(face.id, face.frame, rec["pixel"].astype(np.int64), rec["depth"], rec["rgb"], ortho)
 
 

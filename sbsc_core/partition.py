@@ -412,6 +412,27 @@ def _read_records(files: Sequence[Path]) -> np.ndarray:
     return out
 
 
+def append_records(folder: Path, key: str, pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray) -> int:
+    """Append binned points (orthoimage pixel, depth, colour) to ``folder/key.rec``; their count.
+
+    The partition format of any surface (a ceiling tile, a column face): read it back with
+    :func:`folder_records`.
+    """
+    rec = np.empty(len(pixel), RECORD)
+    rec["pixel"] = pixel
+    rec["depth"] = depth
+    rec["rgb"] = rgb
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / f"{key}.rec", "ab") as fh:
+        rec.tofile(fh)
+    return len(rec)
+
+
+def folder_records(folder: Path) -> np.ndarray:
+    """Every record that :func:`append_records` wrote to ``folder``, in a fixed order of the parts."""
+    return _read_records(sorted(folder.glob("*.rec")) if folder.is_dir() else [])
+
+
 def wall_records(scratch: Path | str, w: int, band: int | None = None) -> np.ndarray:
     """The records of wall number ``w`` (of one band of it, or all), in a fixed order of the parts."""
     d = _wall_dir(Path(scratch), w)
