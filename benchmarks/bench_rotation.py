@@ -4,7 +4,7 @@ rotatable objects turned by random angles (issue 13, item 2).
 Usage (heavy for Scenario I: run under the shared lock)::
 
     flock /tmp/sbsc-heavy.lock python benchmarks/bench_rotation.py \
-        [--scene sample_projects/scenario_I.yaml] [--fraction 0.34] [--seeds 31 32] [--work DIR]
+        [--scene sbsc_core/data/scenario_I.yaml] [--fraction 0.34] [--seeds 31 32] [--work DIR]
 
 For each seed the scene gets ``object_rotation: {fraction, seed}``, is simulated and
 detected with and without ``--expected``. Printed per run: objects, turned objects, TP %,
@@ -63,7 +63,7 @@ def report(scan: Path, out: Path, radius: float) -> str:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scene", type=Path, default=ROOT / "sample_projects" / "scenario_I.yaml")
+    ap.add_argument("--scene", type=Path, default=ROOT / "sbsc_core" / "data" / "scenario_I.yaml")
     ap.add_argument("--fraction", type=float, default=0.34)
     ap.add_argument("--seeds", type=int, nargs="+", default=[31])
     ap.add_argument("--step", type=float, default=None, help="scanner angular step (degrees)")
