@@ -175,9 +175,7 @@ def detect_ceilings(parts: list[ScanPart], origin: np.ndarray, seg: Segmentation
                     s, *, executor, scratch: Path, parked: Path, in_flight: int, progress, timings: dict,
                     log) -> CeilingResults:
     """Bin the ceilings' points into tiles, then run the walls' stages on every tile (see the module)."""
-    from .colour_recognition import learn_prototypes
-    from .pipeline import _in_order, _search_classes, park_wall
-    from .templates import make_templates
+    from .pipeline import _search_classes, surface_stage
 
     t0 = time.perf_counter()
     tiles = ceiling_tiles(seg, s.ceilings)
@@ -187,16 +185,9 @@ def detect_ceilings(parts: list[ScanPart], origin: np.ndarray, seg: Segmentation
     progress("ceilings", 0.0)
     walls = [w.frame for w in seg.walls]
     jobs = [(part, origin, tiles, walls, str(scratch), s.orthoimage, s.ceilings.wall_clear_m) for part in parts]
-    kept = np.zeros(len(tiles), np.int64)
-    for written in _in_order(executor, jobs, ceiling_part, in_flight):
-        kept += np.asarray(written, np.int64)
-    templates = make_templates(library, s.orthoimage.pixel_m, classes)
-    prototypes = learn_prototypes(templates, s.colour)
-    tile_jobs = [(str(scratch), k, t, templates, prototypes, s) for k, t in enumerate(tiles)]
-    results: dict = {}
-    for i, (tid, res, _) in enumerate(_in_order(executor, tile_jobs, ceiling_tile_job, in_flight)):
-        results[tid] = park_wall(res, parked)
-        progress("ceilings", (i + 1) / len(tiles))
+    kept, results, templates = surface_stage(
+        executor, stage="ceilings", part_fn=ceiling_part, part_jobs=jobs, job_fn=ceiling_tile_job, surfaces=tiles,
+        library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress)
     timings["ceilings"] = time.perf_counter() - t0
     log(f"{len(tiles)} ceiling tiles: {int(kept.sum()):,} points, searched for {', '.join(classes)} "
         f"in {timings['ceilings']:.1f} s")

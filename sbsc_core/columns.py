@@ -291,9 +291,7 @@ def detect_columns(parts: list[ScanPart], origin: np.ndarray, columns: list[Foun
                    expected: dict | None, s, *, executor, scratch: Path, parked: Path, in_flight: int, progress,
                    timings: dict, log) -> ColumnResults:
     """Bin the columns' points into their faces, then run the walls' stages on every face."""
-    from .colour_recognition import learn_prototypes
-    from .pipeline import _in_order, _search_classes, park_wall
-    from .templates import make_templates
+    from .pipeline import _search_classes, surface_stage
 
     t0 = time.perf_counter()
     faces = column_faces(columns)
@@ -304,16 +302,9 @@ def detect_columns(parts: list[ScanPart], origin: np.ndarray, columns: list[Foun
     by_id = {c.id: c for c in columns}
     reach = [max(by_id[f.column].size_m) / 2 * math.sqrt(2) + s.orthoimage.depth_range_m[1] + 0.05 for f in faces]
     jobs = [(part, origin, faces, reach, str(scratch), s.orthoimage) for part in parts]
-    kept = np.zeros(len(faces), np.int64)
-    for written in _in_order(executor, jobs, column_part, in_flight):
-        kept += np.asarray(written, np.int64)
-    templates = make_templates(library, s.orthoimage.pixel_m, classes)
-    prototypes = learn_prototypes(templates, s.colour)
-    face_jobs = [(str(scratch), k, f, templates, prototypes, s) for k, f in enumerate(faces)]
-    results: dict = {}
-    for i, (fid, res, _) in enumerate(_in_order(executor, face_jobs, column_face_job, in_flight)):
-        results[fid] = park_wall(res, parked)
-        progress("columns", (i + 1) / len(faces))
+    kept, results, templates = surface_stage(
+        executor, stage="columns", part_fn=column_part, part_jobs=jobs, job_fn=column_face_job, surfaces=faces,
+        library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress)
     timings["columns"] = time.perf_counter() - t0
     log(f"{len(columns)} columns ({', '.join(c.shape for c in columns)}), {len(faces)} faces: "
         f"{int(kept.sum()):,} points, searched for {', '.join(classes)} in {timings['columns']:.1f} s")

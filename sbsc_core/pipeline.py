@@ -503,6 +503,30 @@ def _in_order(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int)
             nxt += 1
 
 
+def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_jobs: list[tuple], job_fn: Callable,
+                  surfaces: Sequence, library: ModelLibrary, classes: list[str], s: DetectionSettings,
+                  scratch: Path, parked: Path, in_flight: int, progress: Progress,
+                  ) -> tuple[np.ndarray, dict[str, WallResult], dict[str, ModelTemplate]]:
+    """A stage on surfaces beyond the walls (ceiling tiles, column faces), run as the walls' is.
+
+    ``part_fn(*job)`` bins one scan part's points into the surfaces' partitions and returns
+    the points written per surface; then ``job_fn(scratch, k, surface, templates, prototypes,
+    s)`` runs the walls' stages on surface number ``k`` and returns ``(id, result, timings)``.
+    Returns the points binned per surface, the results by surface id (their images parked
+    in ``parked``, :func:`park_wall`) and the templates of ``classes``.
+    """
+    kept = np.zeros(len(surfaces), np.int64)
+    for _, written in _as_done(executor, part_jobs, part_fn, in_flight):
+        kept += np.asarray(written, np.int64)
+    templates, prototypes = _templates_job(library, s, classes)
+    jobs = [(str(scratch), k, sf, templates, prototypes, s) for k, sf in enumerate(surfaces)]
+    results: dict[str, WallResult] = {}
+    for i, (sid, res, _) in enumerate(_in_order(executor, jobs, job_fn, in_flight)):
+        results[sid] = park_wall(res, parked)
+        progress(stage, (i + 1) / len(surfaces))
+    return kept, results, templates
+
+
 def detect_scans(
     scans: Sequence[Path],
     library: ModelLibrary,
