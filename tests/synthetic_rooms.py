@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sbsc_core.types import Orthoimage, PointCloud, WallFrame
+from sbsc_core.types import Orthoimage, PointCloud, Wall, WallFrame
 
 RGB = tuple[int, int, int]
 
@@ -68,6 +68,15 @@ def face_frame(a: Sequence[float], b: Sequence[float], height: float, floor_z: f
     return WallFrame(origin=np.array([b[0], b[1], floor_z]), axis_u=np.array([-e[0], -e[1], 0.0]),
                      axis_v=np.array([0.0, 0.0, 1.0]), normal=np.array([-e[1], e[0], 0.0]),
                      width_m=float(np.linalg.norm(b - a)), height_m=float(height))
+
+
+def plan_wall(wid: str, a: Sequence[float], b: Sequence[float], height: float, storey: str = "S1") -> Wall:
+    """A segmented wall from plan point ``a`` to ``b`` (seen from the room on its left), no points."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    e = (b - a) / np.linalg.norm(b - a)
+    frame = WallFrame(np.array([a[0], a[1], 0.0]), np.array([e[0], e[1], 0.0]), np.array([0.0, 0.0, 1.0]),
+                      np.array([e[1], -e[0], 0.0]), float(np.linalg.norm(b - a)), height)
+    return Wall(wid, frame, np.zeros(0, np.int64), storey)
 
 
 def _grid(u0: float, u1: float, v0: float, v1: float, step: float, rng: np.random.Generator

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from functools import partial
 
 import numpy as np
 import pytest
@@ -11,16 +12,10 @@ from sbsc_core.ceilings import ceiling_part, ceiling_tiles, in_core, tile_orthoi
 from sbsc_core.io.ply import write_ply
 from sbsc_core.partition import plan_parts, scan_origin
 from sbsc_core.settings import CeilingSettings, OrthoimageSettings
-from sbsc_core.types import Box, Candidate, Segmentation, Storey, Wall, WallFrame
+from sbsc_core.types import Box, Candidate, Segmentation, Storey
+from tests.synthetic_rooms import plan_wall
 
-
-def _wall(wid: str, a, b, height: float = 2.8) -> Wall:
-    """A wall from plan point a to b (seen from the room on its left)."""
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    e = (b - a) / np.linalg.norm(b - a)
-    frame = WallFrame(np.array([a[0], a[1], 0.0]), np.array([e[0], e[1], 0.0]), np.array([0.0, 0.0, 1.0]),
-                      np.array([e[1], -e[0], 0.0]), float(np.linalg.norm(b - a)), height)
-    return Wall(wid, frame, np.zeros(0, np.int64), "S1")
+_wall = partial(plan_wall, height=2.8)
 
 
 def _room(w: float = 13.0, d: float = 7.0) -> Segmentation:

@@ -4,21 +4,17 @@ from __future__ import annotations
 
 import json
 import math
+from functools import partial
 
 import numpy as np
 import pytest
 
 from sbsc_core.columns import column_faces, find_columns
 from sbsc_core.settings import ColumnSettings
-from sbsc_core.types import PointCloud, Segmentation, Storey, Wall, WallFrame
+from sbsc_core.types import PointCloud, Segmentation, Storey
+from tests.synthetic_rooms import plan_wall
 
-
-def _wall(wid: str, a, b, height: float = 3.0) -> Wall:
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    e = (b - a) / np.linalg.norm(b - a)
-    frame = WallFrame(np.array([a[0], a[1], 0.0]), np.array([e[0], e[1], 0.0]), np.array([0.0, 0.0, 1.0]),
-                      np.array([e[1], -e[0], 0.0]), float(np.linalg.norm(b - a)), height)
-    return Wall(wid, frame, np.zeros(0, np.int64), "S1")
+_wall = partial(plan_wall, height=3.0)
 
 
 def _scene(rng) -> tuple[PointCloud, Segmentation]:
