@@ -32,8 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .ceilings import MemoryPart, part_chunks
 from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
-from .partition import ScanPart, _part_chunks, append_records, folder_records
+from .partition import ScanPart, append_records, folder_records
 from .settings import ColumnSettings, OrthoimageSettings
 from .types import Orthoimage, PointCloud, Segmentation, WallFrame
 
@@ -235,13 +236,13 @@ def _face_dir(scratch: Path, k: int) -> Path:
     return scratch / "columns" / f"{k:05d}"
 
 
-def column_part(part: ScanPart, origin: np.ndarray, faces: list[ColumnFace], reach_m: list[float], scratch: str,
+def column_part(part: ScanPart | MemoryPart, origin: np.ndarray, faces: list[ColumnFace], reach_m: list[float], scratch: str,
                 ortho: OrthoimageSettings) -> list[int]:
     """Stream one part and append each face's binned points to its partition (records per face)."""
     root = Path(scratch)
     written = [0] * len(faces)
     centres = np.array([f.centre if f.centre is not None else _face_centre(f) for f in faces])
-    for chunk in _part_chunks(part, origin):
+    for chunk in part_chunks(part, origin):
         xy = chunk.xyz[:, :2].astype(np.float64) + origin[:2]
         for k, f in enumerate(faces):
             near = np.flatnonzero(np.hypot(xy[:, 0] - centres[k, 0], xy[:, 1] - centres[k, 1]) < reach_m[k])
@@ -287,9 +288,9 @@ class ColumnResults:
         return [f.surface() for f in self.faces]
 
 
-def detect_columns(parts: list[ScanPart], origin: np.ndarray, columns: list[FoundColumn], library,
+def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray, columns: list[FoundColumn], library,
                    expected: dict | None, s, *, executor, scratch: Path, parked: Path, in_flight: int, progress,
-                   timings: dict, log) -> ColumnResults:
+                   timings: dict, log, part_executor=None) -> ColumnResults:
     """Bin the columns' points into their faces, then run the walls' stages on every face."""
     from .pipeline import _search_classes, surface_stage
 
@@ -304,8 +305,9 @@ def detect_columns(parts: list[ScanPart], origin: np.ndarray, columns: list[Foun
     jobs = [(part, origin, faces, reach, str(scratch), s.orthoimage) for part in parts]
     kept, results, templates = surface_stage(
         executor, stage="columns", part_fn=column_part, part_jobs=jobs, job_fn=column_face_job, surfaces=faces,
-        library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress)
+        library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress,
+        part_executor=part_executor)
     timings["columns"] = time.perf_counter() - t0
     log(f"{len(columns)} columns ({', '.join(c.shape for c in columns)}), {len(faces)} faces: "
         f"{int(kept.sum()):,} points, searched for {', '.join(classes)} in {timings['columns']:.1f} s")
-    return ColumnResults(results, templates, classes, columns, faces)
+    return ColumnResults(results, templates, classes, columns, [f for f in faces if f.id in results])
