@@ -666,6 +666,7 @@ def detect_scans(
         for d in result.detections:
             d.surface = kinds.get(d.wall_id)
             if d.wall_id in faces:  # a round column's face is unrolled: put the object back on it
+                d.u = faces[d.wall_id].arc_u(d.u)
                 d.position = faces[d.wall_id].to_world(d.u, d.v)
         result.surfaces = surfaces
     timings["total"] = time.perf_counter() - t0

@@ -293,6 +293,7 @@ class ColumnSettings:
     max_side_m: float = 1.5  # ... and at most this wide
     round_rms_m: float = 0.012  # round when a circle fits its points within this (RMS)
     wall_clear_m: float = 0.15  # points this close to a wall's plane are the wall's
+    wrap_m: float = 0.4  # a round column's unrolled image repeats this much of its start at its end (the seam)
 
 
 @dataclass
