@@ -275,6 +275,11 @@ class CeilingSettings:
     tile_m: float = 6.0  # a storey's ceiling is cut into tiles at most this big each way
     overlap_m: float = 0.3  # ... each grown by this on every side (more than half an object)
     wall_clear_m: float = 0.05  # points this close to a wall's plane are the wall's, not the ceiling's
+    # stepped ceilings: rooms whose ceiling is lower than the storey's get a level of their own
+    level_cell_m: float = 0.25  # plan cells whose top (the ceiling above them) is measured
+    level_max_drop_m: float = 1.0  # a lower ceiling is at most this far below the storey's
+    level_tolerance_m: float = 0.03  # a cell whose top is this close to a level is under it
+    level_min_area_m2: float = 2.0  # a lower ceiling covers at least this much of the plan
 
 
 @dataclass
@@ -289,6 +294,7 @@ class ColumnSettings:
     max_side_m: float = 1.5  # ... and at most this wide
     round_rms_m: float = 0.012  # round when a circle fits its points within this (RMS)
     wall_clear_m: float = 0.15  # points this close to a wall's plane are the wall's
+    wrap_m: float = 0.4  # a round column's unrolled image repeats this much of its start at its end (the seam)
 
 
 @dataclass
