@@ -107,12 +107,17 @@ def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSetting
         raise NoWallsError("no walls found: the scan has no points")
     xyz = cloud.xyz
     box = dense_box(xyz, s, where=", ".join(cloud.sources) or "scan")
-    stray = n - _count_inside(xyz, box)
-
     # regular subsample of the dense part for the levels and for fitting
     step = max(1, math.ceil(n / (2 * s.fit_max_points)))
-    sample = xyz[::step]
-    sample = sample[inside_box(sample, box)]
+    if step == 1:  # the sample is the dense part itself: one test of the box
+        inside = inside_box(xyz, box)
+        stray = n - int(np.count_nonzero(inside))
+        sample = xyz[inside]
+        del inside
+    else:
+        stray = n - _count_inside(xyz, box)
+        sample = xyz[::step]
+        sample = sample[inside_box(sample, box)]
     levels = find_storeys(sample[:, 2], s, sample[:, :2])
     multi = len(levels) > 1
     z0 = float(cloud.origin[2])
