@@ -274,3 +274,28 @@ def test_bcf_viewpoints_from_below_a_ceiling_and_beside_a_column(tmp_path):
             assert (eye - p) @ n > 1.0 and abs(look[2]) < 1e-9 and look @ n == pytest.approx(-1.0)
         seen.add(it.surface)
     assert seen == {"wall", "ceiling", "column"}
+
+
+def test_commands_with_ceilings_and_columns(tmp_path, capsys):
+    """``sbsc export-ifc`` counts ceilings and columns; ``sbsc compare`` writes the report and
+    the BCF and gives the verdicts per kind of surface."""
+    import json
+
+    from sbsc_core.cli import main
+
+    det = tmp_path / "detections.json"
+    det.write_text(json.dumps(detections_of(truth())))
+    assert main(["-q", "export-ifc", str(det), "--out", str(tmp_path / "asis.ifc"), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["ceilings"] == 2 and summary["columns"] == 2
+    design, _ = _design(tmp_path, seed=1)
+    out = tmp_path / "cmp"
+    assert main(["-q", "compare", "--as-designed", str(design), "--detections", str(det), "--out", str(out),
+                 "--json"]) == 0
+    by_surface = json.loads(capsys.readouterr().out)["summary_by_surface"]
+    assert set(by_surface) == {"wall", "ceiling", "column"}
+    data = json.loads((out / "comparison.json").read_text())
+    assert data["summary_by_surface"] == by_surface
+    assert {it["surface"] for it in data["items"]} == {"wall", "ceiling", "column"}
+    html = (out / "report.html").read_text()
+    assert "H-C" in html and "H-COL1-N" in html  # ceilings and planar column faces drawn like walls
