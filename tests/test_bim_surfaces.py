@@ -299,3 +299,30 @@ def test_commands_with_ceilings_and_columns(tmp_path, capsys):
     assert {it["surface"] for it in data["items"]} == {"wall", "ceiling", "column"}
     html = (out / "report.html").read_text()
     assert "H-C" in html and "H-COL1-N" in html  # ceilings and planar column faces drawn like walls
+
+
+def test_turned_survey_frame_puts_surface_objects_back(tmp_path):
+    """At UTM coordinates, turned in plan: ceilings and columns go to the local frame with the
+    walls, and every object comes back within 1 mm through the map conversion."""
+    import math
+
+    from tests.test_bim_georeference import UTM, _turned, world_positions
+
+    doc = detections_of(truth())
+    turned = _turned(doc, 23.5, UTM)
+    a = math.radians(23.5)
+    r = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    for s in doc["surfaces"]:
+        s = {**s, "origin": list(r @ np.asarray(s["origin"]) + UTM),
+             **{k: list(r @ np.asarray(s[k])) for k in ("axis_u", "axis_v", "normal")}}
+        if "centre" in s:
+            s["centre"] = list((r @ np.array([*s["centre"], 0.0]) + UTM)[:2])
+        turned["surfaces"] = [*[x for x in turned["surfaces"] if x["id"] != s["id"]], s]
+    model = export_ifc(turned, schema="IFC4", crs="EPSG:25832")
+    world_pos, largest = world_positions(model)
+    assert largest < 1000.0
+    expected = {d["id"]: np.asarray(d["position"]) for d in turned["detections"]}
+    assert set(world_pos) == set(expected)
+    assert max(float(np.linalg.norm(world_pos[k] - expected[k])) for k in expected) < 1e-3
+    for c in model.by_type("IfcColumn"):  # the columns stand in the local frame, not at UTM coordinates
+        assert np.abs(world(c)[:2, 3]).max() < 1000.0
