@@ -326,3 +326,44 @@ def test_turned_survey_frame_puts_surface_objects_back(tmp_path):
     assert max(float(np.linalg.norm(world_pos[k] - expected[k])) for k in expected) < 1e-3
     for c in model.by_type("IfcColumn"):  # the columns stand in the local frame, not at UTM coordinates
         assert np.abs(world(c)[:2, 3]).max() < 1000.0
+
+
+def _two_storey_truth(lift: float = 3.5) -> dict:
+    """The two halls stacked: a truth with ``storeys``, ids prefixed by the storey."""
+    one = truth()
+    t = {"schema": "sbsc.truth/1", "storeys": [{"id": "S1", "floor_z": 0.0, "ceiling_z": 3.0},
+                                               {"id": "S2", "floor_z": lift, "ceiling_z": lift + 3.0}],
+         "walls": [], "openings": [], "objects": [], "surfaces": [], "columns": []}
+    up = np.array([0.0, 0.0, 1.0])
+    for sid, dz in (("S1", 0.0), ("S2", lift)):
+        t["walls"] += [{**w, "id": f"{sid}-{w['id']}", "storey": sid, "origin": list(np.add(w["origin"], dz * up))}
+                       for w in one["walls"]]
+        t["openings"] += [{**o, "wall": f"{sid}-{o['wall']}"} for o in one["openings"]]
+        t["objects"] += [{**o, "wall": f"{sid}-{o['wall']}", "storey": sid,
+                          "position": list(np.add(o["position"], dz * up))} for o in one["objects"]]
+        t["surfaces"] += [{**s, "id": f"{sid}-{s['id']}", "storey": sid, "origin": list(np.add(s["origin"], dz * up)),
+                           **({"column": f"{sid}-{s['column']}"} if s.get("column") else {})} for s in one["surfaces"]]
+    return t
+
+
+def test_design_and_compare_of_two_storeys(tmp_path):
+    from sbsc_core.bim.compare import compare
+    from sbsc_core.bim.design import read_as_designed, write_as_designed_ifc
+
+    t = _two_storey_truth()
+    path = tmp_path / "design.ifc"
+    res = write_as_designed_ifc(t, path, seed=5)
+    assert validate(path) == []
+    f = open_ifc(path)
+    assert sorted(s.Name for s in f.by_type("IfcBuildingStorey")) == ["storey S1", "storey S2"]
+    for el in [*f.by_type("IfcCovering"), *f.by_type("IfcColumn")]:
+        want = "storey S2" if el.Tag.startswith("S2-") else "storey S1"
+        assert ifcopenshell.util.element.get_container(el).Name == want
+    diffs = res["design_differences"]
+    cmp = compare(read_as_designed(path), detections_of(t), 0.10)
+    by_kind = cmp.summary_by_surface()
+    status = {"removed": "unexpected", "moved": "displaced", "added": "missing"}
+    for kind in ("wall", "ceiling", "column"):
+        want = {s: sum(d["surface"] == kind and status[d["kind"]] == s for d in diffs) for s in status.values()}
+        assert {s: by_kind[kind][s] for s in want} == want, (kind, by_kind[kind])
+        assert by_kind[kind]["not_scanned"] == 0
