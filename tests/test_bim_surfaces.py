@@ -367,3 +367,22 @@ def test_design_and_compare_of_two_storeys(tmp_path):
         want = {s: sum(d["surface"] == kind and status[d["kind"]] == s for d in diffs) for s in status.values()}
         assert {s: by_kind[kind][s] for s in want} == want, (kind, by_kind[kind])
         assert by_kind[kind]["not_scanned"] == 0
+
+
+def test_design_objects_without_connections_find_their_ceiling_or_column(tmp_path):
+    """A design that does not connect its objects to their hosts: each is on the ceiling
+    above it or the column it stands beside, not on the nearest wall."""
+    from sbsc_core.bim.design import read_as_designed
+
+    path, _ = _design(tmp_path, seed=2)
+    connected = read_as_designed(path)
+    f = ifcopenshell.open(str(path))
+    for rel in f.by_type("IfcRelConnectsElements"):
+        f.remove(rel)
+    loose = tmp_path / "loose.ifc"
+    f.write(str(loose))
+    got = read_as_designed(loose)
+    assert len(got.objects) == len(connected.objects)
+    for a, b in zip(connected.objects, got.objects, strict=True):
+        assert (a.guid, a.surface) == (b.guid, b.surface)
+        assert np.linalg.norm(a.position - b.position) <= 0.001

@@ -47,6 +47,7 @@ from .export import (
     storey_elevation,
     write_ifc_atomic,
 )
+from .surfaces import surface_coords, surface_normal, tangent_frame
 
 READABLE_SCHEMAS = ("IFC2X3", "IFC4", "IFC4X3")
 HOST_MAX_DISTANCE_M = 0.60  # an object's centre may stand this far in front of its wall face
@@ -220,7 +221,7 @@ def _wall_faces(matrix: np.ndarray, verts_world: np.ndarray) -> tuple[WallFrame,
     return front, back, float(b1 - b0)
 
 
-def _ceiling_surface(guid: str, name: str, matrix: np.ndarray, verts: np.ndarray) -> Surface:
+def _ceiling_surface(guid: str, matrix: np.ndarray, verts: np.ndarray) -> Surface:
     """The underside of a covering as a ceiling surface (contract 4: normal down, ``axis_u``
     along the placement's X, origin where u and v are smallest)."""
     x = _horizontal(matrix[:3, 0])
@@ -232,13 +233,12 @@ def _ceiling_surface(guid: str, name: str, matrix: np.ndarray, verts: np.ndarray
     z = float(verts[:, 2].min())
     origin = a.min() * x + b.min() * v_axis
     origin[2] = z
-    return Surface(guid, "ceiling", WallFrame(origin, x, v_axis, n, float(np.ptp(a)), float(np.ptp(b))),
-                   room=name)
+    return Surface(guid, "ceiling", WallFrame(origin, x, v_axis, n, float(np.ptp(a)), float(np.ptp(b))))
 
 
 def _column_surfaces(el: Any, matrix: np.ndarray, verts: np.ndarray) -> list[Surface]:
     """A column's faces: four (framed like walls seen from outside) or one round surface."""
-    guid, name = el.GlobalId, el.Name or el.GlobalId
+    guid = el.GlobalId
     z0, z1 = float(verts[:, 2].min()), float(verts[:, 2].max())
     circle = any(it.is_a("IfcExtrudedAreaSolid") and it.SweptArea.is_a("IfcCircleProfileDef")
                  for rep in (el.Representation.Representations if el.Representation else ())
@@ -249,7 +249,7 @@ def _column_surfaces(el: Any, matrix: np.ndarray, verts: np.ndarray) -> list[Sur
         r = float(np.linalg.norm(xy - centre, axis=1).max())
         frame = WallFrame(np.array([centre[0] + r, centre[1], z0]), np.array([0.0, 1.0, 0.0]),
                           np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), 2 * np.pi * r, z1 - z0)
-        return [Surface(guid, "column", frame, room=name, column=guid, radius_m=r,
+        return [Surface(guid, "column", frame, column=guid, radius_m=r,
                         centre=(float(centre[0]), float(centre[1])))]
     x = _horizontal(matrix[:3, 0])
     if x is None:
@@ -264,7 +264,7 @@ def _column_surfaces(el: Any, matrix: np.ndarray, verts: np.ndarray) -> list[Sur
         origin = ua * x + ub * y
         origin[2] = z0
         frame = WallFrame(origin, u_axis, np.array([0.0, 0.0, 1.0]), n, float(width), z1 - z0)
-        out.append(Surface(f"{guid}:{side}", "column", frame, room=name, column=guid))
+        out.append(Surface(f"{guid}:{side}", "column", frame, column=guid))
     return out
 
 
@@ -418,7 +418,6 @@ def _on_host(centre: np.ndarray, verts: np.ndarray | None, host: DesignHost,
              strict: bool) -> tuple[float, Surface, np.ndarray, float | None, float | None] | None:
     """(score, surface, position on it, width, height) of a body centre on a ceiling or
     column, None when (``strict``) it does not stand close to it."""
-    from .surfaces import surface_coords, tangent_frame
 
     best = None
     for sf in host.surfaces:
@@ -492,7 +491,7 @@ def read_as_designed(path: Path, library: ModelLibrary | None = None, *,
             continue
         name = el.Name or el.GlobalId
         if el.is_a("IfcCovering"):
-            host = DesignHost(el.GlobalId, name, "ceiling", [_ceiling_surface(el.GlobalId, name, *geo)])
+            host = DesignHost(el.GlobalId, name, "ceiling", [_ceiling_surface(el.GlobalId, *geo)])
         else:
             host = DesignHost(el.GlobalId, name, "column", _column_surfaces(el, *geo))
         hosts.append(host)
@@ -548,8 +547,6 @@ def read_as_designed(path: Path, library: ModelLibrary | None = None, *,
         surface = "wall"
         if on is not None:
             (_, sf, position, width, height), host = on
-            from .surfaces import surface_coords, surface_normal
-
             normal = surface_normal(sf, position)
             u, v = (float(x) for x in surface_coords(sf, position[None])[0][:2])
             wall_guid, wall_name, surface = host.guid, host.name, host.kind
@@ -602,8 +599,6 @@ class _Placed:
 
 def _truth_objects(truth: dict, walls: dict[str, WallFrame], where: str,
                    surfaces: Mapping[str, Surface] | None = None) -> list[_Placed]:
-    from .surfaces import surface_coords
-
     surfaces = surfaces or {}
     objs = truth.get("objects")
     if not isinstance(objs, list):
@@ -668,8 +663,6 @@ def _surface_differences(built: list[_Placed], surfaces: Mapping[str, Surface], 
     at the middle of a face (round: anywhere around) at its class's median height there.
     Each keeps ``separation_m`` from every other object of its class.
     """
-    from .surfaces import surface_normal
-
     removed: set[int] = set()
     moved: dict[int, _Placed] = {}
     added: list[_Placed] = []
