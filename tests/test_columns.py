@@ -104,6 +104,23 @@ def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
     assert rows["column"].tp == rows["column"].instances and rows["column"].fp == 0
     assert rows["ceiling"].tp == rows["ceiling"].instances and rows["ceiling"].fp == 0
     assert json.loads((det / "detections.json").read_text())["surfaces"][0]["kind"] == "ceiling"
+    # the library's in-memory detect() runs the ceiling and column stages too, with the same result
+    from sbsc_core.io.documents import read_expected_counts
+    from sbsc_core.io.models import load_model_library
+    from sbsc_core.io.scans import read_scan
+    from sbsc_core.pipeline import detect
+    from sbsc_core.settings import DetectionSettings
+
+    settings = DetectionSettings()
+    settings.ceilings.enabled = settings.columns.enabled = True
+    res = detect(read_scan(sim / "scan.ply"), load_model_library(sim / "models"),
+                 read_expected_counts(sim / "expected.json"), settings)
+    assert [sf["id"] for sf in res.surfaces] == [sf["id"] for sf in doc["surfaces"]]
+    mem = sorted((d.class_id, d.wall_id, d.surface) for d in res.detections)
+    assert mem == sorted((d["class"], d["wall"], d.get("surface")) for d in doc["detections"])
+    by_key = {(d["class"], d["wall"]): d["position"] for d in doc["detections"]}
+    for d in res.detections:
+        assert np.linalg.norm(np.subtract(d.position, by_key[(d.class_id, d.wall_id)])) < 0.002
 
 
 def test_round_column_image_wraps_its_seam(tmp_path):
