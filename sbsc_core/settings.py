@@ -7,6 +7,7 @@ dict (e.g. loaded from JSON/YAML) and refuses unknown keys.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any
@@ -331,10 +332,34 @@ def _build(kind: type, data: dict[str, Any], where: str) -> Any:
         if is_dataclass(default):
             kwargs[key] = _build(type(default), value, f"{where}.{key}")
         elif isinstance(default, tuple):
-            kwargs[key] = tuple(value)
+            any_length = "..." in str(known[key].type)  # tuple[float, ...]
+            if not isinstance(value, (list, tuple)) or not (any_length or len(value) == len(default)):
+                raise InputError(f"{where}.{key}", f"expected a list like {list(default)}")
+            kwargs[key] = tuple(_scalar(0.0, v, f"{where}.{key}") for v in value)
         else:
-            kwargs[key] = type(default)(value)
+            kwargs[key] = _scalar(default, value, f"{where}.{key}")
     return kind(**kwargs)
+
+
+def _scalar(default: Any, value: Any, where: str) -> Any:
+    """Check one setting's value against its default's type, without converting what it is not.
+
+    ``bool("false")`` is True and ``int("3x")`` raises a bare ValueError: a settings file's
+    value is taken only if it already is of the setting's kind (an integer is a float too).
+    """
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif isinstance(default, float):
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    elif isinstance(default, str):
+        ok = isinstance(value, str)
+    else:
+        ok = isinstance(value, type(default))
+    if not ok:
+        raise InputError(where, f"expected {type(default).__name__}, got {value!r}")
+    return float(value) if isinstance(default, float) else value
 
 
 def load_settings(path: Path | None) -> DetectionSettings:
