@@ -121,6 +121,14 @@ def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
     by_key = {(d["class"], d["wall"]): d["position"] for d in doc["detections"]}
     for d in res.detections:
         assert np.linalg.norm(np.subtract(d.position, by_key[(d.class_id, d.wall_id)])) < 0.002
+    # the walls keep their ids and frames without the options
+    plain = detect(read_scan(sim / "scan.ply"), load_model_library(sim / "models"),
+                   read_expected_counts(sim / "expected.json"), DetectionSettings())
+    assert not plain.surfaces and all(d.surface is None for d in plain.detections)
+    assert [(w.id, list(np.round(w.frame.origin, 4))) for w in plain.segmentation.walls] == \
+        [(w["id"], list(np.round(w["origin"], 4))) for w in doc["walls"]]
+    assert sorted((d.class_id, d.wall_id) for d in plain.detections) == \
+        sorted((d["class"], d["wall"]) for d in doc["detections"] if d.get("surface") in (None, "wall"))
 
 
 def test_round_column_image_wraps_its_seam(tmp_path):
