@@ -170,3 +170,38 @@ def test_round_column_image_wraps_its_seam(tmp_path):
     assert kept == pytest.approx([circ + 0.01, circ - 0.3, 0.3])
     assert rf.arc_u(circ + 0.01) == pytest.approx(0.01)
     assert rf.to_world(circ + 0.01, 1.2) == pytest.approx(rf.to_world(0.01, 1.2))
+
+
+@pytest.mark.slow
+def test_objects_on_a_round_columns_seam_are_found_once(tmp_path, monkeypatch):
+    import yaml
+
+    import sbsc_core.simulate.surfaces as sim_surfaces
+    from sbsc_core.cli import main
+
+    # two halls: the second one's column is round, with an extinguisher and a socket across its seam (+x)
+    monkeypatch.setattr(sim_surfaces, "ROUND_COLUMN_OBJECTS",
+                        [("fire_extinguisher", 0.0, 1.2), ("socket_x1", 2.0, 0.3), ("fire_alarm_switch", 180.0, 1.4)])
+    scene = {"schema": "sbsc.scene/1", "name": "halls", "ceiling_height_m": 2.8,
+             "rooms": [{"id": "H", "rect": [0, 0, 8, 7]}, {"id": "K", "rect": [8.15, 0, 16.15, 7]}],
+             "openings": [{"wall": "H-S", "kind": "door", "u": 2.0, "width_m": 0.9, "height_m": 2.1},
+                          {"wall": "K-S", "kind": "door", "u": 2.0, "width_m": 0.9, "height_m": 2.1}],
+             "objects": [{"class": "switch", "wall": "H-S", "u": 3.0, "v": 1.1}],
+             "scanner": {"angular_step_deg": 0.1}}
+    (tmp_path / "hall.yaml").write_text(yaml.safe_dump(scene))
+    sim, det = tmp_path / "sim", tmp_path / "det"
+    assert main(["-q", "simulate", "--scene", str(tmp_path / "hall.yaml"), "--columns", "--out", str(sim)]) == 0
+    assert main(["-q", "detect", str(sim / "scan.ply"), "--models", str(sim / "models"), "--expected",
+                 str(sim / "expected.json"), "--columns", "--out", str(det)]) == 0
+    truth = json.loads((sim / "ground_truth.json").read_text())
+    doc = json.loads((det / "detections.json").read_text())
+    (col,) = [sf for sf in doc["surfaces"] if sf.get("radius_m")]
+    circ = 2 * math.pi * col["radius_m"]
+    on_column = [d for d in doc["detections"] if d["wall"] == col["id"]]
+    want = [o for o in truth["objects"] if o["wall"] == "K-COL2"]
+    assert sorted(o["class"] for o in want) == ["fire_alarm_switch", "fire_extinguisher", "socket_x1"]
+    assert sorted(d["class"] for d in on_column) == sorted(o["class"] for o in want)  # each once
+    for o in want:
+        (d,) = [d for d in on_column if d["class"] == o["class"]]
+        assert np.linalg.norm(np.subtract(d["position"], o["position"])) < 0.015
+        assert 0.0 <= d["u"] < circ
