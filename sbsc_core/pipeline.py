@@ -394,6 +394,8 @@ def detect(
     :class:`~sbsc_core.io.documents.ExpectedCounts` with per-storey counts for the storeys
     found, each storey's counts limit the instances on its walls (:func:`consensus_by_storey`).
     ``pool`` (see :func:`wall_pool`) runs the per-wall stages; by default one is made.
+    With ``settings.ceilings`` / ``settings.columns`` enabled the ceilings and the columns'
+    faces are searched too, as by :func:`detect_scans` (the result's ``surfaces``).
     :func:`detect_scans` does the same on scan files without holding the cloud.
     """
     s = settings or DetectionSettings()
@@ -413,9 +415,49 @@ def detect(
     timings["templates"] = time.perf_counter() - t
     walls = _collect_walls(_walls_results(cloud, seg, templates, prototypes, s, pool), len(seg.walls),
                            progress, timings)
+    if s.ceilings.enabled or s.columns.enabled:  # objects on ceilings and columns (issue 11)
+        beyond = _beyond_walls_in_memory(cloud, seg, library, expected, s, pool, progress, timings)
+        walls.update(beyond.walls)
+        templates, classes = {**beyond.templates, **templates}, sorted(set(classes) | set(beyond.classes))
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
+    if s.ceilings.enabled or s.columns.enabled:
+        beyond.place(result)
     timings["total"] = time.perf_counter() - t0
     return result
+
+
+def _beyond_walls_in_memory(cloud: PointCloud, seg: Segmentation, library: ModelLibrary,
+                            expected: ExpectedCounts | None, s: DetectionSettings,
+                            pool: ProcessPoolExecutor | None, progress: Progress,
+                            timings: dict[str, float]) -> _BeyondWalls:
+    """:func:`_beyond_walls` on an in-memory cloud: the levels and columns are measured on a
+    regular sample of it (as :func:`detect_scans` does), its points are binned into the
+    surfaces' partitions in a temporary folder in this process, and the surfaces' stages
+    run in ``pool`` (or one made here), their images kept in the results."""
+    import tempfile
+
+    from .ceilings import ceiling_levels, memory_parts
+
+    step = max(1, -(-len(cloud) // (2 * s.segmentation.fit_max_points)))
+    sample = cloud if step == 1 else PointCloud(cloud.xyz[::step], cloud.rgb[::step], cloud.origin, cloud.sources)
+    levels = ceiling_levels(sample, seg, s.ceilings) if s.ceilings.enabled else None
+    columns = []
+    if s.columns.enabled:
+        from .columns import find_columns
+
+        columns = find_columns(sample, seg, s.columns)
+    del sample
+    own = pool is None
+    executor: Executor = (wall_pool(s) if own else pool) or InlineExecutor()
+    try:
+        with tempfile.TemporaryDirectory(prefix=".sbsc-surfaces-", dir=os.environ.get("SBSC_SCRATCH_DIR")) as tmp:
+            return _beyond_walls(memory_parts(cloud), np.asarray(cloud.origin, np.float64), seg, levels, columns,
+                                 library, expected, s, executor=executor, scratch=Path(tmp), parked=None,
+                                 in_flight=2 * max(1, _worker_count(s)), progress=progress, timings=timings,
+                                 log=lambda msg: None, part_executor=InlineExecutor())
+    finally:
+        if own and isinstance(executor, ProcessPoolExecutor):
+            executor.shutdown(wait=True, cancel_futures=True)
 
 
 # --------------------------------------------------------------------------- out of core
@@ -505,7 +547,7 @@ def _in_order(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int)
 
 def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_jobs: list[tuple], job_fn: Callable,
                   surfaces: Sequence, library: ModelLibrary, classes: list[str], s: DetectionSettings,
-                  scratch: Path, parked: Path, in_flight: int, progress: Progress,
+                  scratch: Path, parked: Path | None, in_flight: int, progress: Progress,
                   part_executor: Executor | None = None,
                   ) -> tuple[np.ndarray, dict[str, WallResult], dict[str, ModelTemplate]]:
     """A stage on surfaces beyond the walls (ceiling tiles, column faces), run as the walls' is.
@@ -515,7 +557,7 @@ def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_job
     s)`` runs the walls' stages on surface number ``k`` and returns ``(id, result, timings)``.
     Surfaces that got no point are left out (no work, no result). Returns the points binned
     per surface, the results by surface id (their images parked in ``parked``,
-    :func:`park_wall`) and the templates of ``classes``. ``part_executor`` (default:
+    :func:`park_wall`, unless it is None) and the templates of ``classes``. ``part_executor`` (default:
     ``executor``) runs the binning (an in-memory cloud's parts are binned in this process).
     """
     kept = np.zeros(len(surfaces), np.int64)
@@ -525,9 +567,64 @@ def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_job
     jobs = [(str(scratch), k, sf, templates, prototypes, s) for k, sf in enumerate(surfaces) if kept[k] > 0]
     results: dict[str, WallResult] = {}
     for i, (sid, res, _) in enumerate(_in_order(executor, jobs, job_fn, in_flight)):
-        results[sid] = park_wall(res, parked)
+        results[sid] = res if parked is None else park_wall(res, parked)
         progress(stage, (i + 1) / len(jobs))
     return kept, results, templates
+
+
+@dataclass
+class _BeyondWalls:
+    """What the ceiling and column stages add to the walls' results for the consensus."""
+
+    walls: dict[str, WallResult] = field(default_factory=dict)
+    templates: dict[str, ModelTemplate] = field(default_factory=dict)
+    classes: list[str] = field(default_factory=list)
+    surfaces: list[dict] = field(default_factory=list)
+    faces: dict = field(default_factory=dict)  # column faces by id
+
+    def place(self, result: DetectionResult) -> None:
+        """Name each detection's surface kind and put those on a round column back on it."""
+        if not self.surfaces:
+            return
+        kinds = {sf["id"]: sf["kind"] for sf in self.surfaces}
+        for d in result.detections:
+            d.surface = kinds.get(d.wall_id)
+            if d.wall_id in self.faces:  # a round column's face is unrolled: put the object back on it
+                d.u = self.faces[d.wall_id].arc_u(d.u)
+                d.position = self.faces[d.wall_id].to_world(d.u, d.v)
+        result.surfaces = self.surfaces
+
+
+def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, levels: list | None, columns: list,
+                  library: ModelLibrary, expected: ExpectedCounts | None, s: DetectionSettings, *,
+                  executor: Executor, scratch: Path, parked: Path | None, in_flight: int, progress: Progress,
+                  timings: dict[str, float], log: Callable[[str], None],
+                  part_executor: Executor | None = None) -> _BeyondWalls:
+    """The ceiling tiles' and column faces' results (issue 11), when the settings ask for them."""
+    out = _BeyondWalls()
+    counts = None if expected is None else expected.counts
+    if s.ceilings.enabled:  # objects on ceilings: the tiles join the walls in the consensus
+        from .ceilings import detect_ceilings
+
+        ceil = detect_ceilings(parts, origin, seg, library, counts, s, executor=executor, scratch=scratch,
+                               parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
+                               levels=levels, part_executor=part_executor)
+        out.walls.update(ceil.walls)
+        out.templates.update(ceil.templates)
+        out.classes = sorted(set(out.classes) | set(ceil.classes))
+        out.surfaces += ceil.surfaces()
+    if columns:  # objects on columns: their faces join the walls in the consensus too
+        from .columns import detect_columns
+
+        cols = detect_columns(parts, origin, columns, library, counts, s, executor=executor, scratch=scratch,
+                              parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
+                              part_executor=part_executor)
+        out.walls.update(cols.walls)
+        out.templates = {**cols.templates, **out.templates}
+        out.classes = sorted(set(out.classes) | set(cols.classes))
+        out.surfaces += cols.surfaces()
+        out.faces = {f.id: f for f in cols.faces}
+    return out
 
 
 def detect_scans(
@@ -636,39 +733,14 @@ def detect_scans(
     results = (res for _, res in _as_done(executor, wall_jobs, _partition_wall_job, 2 * workers))
     done = _collect_walls(results, len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
-    surfaces: list[dict] = []
-    counts = None if expected is None else expected.counts
-    if s.ceilings.enabled:  # objects on ceilings (issue 11): the tiles join the walls in the consensus
-        from .ceilings import detect_ceilings
-
-        ceil = detect_ceilings(parts, origin, seg, library, counts, s, executor=executor, scratch=Path(scratch),
-                               parked=parked, in_flight=2 * workers, progress=progress, timings=timings, log=log,
-                               levels=levels)
-        walls.update(ceil.walls)
-        templates = {**ceil.templates, **templates}
-        classes = sorted(set(classes) | set(ceil.classes))
-        surfaces = ceil.surfaces()
-    faces = {}
-    if found_columns:  # objects on columns: their faces join the walls in the consensus too
-        from .columns import detect_columns
-
-        cols = detect_columns(parts, origin, found_columns, library, counts, s, executor=executor,
-                              scratch=Path(scratch), parked=parked, in_flight=2 * workers, progress=progress,
-                              timings=timings, log=log)
-        walls.update(cols.walls)
-        templates = {**cols.templates, **templates}
-        classes = sorted(set(classes) | set(cols.classes))
-        surfaces += cols.surfaces()
-        faces = {f.id: f for f in cols.faces}
+    beyond = _beyond_walls(parts, origin, seg, levels, found_columns, library, expected, s, executor=executor,
+                           scratch=Path(scratch), parked=parked, in_flight=2 * workers, progress=progress,
+                           timings=timings, log=log)
+    walls.update(beyond.walls)
+    if s.ceilings.enabled or found_columns:
+        templates, classes = {**beyond.templates, **templates}, sorted(set(classes) | set(beyond.classes))
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings, log)
-    if surfaces:
-        kinds = {sf["id"]: sf["kind"] for sf in surfaces}
-        for d in result.detections:
-            d.surface = kinds.get(d.wall_id)
-            if d.wall_id in faces:  # a round column's face is unrolled: put the object back on it
-                d.u = faces[d.wall_id].arc_u(d.u)
-                d.position = faces[d.wall_id].to_world(d.u, d.v)
-        result.surfaces = surfaces
+    beyond.place(result)
     timings["total"] = time.perf_counter() - t0
     return result, points
 
