@@ -40,7 +40,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import find_peaks
 
 from .errors import NoWallsError
 from .settings import SegmentationSettings
@@ -263,6 +262,9 @@ def find_floor_ceiling(z: np.ndarray, settings: SegmentationSettings | None = No
     counts = np.bincount(((zs - lo) / b).astype(np.int64)).astype(np.float64)
     smooth = np.convolve(counts, np.ones(3), mode="same")
     padded = np.concatenate(([0.0], smooth, [0.0]))  # a level in the first or last bin is a peak too
+    from scipy.signal import find_peaks  # here: scipy.signal imports scipy.stats (0.4 s), which the
+    # wall workers, importing this module with the pipeline, never need
+
     peaks, props = find_peaks(padded, prominence=s.min_level_fraction * float(smooth.max()))
     peaks = peaks - 1
     small = np.zeros(0, np.int64)
