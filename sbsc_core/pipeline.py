@@ -33,6 +33,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -52,8 +53,6 @@ from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
 from .io.crs import georeference_fields, scan_crs
-from .io.documents import ExpectedCounts, detections_document, read_expected_counts
-from .io.models import load_model_library
 from .lookalikes import resolve_on_wall
 from .orthoimage import build_orthoimage
 from .partition import (
@@ -281,10 +280,15 @@ def _walls_results(cloud: PointCloud, seg: Segmentation, templates: dict[str, Mo
             pool.shutdown(wait=True, cancel_futures=True)
 
 
-Expected = dict[str, int] | ExpectedCounts  # contract 3: counts, or counts with per-storey counts
+if TYPE_CHECKING:  # the documents (and pydantic) are imported where used: the wall workers never need them
+    from .io.documents import ExpectedCounts
+
+    Expected = dict[str, int] | ExpectedCounts  # contract 3: counts, or counts with per-storey counts
 
 
 def _as_expected(expected: Expected | None) -> ExpectedCounts | None:
+    from .io.documents import ExpectedCounts
+
     if expected is None or isinstance(expected, ExpectedCounts):
         return expected
     return ExpectedCounts(dict(expected))
@@ -686,6 +690,9 @@ def detect_to_dir(
     progress = progress or _noop_progress
     s = settings or load_settings(settings_file)
     progress("reading", 0.0)
+    from .io.documents import read_expected_counts
+    from .io.models import load_model_library
+
     library = load_model_library(Path(models))
     counts = read_expected_counts(expected) if isinstance(expected, (str, Path)) else expected
     paths = [Path(p) for p in scans]
@@ -831,6 +838,8 @@ def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dic
         fields["storeys"] = [st.to_dict() for st in seg.storeys]
     if result.surfaces:
         fields["surfaces"] = result.surfaces
+    from .io.documents import detections_document
+
     doc = detections_document([(wall.id, wall.frame) for wall in seg.walls], result.openings,
                               result.detections, extra=fields)
     if len(seg.storeys) > 1:
