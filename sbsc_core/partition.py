@@ -371,6 +371,7 @@ def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch
     chunks = _spilled_chunks(root, part, origin, points) if spilled else _part_chunks(part, origin)
     written = [0] * len(index.frames)
     band_px = [band_rows(f, ortho) * ortho_shape(f, ortho.pixel_m)[1] for f in index.frames]
+    made: set[tuple[int, int]] = set()
     for chunk in chunks:
         for w, idx, uvd in assign_chunk(chunk.xyz, index):
             keep, pixel = ortho_pixels(uvd, index.frames[w], ortho)
@@ -391,7 +392,9 @@ def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch
                 a, z = int(cuts[b - b0]), int(cuts[b - b0 + 1])
                 if z > a:
                     d = _band_dir(root, w, b)
-                    d.mkdir(parents=True, exist_ok=True)
+                    if (w, b) not in made:  # one mkdir per band folder and part, not per chunk
+                        d.mkdir(parents=True, exist_ok=True)
+                        made.add((w, b))
                     with open(d / f"{part.key}.rec", "ab") as fh:
                         rec[a:z].tofile(fh)
             written[w] += len(rec)
