@@ -162,10 +162,12 @@ def _storey_walls(xyz: np.ndarray, sample: np.ndarray, box: DenseBox, floor: flo
 
     index = _assign_points(xyz, segs, floor + s.slab_tolerance_m, ceiling - s.slab_tolerance_m, s, box)
     walls: list[tuple[WallFrame, np.ndarray]] = []
-    for seg, idx in zip(segs, index, strict=True):
-        done = _final_frame(xyz, idx, seg, floor, ceiling, origin, s)
-        if done is not None and done[0].width_m >= s.min_wall_length_m:
-            walls.append(done)
+    threads = min(_ASSIGN_THREADS, os.cpu_count() or 1) if len(xyz) >= _THREAD_MIN_POINTS else 1
+    with ThreadPoolExecutor(max_workers=threads) as pool:  # each wall on its own (numpy releases the GIL)
+        for done in pool.map(lambda job: _final_frame(xyz, job[1], job[0], floor, ceiling, origin, s),
+                             zip(segs, index, strict=True)):
+            if done is not None and done[0].width_m >= s.min_wall_length_m:
+                walls.append(done)
     if not walls:
         raise NoWallsError("no walls found: no wall kept its points")
     walls.sort(key=_order_key)
