@@ -553,12 +553,13 @@ def _orient(segs: list[_Segment], slab_xy: np.ndarray, s: SegmentationSettings) 
         occ = None
     else:
         cell = s.xy_cell_m
-        lo = slab_xy.min(axis=0) - cell
-        ij = ((slab_xy - lo) / cell).astype(np.int64)
-        shape = tuple(ij.max(axis=0) + 2)
-        occ = np.zeros(shape, bool)
-        occ[ij[:, 0], ij[:, 1]] = True
-        centre = slab_xy.mean(axis=0)
+        # one column at a time (no (n, 2) temporaries); the same cells
+        lo = np.array([float(slab_xy[:, 0].min()), float(slab_xy[:, 1].min())]) - cell
+        ix = ((slab_xy[:, 0] - lo[0]) / cell).astype(np.int64)
+        iy = ((slab_xy[:, 1] - lo[1]) / cell).astype(np.int64)
+        occ = np.zeros((int(ix.max()) + 2, int(iy.max()) + 2), bool)
+        occ[ix, iy] = True
+        del ix, iy
     probes = np.linspace(s.facing_probe_m[0], s.facing_probe_m[1], 4)
     for g in segs:
         if occ is None:  # nothing but walls: face the middle of the scan
