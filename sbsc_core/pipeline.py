@@ -22,11 +22,13 @@ segmentation, one partition file per wall, tasks on a local pool or a Dask clust
 from __future__ import annotations
 
 import contextlib
+import importlib
 import itertools
 import json
 import multiprocessing
 import os
 import shutil
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -569,6 +571,8 @@ def detect_scans(
     step = sample_step(estimate, s)
     sample_jobs = [(part, origin, step, str(scratch)) for part in parts]
     samples: list = [None] * len(parts)
+    if workers > 1:  # this process waits while the workers read: it imports what segmentation needs meanwhile
+        threading.Thread(target=importlib.import_module, args=("scipy.signal",), daemon=True).start()
     for i, (k, smp) in enumerate(_as_done(executor, sample_jobs, sample_part, 2 * workers)):
         samples[k] = smp
         progress("reading", (i + 1) / len(parts))
