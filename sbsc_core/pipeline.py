@@ -32,7 +32,14 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from concurrent.futures import (
+    FIRST_COMPLETED,
+    Executor,
+    Future,
+    ProcessPoolExecutor,
+    ThreadPoolExecutor,
+    wait,
+)
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -59,6 +66,7 @@ from .lookalikes import resolve_on_wall
 from .orthoimage import build_orthoimage
 from .partition import (
     WallIndex,
+    drop_wall_partition,
     partition_part,
     plan_parts,
     sample_cloud,
@@ -633,8 +641,14 @@ def detect_scans(
     # each task writes its wall's images itself: this process only receives the small results
     wall_jobs = [(str(scratch), w, seg.walls[w].id, seg.walls[w].frame, templates, prototypes, s, str(parked))
                  for w in order]
-    results = (res for _, res in _as_done(executor, wall_jobs, _partition_wall_job, 2 * workers))
-    done = _collect_walls(results, len(seg.walls), progress, timings)
+    with ThreadPoolExecutor(max_workers=1) as cleaner:  # frees the disk while the walls run, not at the end
+
+        def results() -> Iterator[tuple[str, WallResult, dict[str, float]]]:
+            for k, res in _as_done(executor, wall_jobs, _partition_wall_job, 2 * workers):
+                cleaner.submit(drop_wall_partition, scratch, order[k])  # its points are not read again
+                yield res
+
+        done = _collect_walls(results(), len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
     surfaces: list[dict] = []
     counts = None if expected is None else expected.counts
