@@ -708,17 +708,23 @@ def detect_to_dir(
     progress = progress or _noop_progress
     s = settings or load_settings(settings_file)
     progress("reading", 0.0)
-    from .io.documents import read_expected_counts
-    from .io.models import load_model_library
-
-    library = load_model_library(Path(models))
-    counts = read_expected_counts(expected) if isinstance(expected, (str, Path)) else expected
     paths = [Path(p) for p in scans]
     if not paths:
         raise InputError("scans", "no scan files given")
-    origin = scan_origin(paths[0])  # read once: the recentring origin and the georeference
-    georef = georeference_fields(scan_crs(paths), origin)
-    with wall_executor(s, scheduler) as ex, scratch_folder(Path(out), scratch) as work:
+    stack = contextlib.ExitStack()
+    ex = stack.enter_context(wall_executor(s, scheduler))  # the workers start while the inputs are read
+    try:
+        from .io.documents import read_expected_counts
+        from .io.models import load_model_library
+
+        library = load_model_library(Path(models))
+        counts = read_expected_counts(expected) if isinstance(expected, (str, Path)) else expected
+        origin = scan_origin(paths[0])  # read once: the recentring origin and the georeference
+        georef = georeference_fields(scan_crs(paths), origin)
+    except BaseException:
+        stack.close()
+        raise
+    with stack, scratch_folder(Path(out), scratch) as work:
         result, points = detect_scans(paths, library, counts, s, progress, executor=ex, scratch=work, log=log,
                                       origin=origin)
         seg = result.segmentation
