@@ -163,7 +163,8 @@ def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], p
     c_img = colour_image(ortho, area, s.colour)  # J_C and J_BW, computed once per wall
     c_rois = colour_rois(ortho, area, s.colour, c_img)
     c_cands = match_colour(ortho, area, c_rois, prototypes, s.colour, c_img)
-    d_cands, c_cands = resolve_on_wall(d_cands, c_cands, c_img, prototypes, s.lookalikes)
+    d_cands, c_cands = resolve_on_wall(d_cands, c_cands, c_img, prototypes, s.lookalikes,
+                                       relief=d_img.levelled)
     t_stage["colour"] = time.perf_counter() - t
     return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
 
