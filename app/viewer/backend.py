@@ -24,7 +24,12 @@ from typing import Any, Protocol, runtime_checkable
 
 from sbsc_core.errors import InputError
 
+from ..errors import Conflict, Forbidden, Locked, NotFound, NotReady, ReviewError, StaleVersion
 from ..surfaces import point_on
+
+__all__ = ["Changes", "Conflict", "Forbidden", "InMemoryBackend", "Locked", "NotFound", "NotReady",
+           "ProjectData", "ProjectId", "ReviewBackend", "ReviewError", "Reviewer", "StaleVersion",
+           "load_detection_dir"]
 
 ProjectId = Hashable  # the service uses ints; the stand-alone viewer uses strings
 REVIEW_STATUSES: tuple[str, ...] = ("pending", "accepted", "rejected")
@@ -71,38 +76,6 @@ class Changes:
     locked: bool = False
     signoff: dict | None = None
     reload: bool = False  # the detections document was replaced: rebuild the scene
-
-
-class ReviewError(Exception):
-    """A decision that cannot be recorded; ``status`` is the HTTP code the REST API would give."""
-
-    status = 400
-
-    def __init__(self, message: str, current: dict | None = None) -> None:
-        super().__init__(message)
-        self.current = current  # the detection as it now stands, when known
-
-
-class NotFound(ReviewError):
-    status = 404
-
-
-class NotReady(ReviewError):
-    """The project exists but has no detections yet."""
-
-    status = 409
-
-
-class Forbidden(ReviewError):
-    status = 403
-
-
-class StaleVersion(ReviewError):
-    status = 409
-
-
-class Locked(ReviewError):
-    status = 423
 
 
 @runtime_checkable
