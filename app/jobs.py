@@ -55,6 +55,7 @@ STAGE_SPANS: dict[str, tuple[float, float]] = {
 TERMINAL = ("succeeded", "failed", "cancelled")
 MAX_EXPECTED_CLASSES = 200  # keys of a job's ``expected`` counts
 MAX_EXPECTED_COUNT = 100_000  # instances of one class on one floor
+MAX_EXPECTED_STOREYS = 500  # storeys of a job's per-storey expected counts
 
 
 class JobAbandoned(Exception):
@@ -259,7 +260,7 @@ def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
             select(Scan.path).where(Scan.project_id == job.project_id).order_by(Scan.id))]
         models_rel = s.scalar(select(ModelLibraryRow.path).where(ModelLibraryRow.id == job.models_id)) \
             if job.models_id else None
-        expected = dict(job.expected) if job.expected else None
+        expected = runner_expected(dict(job.expected) if job.expected else None, job.expected_storeys)
         out = settings.data_dir / job.out_dir
         project_id = job.project_id
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -523,16 +524,56 @@ def parse_expected(value: object) -> dict[str, int] | None:
         return None
     if isinstance(value, dict) and "counts" in value:
         value = value["counts"]
+    return _parse_counts(value, "expected")
+
+
+def _parse_counts(value: object, where: str) -> dict[str, int]:
     if not isinstance(value, dict):
-        raise InputError("expected", "must be an object of class id -> count")
+        raise InputError(where, "must be an object of class id -> count")
     if len(value) > MAX_EXPECTED_CLASSES:
-        raise InputError("expected", f"{len(value):,} classes; at most {MAX_EXPECTED_CLASSES} allowed")
+        raise InputError(where, f"{len(value):,} classes; at most {MAX_EXPECTED_CLASSES} allowed")
     out: dict[str, int] = {}
     for k, v in value.items():
         if not isinstance(k, str) or not re.fullmatch(r"[a-z0-9_]+", k):
-            raise InputError(f"expected.{k}", "class ids are lower case letters, digits and '_'")
+            raise InputError(f"{where}.{k}", "class ids are lower case letters, digits and '_'")
         if isinstance(v, bool) or not isinstance(v, int) or v < 0 or v > MAX_EXPECTED_COUNT:
-            raise InputError(f"expected.{k}", f"count must be a whole number >= 0, not {v!r}")
+            raise InputError(f"{where}.{k}", f"count must be a whole number >= 0, not {v!r}")
         out[k] = v
     return out
+
+
+def parse_expected_storeys(value: object) -> dict[str, dict[str, int]] | None:
+    """The per-storey counts of a whole contract-3 document (``storeys``: ``{"S1": {...}, ...}``).
+
+    As ``sbsc detect --expected`` reads them: storey ids ``S1``, ``S2``, ... whose counts add
+    up to ``counts`` class by class. None when the document has no ``storeys``.
+    """
+    if not isinstance(value, dict) or "counts" not in value or value.get("storeys") is None:
+        return None
+    counts = parse_expected(value)
+    storeys = value["storeys"]
+    if not isinstance(storeys, dict):
+        raise InputError("expected.storeys", "must be an object of storey id -> counts")
+    if len(storeys) > MAX_EXPECTED_STOREYS:
+        raise InputError("expected.storeys", f"{len(storeys):,} storeys; at most {MAX_EXPECTED_STOREYS} allowed")
+    out: dict[str, dict[str, int]] = {}
+    for sid, st in storeys.items():
+        if not isinstance(sid, str) or not re.fullmatch(r"S[0-9]+", sid):
+            raise InputError(f"expected.storeys.{sid}", "storey ids are S1, S2, ... (bottom up, as in the detections)")
+        out[sid] = _parse_counts(st, f"expected.storeys.{sid}")
+    for cls in sorted(set(counts or {}) | {c for st in out.values() for c in st}):
+        total = sum(st.get(cls, 0) for st in out.values())
+        if total != (counts or {}).get(cls, 0):
+            raise InputError(f"expected.storeys.*.{cls}", f"the storeys hold {total} in all, counts.{cls} is "
+                                                          f"{(counts or {}).get(cls, 0)}")
+    return out or None
+
+
+def runner_expected(counts: dict | None, storeys: dict | None) -> object:
+    """What the runner gets as ``expected``: the counts, with the storeys' counts when given."""
+    if counts is None or not storeys:
+        return counts
+    from sbsc_core.io.documents import ExpectedCounts
+
+    return ExpectedCounts(dict(counts), {sid: dict(c) for sid, c in storeys.items()})
 

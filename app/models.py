@@ -152,9 +152,12 @@ class Job(Base):
     out_dir: Mapped[str | None] = mapped_column(String(500))  # relative to the data dir
     cancelled_by: Mapped[str | None] = mapped_column(String(100))
     storeys: Mapped[list[Any] | None] = mapped_column(JSON)  # contract 4's storeys block of the results
+    expected_storeys: Mapped[dict[str, Any] | None] = mapped_column(JSON)  # contract 3's per-storey counts
 
 
 class WallRow(Base):
+    """A wall of a job's results, or a surface beyond walls (contract 4's ``surfaces``: ``kind``)."""
+
     __tablename__ = "walls"
     __table_args__ = (UniqueConstraint("job_id", "key"),)
 
@@ -171,6 +174,8 @@ class WallRow(Base):
     pixel_m: Mapped[float] = mapped_column(Float)
     images: Mapped[dict[str, Any]] = mapped_column(JSON)  # kind -> {"path", "bytes", "sha256"}
     storey: Mapped[str | None] = mapped_column(String(50))  # "S2" in a scan of several storeys
+    kind: Mapped[str | None] = mapped_column(String(20))  # None: a wall; "ceiling" / "column": a surface
+    extra: Mapped[dict[str, Any] | None] = mapped_column(JSON)  # other surface fields (column, radius_m, centre)
 
 
 class OpeningRow(Base):

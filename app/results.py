@@ -18,6 +18,7 @@ from sbsc_core.io.documents import read_detections
 
 from .models import DetectionRow, Job, OpeningRow, Project, SuggestionRow, WallRow, iso
 from .storage import sha256_file
+from .surfaces import FRAME_FIELDS
 
 DEFAULT_PIXEL_M = 0.005
 # contract-4 detection fields with columns of their own; any other field is kept in ``extra``
@@ -36,18 +37,22 @@ def import_results(session: Session, job: Job, out_dir: Path, data_dir: Path) ->
     """Add the walls, openings and detections of ``out_dir`` to ``session`` (not committed)."""
     doc = read_detections(out_dir / "detections.json")
     pixel_m = float(doc.get("pixel_m") or DEFAULT_PIXEL_M)
-    for w in doc["walls"]:
+    surfaces = list(doc.get("surfaces") or [])  # contract 4: ceilings and column faces
+    for w in [*doc["walls"], *surfaces]:
         images = {}
         for kind, pattern in IMAGE_FILES.items():
             p = out_dir / "orthoimages" / pattern.format(w=w["id"])
             if p.is_file():
                 images[kind] = file_meta(p, data_dir)
+        kind = str(w["kind"])[:20] if w.get("kind") else None
+        extra = {k: v for k, v in w.items() if k not in FRAME_FIELDS} if kind else None
         session.add(WallRow(project_id=job.project_id, job_id=job.id, key=w["id"],
                             origin=list(w["origin"]), axis_u=list(w["axis_u"]),
                             axis_v=list(w["axis_v"]), normal=list(w["normal"]),
                             width_m=float(w["width_m"]), height_m=float(w["height_m"]),
                             pixel_m=pixel_m, images=images,
-                            storey=str(w["storey"])[:50] if w.get("storey") else None))
+                            storey=str(w["storey"])[:50] if w.get("storey") else None,
+                            kind=kind, extra=extra or None))
     if doc.get("storeys"):  # contract 4: several storeys, bottom up
         job.storeys = [{"id": str(st["id"]), "floor_z": float(st["floor_z"]), "ceiling_z": float(st["ceiling_z"])}
                        for st in doc["storeys"]]
@@ -65,7 +70,7 @@ def import_results(session: Session, job: Job, out_dir: Path, data_dir: Path) ->
             confidence=_float_or_none(d.get("confidence")),
             extra={k: v for k, v in d.items() if k not in DETECTION_COLUMNS} or None))
     n_sugg = import_suggestions(session, job, out_dir)
-    return {"walls": len(doc["walls"]), "openings": len(doc["openings"]),
+    return {"walls": len(doc["walls"]), "surfaces": len(surfaces), "openings": len(doc["openings"]),
             "detections": len(doc["detections"]), "suggestions": n_sugg}
 
 
@@ -103,8 +108,12 @@ def import_suggestions(session: Session, job: Job, out_dir: Path) -> int:
 
 
 def wall_dict(w: WallRow) -> dict:
+    """A wall of contract 4, or an entry of its ``surfaces`` (with ``kind`` and its other fields)."""
     out = {"id": w.key, "origin": w.origin, "axis_u": w.axis_u, "axis_v": w.axis_v,
            "normal": w.normal, "width_m": w.width_m, "height_m": w.height_m}
+    if w.kind:
+        out = {"id": w.key, "kind": w.kind, **{k: v for k, v in out.items() if k != "id"},
+               **(w.extra or {})}
     if w.storey:
         out["storey"] = w.storey
     return out
@@ -143,7 +152,10 @@ def project_document(session: Session, project: Project, *, id_is_ref: bool = Fa
     job = session.get(Job, jid)
     if job is not None and job.storeys:
         doc["storeys"] = list(job.storeys)
-    doc["walls"] = [wall_dict(w) for w in walls]
+    doc["walls"] = [wall_dict(w) for w in walls if not w.kind]
+    surfaces = [wall_dict(w) for w in walls if w.kind]
+    if surfaces:  # contract 4: ceilings and column faces; absent when the run looked at walls only
+        doc["surfaces"] = surfaces
     doc["openings"] = [
         {"wall": o.wall_key, "kind": o.kind, "u_min": o.u_min, "u_max": o.u_max,
          "v_min": o.v_min, "v_max": o.v_max}
@@ -175,4 +187,5 @@ def job_dict(job: Job) -> dict:
             "created_by": job.created_by, "created_at": iso(job.created_at),
             "started_at": iso(job.started_at), "finished_at": iso(job.finished_at),
             "updated_at": iso(job.updated_at), "expected": job.expected,
+            **({"expected_storeys": job.expected_storeys} if job.expected_storeys else {}),
             **({"storeys": job.storeys} if job.storeys else {})}

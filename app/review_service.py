@@ -41,8 +41,9 @@ from .models import (
     iso,
     utcnow,
 )
-from .results import detection_dict, review_counts
+from .results import detection_dict, review_counts, wall_dict
 from .snap import Snap, depth_template, snap_to_relief
+from .surfaces import point_on
 
 ACTIONS = {"accepted": "accept", "rejected": "reject", "pending": "reset"}
 CARRY_TOLERANCE_M = 0.10  # a new detection within this of an old one (or half its size) is the same
@@ -224,16 +225,17 @@ def decide(s: Session, did: int, change: Change, user: Principal, *, pid: int | 
 
 def _check_on_wall(wall: WallRow | None, u: float, v: float) -> None:
     if wall is None:
-        raise Invalid("wall: not a wall of the project's current results")
+        raise Invalid("wall: not a wall or surface of the project's current results")
     if not (np.isfinite(u) and np.isfinite(v)):
         raise Invalid("u, v: must be finite numbers")
     if not (0.0 <= u <= wall.width_m and 0.0 <= v <= wall.height_m):
-        raise Invalid(f"u, v: ({u:.3f}, {v:.3f}) is outside wall {wall.key} "
+        raise Invalid(f"u, v: ({u:.3f}, {v:.3f}) is outside {wall.kind or 'wall'} {wall.key} "
                       f"({wall.width_m:.2f} x {wall.height_m:.2f} m)")
 
 
 def _position(wall: WallRow, u: float, v: float) -> list[float]:
-    return [round(o + u * a + v * b, 5) for o, a, b in zip(wall.origin, wall.axis_u, wall.axis_v, strict=True)]
+    """The world point (u, v) of a wall or surface (on the cylinder of a round column)."""
+    return point_on(wall_dict(wall), u, v)
 
 
 # --------------------------------------------------------------------------- bulk decisions
@@ -349,7 +351,7 @@ def add_object(s: Session, pid: int, class_id: str, wall_key: str, u: float, v: 
         raise Invalid(f"class: '{class_id}' is not in the project's model library")
     wall = _wall(s, job.id, wall_key)
     if wall is None:
-        raise Invalid(f"wall: '{wall_key}' is not a wall of the project's current results")
+        raise Invalid(f"wall: '{wall_key}' is not a wall or surface of the project's current results")
     _check_on_wall(wall, float(u), float(v))
     where = Snap(float(u), float(v))
     if snap:
@@ -361,7 +363,8 @@ def add_object(s: Session, pid: int, class_id: str, wall_key: str, u: float, v: 
                      u=where.u, v=where.v, width_m=w_m, height_m=h_m, alpha=None,
                      rho_depth=where.rho, rho_colour=None, source="reviewer", status="accepted",
                      version=1, reviewed_by=user.name, reviewed_at=now, note=note,
-                     extra={"clicked": [float(u), float(v)], "snapped": where.snapped, **(extra or {})})
+                     extra={**({"surface": wall.kind} if wall.kind else {}),  # contract 4: on a surface
+                            "clicked": [float(u), float(v)], "snapped": where.snapped, **(extra or {})})
     s.add(d)
     s.flush()
     _audit(s, d, user, action, 0, {}, note)

@@ -115,3 +115,59 @@ def test_gallery_filters_by_storey(project, browser) -> None:  # noqa: F811
     finally:
         page.close()
         server.stop()
+
+
+EXPECTED_DOC = {"schema": "sbsc.expected/1", "counts": {"socket_x1": 3, "switch": 2},
+                "storeys": {"S1": {"socket_x1": 1, "switch": 2}, "S2": {"socket_x1": 2}}}
+
+
+def test_expected_storeys_are_parsed_and_checked() -> None:
+    from app.jobs import parse_expected, parse_expected_storeys, runner_expected
+    from sbsc_core.errors import InputError
+    from sbsc_core.io.documents import ExpectedCounts
+
+    assert parse_expected(EXPECTED_DOC) == {"socket_x1": 3, "switch": 2}
+    assert parse_expected_storeys(EXPECTED_DOC) == EXPECTED_DOC["storeys"]
+    assert parse_expected_storeys({"counts": {"switch": 1}}) is None
+    assert parse_expected_storeys({"switch": 1}) is None  # bare counts: no storeys
+    got = runner_expected(parse_expected(EXPECTED_DOC), parse_expected_storeys(EXPECTED_DOC))
+    assert got == ExpectedCounts({"socket_x1": 3, "switch": 2}, EXPECTED_DOC["storeys"])
+    assert runner_expected({"switch": 1}, None) == {"switch": 1}
+    for bad, where in (({**EXPECTED_DOC, "storeys": {"S1": {"socket_x1": 1}}}, "storeys.*.socket_x1"),
+                       ({**EXPECTED_DOC, "storeys": {"first": {"socket_x1": 3, "switch": 2}}}, "storeys.first"),
+                       ({**EXPECTED_DOC, "storeys": ["S1"]}, "expected.storeys"),
+                       ({**EXPECTED_DOC, "storeys": {"S1": {"socket_x1": -1}}}, "storeys.S1.socket_x1")):
+        with pytest.raises(InputError, match=where.replace("*", r"\*")):
+            parse_expected_storeys(bad)
+
+
+def test_job_api_keeps_the_expected_storeys(tmp_path) -> None:
+    """Issue 12: a whole expected.json with ``storeys`` reaches the job (and its retry) whole."""
+    from fastapi.testclient import TestClient
+
+    from app.jobs import runner_expected
+    from app.models import Job
+    from app.server import create_app
+    from app.users import create_user
+
+    settings = AppSettings(data_dir=tmp_path / "data", viewer=False)
+    _two_storey_output(tmp_path / "out")
+    pid = ensure_sample_project(write_small_ply(tmp_path / "scan.ply", n=100), tmp_path / "out",
+                                settings=settings, points=100, name="storeys job")
+    with TestClient(create_app(settings, start_jobs=False)) as c:
+        with c.app.state.db.write() as s:
+            _, token = create_user(s, "max", "manager")
+        r = c.post(f"/api/projects/{pid}/jobs", json={"expected": EXPECTED_DOC}, headers=auth(token))
+        assert r.status_code == 202, r.text
+        job = r.json()
+        assert job["expected"] == EXPECTED_DOC["counts"] and job["expected_storeys"] == EXPECTED_DOC["storeys"]
+        assert c.get(f"/api/jobs/{job['id']}", headers=auth(token)).json()["expected_storeys"] == EXPECTED_DOC["storeys"]
+        with c.app.state.db.read() as s:
+            row = s.get(Job, job["id"])
+            assert runner_expected(row.expected, row.expected_storeys).storeys == EXPECTED_DOC["storeys"]
+        bad = {**EXPECTED_DOC, "storeys": {"S1": {"socket_x1": 1}}}
+        c.delete(f"/api/jobs/{job['id']}", headers=auth(token))
+        r = c.post(f"/api/projects/{pid}/jobs", json={"expected": bad}, headers=auth(token))
+        assert r.status_code == 422 and "storeys" in r.json()["detail"]
+        r = c.post(f"/api/jobs/{job['id']}/retry", headers=auth(token))
+        assert r.status_code == 202 and r.json()["expected_storeys"] == EXPECTED_DOC["storeys"]

@@ -20,7 +20,7 @@ from sqlalchemy import func, select
 from sbsc_core.errors import InputError
 
 from ..auth import Principal
-from ..jobs import TERMINAL, parse_expected
+from ..jobs import TERMINAL, parse_expected, parse_expected_storeys
 from ..models import Job, Project, ProjectEvent, Scan, utcnow
 from ..results import job_dict
 from ..review_service import is_reviewed
@@ -64,6 +64,7 @@ def submit_job(pid: int, user: Reviewer, db: DB, jobs: Jobs, body: NewJob | None
     """Queue a detection run over all the project's scans with its model library."""
     try:
         expected = parse_expected(body.expected if body else None)
+        per_storey = parse_expected_storeys(body.expected if body else None)  # contract 3's storeys
     except InputError as exc:
         raise HTTPException(422, str(exc)) from None
     with db.write() as s:
@@ -72,7 +73,7 @@ def submit_job(pid: int, user: Reviewer, db: DB, jobs: Jobs, body: NewJob | None
             raise HTTPException(409, f"project {pid} has no scan yet; upload one first")
         check_new_job(s, project, user)
         job = Job(project_id=pid, status="queued", stage="queued", progress=0.0, expected=expected,
-                  models_id=project.models_id, created_by=user.name)
+                  expected_storeys=per_storey, models_id=project.models_id, created_by=user.name)
         s.add(job)
         s.flush()
         out = job_dict(job)
@@ -96,7 +97,8 @@ def retry_job(jid: int, user: Reviewer, db: DB, jobs: Jobs) -> dict:
                                      "can be retried")
         check_new_job(s, project, user)
         job = Job(project_id=old.project_id, status="queued", stage="queued", progress=0.0,
-                  expected=old.expected, models_id=old.models_id, retry_of=old.id,
+                  expected=old.expected, expected_storeys=old.expected_storeys,
+                  models_id=old.models_id, retry_of=old.id,
                   created_by=user.name)
         s.add(job)
         s.flush()
