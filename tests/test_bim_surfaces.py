@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import math
 from functools import cache
 from pathlib import Path
 
@@ -386,3 +387,32 @@ def test_design_objects_without_connections_find_their_ceiling_or_column(tmp_pat
     for a, b in zip(connected.objects, got.objects, strict=True):
         assert (a.guid, a.surface) == (b.guid, b.surface)
         assert np.linalg.norm(a.position - b.position) <= 0.001
+
+
+@pytest.mark.parametrize("turn", [30.0, -60.0])
+def test_turned_objects_on_a_ceiling_and_a_column(turn):
+    """``rotation_deg`` turns the body about the surface's normal, counter-clockwise seen from
+    the room (as the simulator places it): the footprint's width runs along u turned towards v."""
+    t = truth()
+    doc = detections_of(t)
+    surfaces = {s["id"]: s for s in t["surfaces"]}
+    picks = {}
+    for d in doc["detections"]:
+        kind = d.get("surface")
+        if kind and kind not in picks and not surfaces[d["wall"]].get("radius_m") and d["class"] == (
+                "exit_light" if kind == "ceiling" else "fire_extinguisher"):
+            d["rotation_deg"] = turn
+            picks[kind] = d
+    assert set(picks) == {"ceiling", "column"}
+    model = export_ifc(doc, schema="IFC4")
+    a = math.radians(turn)
+    for kind, d in picks.items():
+        el = next(e for e in model.by_type("IfcElement") if e.Tag == d["id"])
+        s = surfaces[d["wall"]]
+        u, v, n = (np.asarray(s[k], float) for k in ("axis_u", "axis_v", "normal"))
+        along = math.cos(a) * u + math.sin(a) * v  # where the footprint's width now runs
+        across = -math.sin(a) * u + math.cos(a) * v
+        verts = body_vertices(el) - d["position"]
+        w_ext, h_ext = np.ptp(verts @ along), np.ptp(verts @ across)
+        assert w_ext == pytest.approx(d["width_m"], abs=1e-6) and h_ext == pytest.approx(d["height_m"], abs=1e-6)
+        assert (verts @ n).min() >= -1e-6  # still out of the surface, into the room
