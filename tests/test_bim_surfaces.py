@@ -406,7 +406,7 @@ def test_turned_objects_on_a_ceiling_and_a_column(turn):
     assert set(picks) == {"ceiling", "column"}
     model = export_ifc(doc, schema="IFC4")
     a = math.radians(turn)
-    for kind, d in picks.items():
+    for d in picks.values():
         el = next(e for e in model.by_type("IfcElement") if e.Tag == d["id"])
         s = surfaces[d["wall"]]
         u, v, n = (np.asarray(s[k], float) for k in ("axis_u", "axis_v", "normal"))
