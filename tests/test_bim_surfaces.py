@@ -18,7 +18,13 @@ import yaml
 
 from sbsc_core.bim.design import open_ifc
 from sbsc_core.bim.export import export_ifc
-from sbsc_core.bim.surfaces import column_bodies, read_surfaces, surface_coords, surface_normal
+from sbsc_core.bim.surfaces import (
+    column_bodies,
+    drawing_frame,
+    read_surfaces,
+    surface_coords,
+    surface_normal,
+)
 from sbsc_core.errors import InputError
 from sbsc_core.simulate.building import build_building
 from sbsc_core.simulate.scene import parse_scene
@@ -90,6 +96,9 @@ def test_surfaces_read_and_columns_rebuilt():
     u, v, d = surface_coords(rnd, np.array([o["position"]]))[0]
     assert (u, v, d) == pytest.approx((o["u"], o["v"], 0.0), abs=1e-4)
     assert np.allclose(surface_normal(rnd, np.array(o["position"])), o["normal"], atol=1e-5)
+    drawn = drawing_frame(rnd)  # drawn like a wall, unrolled around the column
+    assert drawn.to_uvd(np.array([o["position"]]))[0] == pytest.approx((o["u"], o["v"], 0.0), abs=1e-4)
+    assert np.allclose(drawn.to_world(o["u"], o["v"]), o["position"], atol=1e-4)
     # the shared type round-trips its contract-4 entry
     entry = t["surfaces"][0]
     assert Surface.from_dict(entry).to_dict(digits=6) == entry
@@ -300,7 +309,7 @@ def test_commands_with_ceilings_and_columns(tmp_path, capsys):
     assert data["summary_by_surface"] == by_surface
     assert {it["surface"] for it in data["items"]} == {"wall", "ceiling", "column"}
     html = (out / "report.html").read_text()
-    assert "H-C" in html and "H-COL1-N" in html  # ceilings and planar column faces drawn like walls
+    assert "Ceiling H-C<" in html and "Column face H-COL1-N<" in html and "Column face K-COL2<" in html
 
 
 def test_turned_survey_frame_puts_surface_objects_back(tmp_path):
