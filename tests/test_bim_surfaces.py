@@ -113,6 +113,10 @@ def test_surfaces_refused_with_the_entry_named():
     doc["surfaces"][-1]["radius_m"] = -1.0
     with pytest.raises(InputError, match="radius_m"):
         export_ifc(doc)
+    doc = detections_of(truth())
+    doc["surfaces"][0]["axis_u"] = [0.0, 0.0, 1.0]
+    with pytest.raises(InputError, match=r"surfaces\[0\]\.axis_u: .* must be horizontal"):
+        export_ifc(doc)
 
 
 @pytest.mark.parametrize("schema", SCHEMAS)

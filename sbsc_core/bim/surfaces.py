@@ -88,6 +88,8 @@ def read_surfaces(doc: Mapping[str, Any], where: str = "detections") -> dict[str
             raise InputError(f"{at}.normal", "a ceiling's normal must be vertical")
         if s.kind == "column" and np.linalg.norm(f.normal[:2]) < 0.9:
             raise InputError(f"{at}.normal", "a column face's normal must be horizontal")
+        if np.linalg.norm(f.axis_u[:2]) < 0.9:
+            raise InputError(f"{at}.axis_u", f"a {s.kind}'s axis_u must be horizontal")
         if s.radius_m is not None and not (s.radius_m > 0 and s.centre is not None):
             raise InputError(f"{at}.radius_m", "a round column needs radius_m > 0 and a centre [x, y]")
         out[s.id] = s
