@@ -39,7 +39,7 @@ from .design import (
     read_as_designed,
 )
 from .export import load_json, parse_detections_document, selected_detections
-from .surfaces import surface_coords, surface_normal
+from .surfaces import drawing_frame, surface_coords, surface_normal
 
 MAX_DISPLACEMENT_M = 1.0  # a designed object and a detection farther apart are two findings
 FACING_MIN_COS = 0.5  # a pair's normals must agree at least this much
@@ -256,8 +256,8 @@ def compare(design: AsDesigned, document: dict, tolerance_m: float = 0.10, *,
             items.append(ComparisonItem("unexpected", d["class"], detection=d, detection_wall=det_walls[j]))
     order = {s: i for i, s in enumerate(("missing", "displaced", "unexpected", "found", "not_scanned"))}
     items.sort(key=lambda it: (order[it.status], it.wall or "~", it.class_id))
-    # the report draws planar surfaces like walls (a round column's unrolled image is not a plane)
-    frames = {**walls, **{i: s.frame for i, s in surfaces.items() if not s.round}}
+    # the report draws surfaces like walls (a round column's face unrolled around it)
+    frames = {**walls, **{i: drawing_frame(s) for i, s in surfaces.items()}}
     return Comparison(design=design, walls=frames, openings=doc.openings, items=items, tolerance_m=float(tolerance_m),
                       max_displacement_m=float(max_displacement_m), detections_path=detections_path,
                       surfaces=surfaces)

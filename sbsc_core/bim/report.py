@@ -250,8 +250,16 @@ def render_report(comparison: Comparison, image_dir: Path | None = None) -> str:
             continue
         img, _ = wall_picture(comparison, wid, image_dir)
         designs = [names.get(g, g) for g, ws in matches.items() if wid in ws]
+        title, design_label = "Wall", "design wall"
+        surface = comparison.surfaces.get(wid)
+        if surface is not None:  # a ceiling (tile) or a column face: its design host from its items
+            title, design_label = ("Ceiling", "design ceiling") if surface.kind == "ceiling" else \
+                ("Column face", "design column")
+            designs = sorted({i["designed"]["design_wall"] for i in items
+                              if i["designed"] and i["designed"]["design_wall"]})
         counts = {s: sum(i["status"] == s for i in items) for s in ("found", "displaced", "missing", "unexpected")}
-        parts.append(f"<h2>Wall {esc(wid)}</h2><p class='muted'>design wall: {esc(', '.join(designs) or 'none matched')}; "
+        parts.append(f"<h2>{title} {esc(wid)}</h2><p class='muted'>{design_label}: "
+                     f"{esc(', '.join(designs) or 'none matched')}; "
                      + ", ".join(f"{k} {v}" for k, v in counts.items()) + "</p>")
         parts.append(f"<img alt='wall {esc(wid)}' src='data:image/png;base64,{_png_b64(img)}'>")
         parts.append(_rows(items))

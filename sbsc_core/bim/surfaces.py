@@ -88,6 +88,8 @@ def read_surfaces(doc: Mapping[str, Any], where: str = "detections") -> dict[str
             raise InputError(f"{at}.normal", "a ceiling's normal must be vertical")
         if s.kind == "column" and np.linalg.norm(f.normal[:2]) < 0.9:
             raise InputError(f"{at}.normal", "a column face's normal must be horizontal")
+        if np.linalg.norm(f.axis_u[:2]) < 0.9:
+            raise InputError(f"{at}.axis_u", f"a {s.kind}'s axis_u must be horizontal")
         if s.radius_m is not None and not (s.radius_m > 0 and s.centre is not None):
             raise InputError(f"{at}.radius_m", "a round column needs radius_m > 0 and a centre [x, y]")
         out[s.id] = s
@@ -175,6 +177,37 @@ def tangent_frame(surface: Surface, point: np.ndarray) -> WallFrame:
     r = float(surface.radius_m)
     on = np.array([surface.centre[0], surface.centre[1], surface.frame.origin[2]]) + r * n
     return WallFrame(on - uvd[0] * u_axis, u_axis, _UP.copy(), n, surface.frame.width_m, surface.frame.height_m)
+
+
+@dataclass(frozen=True)
+class CylinderFrame(WallFrame):
+    """The unrolled frame of a round column face, usable where a wall's frame is: ``to_uvd``
+    and ``to_world`` go around the cylinder (``u`` the arc length counter-clockwise from +x,
+    ``v`` the height above ``origin``, ``d`` the distance out of the cylinder)."""
+
+    centre: tuple[float, float] = (0.0, 0.0)
+    radius_m: float = 1.0
+
+    def to_uvd(self, points: np.ndarray) -> np.ndarray:
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        dx, dy = p[:, 0] - self.centre[0], p[:, 1] - self.centre[1]
+        theta = np.mod(np.arctan2(dy, dx), 2 * math.pi)
+        return np.column_stack([theta * self.radius_m, p[:, 2] - self.origin[2], np.hypot(dx, dy) - self.radius_m])
+
+    def to_world(self, u: np.ndarray | float, v: np.ndarray | float, d: np.ndarray | float = 0.0) -> np.ndarray:
+        u_, v_, d_ = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float), np.asarray(d, float))
+        a = u_ / self.radius_m
+        r = self.radius_m + d_
+        return np.stack([self.centre[0] + r * np.cos(a), self.centre[1] + r * np.sin(a), self.origin[2] + v_], axis=-1)
+
+
+def drawing_frame(surface: Surface) -> WallFrame:
+    """The frame a surface is drawn in like a wall: its own, or a :class:`CylinderFrame`."""
+    if not surface.round:
+        return surface.frame
+    f = surface.frame
+    return CylinderFrame(f.origin, f.axis_u, f.axis_v, f.normal, f.width_m, f.height_m,
+                         centre=(float(surface.centre[0]), float(surface.centre[1])), radius_m=float(surface.radius_m))
 
 
 def object_matrix(surface: Surface, position: np.ndarray) -> np.ndarray:
