@@ -9,6 +9,14 @@ be one huge image), each grown by ``overlap_m`` on every side so that an object 
 lies in a tile's own part (its *core*) is whole in its image. A tile is a surface of kind
 ``ceiling`` (contract 4 ``surfaces``), id ``C01``, ... (``S2-C01`` with several storeys).
 
+**Stepped ceilings.** Rooms within a storey may have lower ceilings than the storey's
+(highest) one. :func:`ceiling_levels` measures the top of the points over plan cells of
+``level_cell_m`` in the segmentation sample; cells whose top lies ``level_tolerance_m`` from
+a lower level that covers at least ``level_min_area_m2`` are under that level. Each lower
+level gets tiles of its own over its cells, at its own height, and takes only the points over
+its cells; the storey's ceiling takes the points over every other cell. Tiles with no point
+are left out (no surface, no work).
+
 The scan is read once more: the points within the orthoimage's depth range of a storey's
 ceiling, minus those on a wall's plane (the tops of the walls seen edge-on), are binned
 into each tile's partition like a wall's (:mod:`partition`). Each tile then goes through
@@ -23,27 +31,93 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from .io.scans import ScanChunk
 from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
 from .partition import ScanPart, _part_chunks, append_records, folder_records
 from .settings import CeilingSettings, OrthoimageSettings
-from .types import Candidate, Orthoimage, Segmentation, WallFrame
+from .types import Candidate, Orthoimage, PointCloud, Segmentation, WallFrame
 
 CEILING_SKIN_M = 0.01  # points this close to the ceiling plane are the ceiling's, even at a wall
+_MAX_LOWER_LEVELS = 4
+_MEMORY_PART_POINTS = 4_000_000
+
+
+@dataclass(frozen=True)
+class MemoryPart:
+    """Consecutive points of an in-memory cloud (:func:`~sbsc_core.pipeline.detect`), used
+    like a scan part by the ceiling and column stages (``xyz`` relative to the cloud's origin)."""
+
+    xyz: np.ndarray  # (n, 3) float32
+    rgb: np.ndarray  # (n, 3) uint8
+    key: str
+    start: int = 0
+
+
+def memory_parts(cloud: PointCloud, points: int = _MEMORY_PART_POINTS) -> list[MemoryPart]:
+    """``cloud`` as parts of at most ``points`` points (views, no copy)."""
+    return [MemoryPart(cloud.xyz[a:a + points], cloud.rgb[a:a + points], f"m{k:05d}", a)
+            for k, a in enumerate(range(0, len(cloud), points))]
+
+
+def part_chunks(part: ScanPart | MemoryPart, origin: np.ndarray) -> Iterator[ScanChunk]:
+    """The chunks of a scan part (streamed from its file) or of a :class:`MemoryPart`."""
+    if isinstance(part, MemoryPart):
+        yield ScanChunk(part.xyz, part.rgb, np.asarray(origin, np.float64), part.start)
+        return
+    yield from _part_chunks(part, origin)
+
+
+@dataclass(frozen=True)
+class CeilingLevels:
+    """The ceiling levels of one storey over a plan grid: ``labels[j, i]`` is 0 under the
+    storey's ceiling (or unknown) and ``k`` under the lower level ``z[k - 1]``."""
+
+    storey: str | None
+    ceiling_z: float
+    x0: float
+    y0: float
+    cell_m: float
+    labels: np.ndarray  # (ny, nx) int8
+    z: tuple[float, ...]  # the lower levels, highest first
+
+    def label(self, xy: np.ndarray) -> np.ndarray:
+        """The level number (0: the storey's ceiling) over each plan point (N, 2) float64."""
+        ny, nx = self.labels.shape
+        i = np.floor((xy[:, 0] - self.x0) / self.cell_m).astype(np.int64)
+        j = np.floor((xy[:, 1] - self.y0) / self.cell_m).astype(np.int64)
+        inside = (i >= 0) & (i < nx) & (j >= 0) & (j < ny)
+        out = np.zeros(len(xy), np.int8)
+        out[inside] = self.labels[j[inside], i[inside]]
+        return out
+
+    def extent(self, k: int) -> tuple[float, float, float, float]:
+        """x0, x1, y0, y1 of the cells under lower level ``k``."""
+        jj, ii = np.nonzero(self.labels == k)
+        c = self.cell_m
+        return (self.x0 + ii.min() * c, self.x0 + (ii.max() + 1) * c,
+                self.y0 + jj.min() * c, self.y0 + (jj.max() + 1) * c)
 
 
 @dataclass(frozen=True)
 class CeilingTile:
-    """One tile of a storey's ceiling: its frame and the part of it (u, v in metres) it owns."""
+    """One tile of a storey's ceiling: its frame and the part of it (u, v in metres) it owns.
+
+    With ``levels``, the tile is under level ``level`` of them (0: the storey's ceiling) and
+    takes only the points over that level's cells.
+    """
 
     id: str
     storey: str | None
     frame: WallFrame
     core: tuple[float, float, float, float]  # u_min, u_max, v_min, v_max
+    level: int = 0
+    levels: CeilingLevels | None = None
 
     def owns(self, u: float, v: float) -> bool:
         return self.core[0] <= u < self.core[1] and self.core[2] <= v < self.core[3]
@@ -56,10 +130,105 @@ class CeilingTile:
         return doc
 
 
-def ceiling_tiles(seg: Segmentation, s: CeilingSettings) -> list[CeilingTile]:
-    """The tiles of every storey's ceiling, over the plan extent of the storey's walls."""
+def ceiling_levels(cloud: PointCloud, seg: Segmentation, s: CeilingSettings) -> list[CeilingLevels]:
+    """The ceiling levels of every storey measured in ``cloud`` (the segmentation sample).
+
+    Over plan cells of ``s.level_cell_m``, the top of a cell is its third-highest point
+    between ``level_max_drop_m`` below the storey's ceiling and 5 cm above it (a stray point
+    does not lift it). Cells whose top is more than ``level_tolerance_m`` below the storey's
+    ceiling form lower levels: the most common top among them, refined as the median of the
+    tops within the tolerance, is a level when its cells (closed and opened by a cell, the
+    smaller pieces dropped) cover ``level_min_area_m2``; then the next, up to four. Each
+    level is then the median of its cells' points within the tolerance. A storey with no
+    lower level gets no entry.
+    """
+    import cv2
+
+    storeys = [(st.id, st.ceiling_z) for st in seg.storeys] or [(None, seg.ceiling_z)]
+    origin = np.asarray(cloud.origin, np.float64)
+    z_all = cloud.xyz[:, 2].astype(np.float64) + origin[2]
+    c = s.level_cell_m
+    min_cells = s.level_min_area_m2 / (c * c)
+    out: list[CeilingLevels] = []
+    for sid, cz in storeys:
+        idx = np.flatnonzero((z_all > cz - s.level_max_drop_m) & (z_all < cz + 0.05))
+        if len(idx) < 100:
+            continue
+        xy = cloud.xyz[idx, :2].astype(np.float64) + origin[:2]
+        z = z_all[idx]
+        x0, y0 = xy.min(axis=0)
+        ij = np.floor((xy - (x0, y0)) / c).astype(np.int64)
+        nx, ny = int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1
+        cell = ij[:, 1] * nx + ij[:, 0]
+        order = np.lexsort((-z, cell))  # by cell, highest first
+        cell_s, z_s = cell[order], z[order]
+        first = np.flatnonzero(np.r_[True, cell_s[1:] != cell_s[:-1]])
+        count = np.diff(np.r_[first, len(cell_s)])
+        pick = first + np.minimum(count, 3) - 1
+        top = np.full(nx * ny, np.nan)
+        top[cell_s[pick]] = z_s[pick]
+        top[cell_s[first[count < 3]]] = np.nan  # too few points to say
+        labels = np.zeros(nx * ny, np.int8)
+        free = np.isfinite(top) & (top < cz - s.level_tolerance_m)
+        levels: list[float] = []
+        kernel = np.ones((3, 3), np.uint8)
+        while len(levels) < _MAX_LOWER_LEVELS and free.sum() >= min_cells:
+            bins = np.floor((top[free] - (cz - s.level_max_drop_m)) / 0.01).astype(np.int64)
+            hist = np.convolve(np.bincount(bins), np.ones(3), "same")
+            peak = cz - s.level_max_drop_m + (int(np.argmax(hist)) + 0.5) * 0.01
+            near = free & (np.abs(top - peak) < s.level_tolerance_m)
+            level = float(np.median(top[near]))
+            under = free & (np.abs(top - level) < s.level_tolerance_m)
+            free &= ~near & ~under
+            grid = under.reshape(ny, nx).astype(np.uint8)
+            grid = cv2.morphologyEx(cv2.morphologyEx(grid, cv2.MORPH_CLOSE, kernel), cv2.MORPH_OPEN, kernel)
+            n, lab, stats, _ = cv2.connectedComponentsWithStats(grid, connectivity=4)
+            big = [m for m in range(1, n) if stats[m, cv2.CC_STAT_AREA] >= min_cells]
+            if not big:
+                continue
+            mine = np.isin(lab, big).ravel() & (labels == 0)
+            levels.append(level)
+            labels[mine] = len(levels)
+        if levels:  # each level refined on its cells' points near it (the tops lie a little high)
+            at = labels[cell]
+            for k, lz in enumerate(levels, start=1):
+                on = (at == k) & (np.abs(z - lz) < s.level_tolerance_m)
+                levels[k - 1] = float(np.median(z[on])) if on.any() else lz
+            out.append(CeilingLevels(sid, float(cz), float(x0), float(y0), c, labels.reshape(ny, nx),
+                                     tuple(levels)))
+    return out
+
+
+def _cut(x0: float, x1: float, y0: float, y1: float, z: float, s: CeilingSettings
+         ) -> list[tuple[WallFrame, tuple[float, float, float, float]]]:
+    """The plan box cut into tiles of at most ``s.tile_m``, each grown by ``s.overlap_m``:
+    (frame at height ``z``, core), row by row from the top (max y; v runs along -y)."""
+    nx = max(1, math.ceil((x1 - x0) / s.tile_m - 1e-9))
+    ny = max(1, math.ceil((y1 - y0) / s.tile_m - 1e-9))
+    xs = np.linspace(x0, x1, nx + 1)
+    ys = np.linspace(y1, y0, ny + 1)
+    out = []
+    for j in range(ny):
+        for i in range(nx):
+            g = s.overlap_m
+            tx0, tx1 = max(x0, xs[i] - g), min(x1, xs[i + 1] + g)
+            ty1, ty0 = min(y1, ys[j] + g), max(y0, ys[j + 1] - g)
+            frame = WallFrame(origin=np.array([tx0, ty1, z], np.float64), axis_u=np.array([1.0, 0.0, 0.0]),
+                              axis_v=np.array([0.0, -1.0, 0.0]), normal=np.array([0.0, 0.0, -1.0]),
+                              width_m=float(tx1 - tx0), height_m=float(ty1 - ty0))
+            core = (float(xs[i] - tx0), float(xs[i + 1] - tx0) + (1e-6 if i == nx - 1 else 0.0),
+                    float(ty1 - ys[j]), float(ty1 - ys[j + 1]) + (1e-6 if j == ny - 1 else 0.0))
+            out.append((frame, core))
+    return out
+
+
+def ceiling_tiles(seg: Segmentation, s: CeilingSettings, levels: list[CeilingLevels] | None = None
+                  ) -> list[CeilingTile]:
+    """The tiles of every storey's ceiling, over the plan extent of the storey's walls, then
+    (numbered on) those of each lower level of ``levels`` over the extent of its cells."""
     storeys = [(st.id, st.ceiling_z) for st in seg.storeys] or [(None, seg.ceiling_z)]
     several = len(storeys) > 1
+    by_storey = {lv.storey: lv for lv in levels or []}
     tiles: list[CeilingTile] = []
     for sid, cz in storeys:
         walls = [w for w in seg.walls if sid is None or w.storey in (sid, None)]
@@ -69,24 +238,20 @@ def ceiling_tiles(seg: Segmentation, s: CeilingSettings) -> list[CeilingTile]:
                                                      + w.frame.width_m * w.frame.axis_u[:2])])
         x0, y0 = ends.min(axis=0)
         x1, y1 = ends.max(axis=0)
-        nx = max(1, math.ceil((x1 - x0) / s.tile_m - 1e-9))
-        ny = max(1, math.ceil((y1 - y0) / s.tile_m - 1e-9))
-        xs = np.linspace(x0, x1, nx + 1)
-        ys = np.linspace(y1, y0, ny + 1)  # v runs along -y: the first row of tiles is at the top (max y)
+        lv = by_storey.get(sid)
+        boxes = [(0, cz, (x0, x1, y0, y1))]
+        if lv is not None:
+            for k, z in enumerate(lv.z, start=1):
+                e = lv.extent(k)
+                box = (max(x0, e[0]), min(x1, e[1]), max(y0, e[2]), min(y1, e[3]))
+                if box[1] > box[0] and box[3] > box[2]:
+                    boxes.append((k, z, box))
         k = 0
-        for j in range(ny):
-            for i in range(nx):
+        for level, z, (bx0, bx1, by0, by1) in boxes:
+            for frame, core in _cut(bx0, bx1, by0, by1, z, s):
                 k += 1
-                g = s.overlap_m
-                tx0, tx1 = max(x0, xs[i] - g), min(x1, xs[i + 1] + g)
-                ty1, ty0 = min(y1, ys[j] + g), max(y0, ys[j + 1] - g)
-                frame = WallFrame(origin=np.array([tx0, ty1, cz], np.float64), axis_u=np.array([1.0, 0.0, 0.0]),
-                                  axis_v=np.array([0.0, -1.0, 0.0]), normal=np.array([0.0, 0.0, -1.0]),
-                                  width_m=float(tx1 - tx0), height_m=float(ty1 - ty0))
-                core = (float(xs[i] - tx0), float(xs[i + 1] - tx0) + (1e-6 if i == nx - 1 else 0.0),
-                        float(ty1 - ys[j]), float(ty1 - ys[j + 1]) + (1e-6 if j == ny - 1 else 0.0))
                 tid = (f"{sid}-" if several else "") + f"C{k:02d}"
-                tiles.append(CeilingTile(tid, sid, frame, core))
+                tiles.append(CeilingTile(tid, sid, frame, core, level, lv))
     return tiles
 
 
@@ -94,42 +259,48 @@ def _tile_dir(scratch: Path, k: int) -> Path:
     return scratch / "ceilings" / f"{k:05d}"
 
 
-def ceiling_part(part: ScanPart, origin: np.ndarray, tiles: list[CeilingTile], walls: list[WallFrame],
+def ceiling_part(part: ScanPart | MemoryPart, origin: np.ndarray, tiles: list[CeilingTile], walls: list[WallFrame],
                  scratch: str, ortho: OrthoimageSettings, wall_clear_m: float) -> list[int]:
     """Stream one part of a scan and append each tile's binned points to its partition.
 
-    A point goes to every tile whose image it falls in (tiles overlap), unless it hangs
-    more than ``CEILING_SKIN_M`` below the ceiling within ``wall_clear_m`` of a wall's plane
-    over the wall (the wall's top, seen edge-on). Returns records per tile.
+    A point goes to every tile of its ceiling level whose image it falls in (tiles overlap),
+    unless it hangs more than ``CEILING_SKIN_M`` below the level within ``wall_clear_m`` of
+    a wall's plane over the wall (the wall's top, seen edge-on). A tile of a storey with
+    several levels takes only the points over its level's cells. ``part`` is a scan part or
+    a :class:`MemoryPart`. Returns records per tile.
     """
     root = Path(scratch)
     written = [0] * len(tiles)
     d0, d1 = ortho.depth_range_m
-    zs = sorted({float(t.frame.origin[2]) for t in tiles})
-    for chunk in _part_chunks(part, origin):
+    groups: dict[tuple, list[int]] = {}  # tiles at one height under one level of one storey
+    for k, t in enumerate(tiles):
+        groups.setdefault((float(t.frame.origin[2]), t.storey, t.level), []).append(k)
+    for chunk in part_chunks(part, origin):
         z = chunk.xyz[:, 2].astype(np.float64) + float(origin[2])
-        near = np.zeros(len(z), bool)
-        for cz in zs:
-            near |= (z >= cz - d1) & (z <= cz - d0)
-        idx = np.flatnonzero(near)
-        if not len(idx):
-            continue
-        xyz = chunk.xyz[idx]
-        below = np.ones(len(idx), bool)  # hangs below every ceiling plane: may be a wall's top
-        for cz in zs:
-            below &= z[idx] < cz - CEILING_SKIN_M
-        on_wall = np.zeros(len(idx), bool)
-        for f in walls:
-            uvd = wall_coordinates(xyz[below], f, origin)
-            on_wall[below] |= (np.abs(uvd[:, 2]) < wall_clear_m) & (uvd[:, 0] > -wall_clear_m) \
-                & (uvd[:, 0] < f.width_m + wall_clear_m)
-        idx, xyz = idx[~on_wall], xyz[~on_wall]
-        for k, t in enumerate(tiles):
-            uvd = wall_coordinates(xyz, t.frame, origin)
-            keep, pixel = ortho_pixels(uvd, t.frame, ortho)
-            if not len(pixel):
+        for (cz, _, level), ks in groups.items():
+            idx = np.flatnonzero((z >= cz - d1) & (z <= cz - d0))
+            levels = tiles[ks[0]].levels
+            if len(idx) and levels is not None:
+                xy = chunk.xyz[idx, :2].astype(np.float64) + origin[:2]
+                idx = idx[levels.label(xy) == level]
+            if not len(idx):
                 continue
-            written[k] += append_records(_tile_dir(root, k), part.key, pixel, uvd[keep, 2], chunk.rgb[idx[keep]])
+            xyz = chunk.xyz[idx]
+            below = z[idx] < cz - CEILING_SKIN_M  # hangs below the ceiling plane: may be a wall's top
+            on_wall = np.zeros(len(idx), bool)
+            for f in walls:
+                uvd = wall_coordinates(xyz[below], f, origin)
+                on_wall[below] |= (np.abs(uvd[:, 2]) < wall_clear_m) & (uvd[:, 0] > -wall_clear_m) \
+                    & (uvd[:, 0] < f.width_m + wall_clear_m)
+            idx, xyz = idx[~on_wall], xyz[~on_wall]
+            for k in ks:
+                t = tiles[k]
+                uvd = wall_coordinates(xyz, t.frame, origin)
+                keep, pixel = ortho_pixels(uvd, t.frame, ortho)
+                if not len(pixel):
+                    continue
+                written[k] += append_records(_tile_dir(root, k), part.key, pixel, uvd[keep, 2],
+                                             chunk.rgb[idx[keep]])
     return written
 
 
@@ -171,14 +342,19 @@ class CeilingResults:
         return [t.surface() for t in self.tiles]
 
 
-def detect_ceilings(parts: list[ScanPart], origin: np.ndarray, seg: Segmentation, library, expected: dict | None,
-                    s, *, executor, scratch: Path, parked: Path, in_flight: int, progress, timings: dict,
-                    log) -> CeilingResults:
-    """Bin the ceilings' points into tiles, then run the walls' stages on every tile (see the module)."""
+def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg: Segmentation, library,
+                    expected: dict | None, s, *, executor, scratch: Path, parked: Path, in_flight: int, progress,
+                    timings: dict, log, levels: list[CeilingLevels] | None = None,
+                    part_executor=None) -> CeilingResults:
+    """Bin the ceilings' points into tiles, then run the walls' stages on every tile (see the module).
+
+    ``levels`` (:func:`ceiling_levels`) gives the storeys' lower ceilings their own tiles.
+    Tiles that got no point are left out.
+    """
     from .pipeline import _search_classes, surface_stage
 
     t0 = time.perf_counter()
-    tiles = ceiling_tiles(seg, s.ceilings)
+    tiles = ceiling_tiles(seg, s.ceilings, levels)
     classes = _search_classes(library, expected, kind="ceiling")
     if not tiles or not classes:
         return CeilingResults({}, {}, classes, [])
@@ -187,8 +363,10 @@ def detect_ceilings(parts: list[ScanPart], origin: np.ndarray, seg: Segmentation
     jobs = [(part, origin, tiles, walls, str(scratch), s.orthoimage, s.ceilings.wall_clear_m) for part in parts]
     kept, results, templates = surface_stage(
         executor, stage="ceilings", part_fn=ceiling_part, part_jobs=jobs, job_fn=ceiling_tile_job, surfaces=tiles,
-        library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress)
+        library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress,
+        part_executor=part_executor)
     timings["ceilings"] = time.perf_counter() - t0
-    log(f"{len(tiles)} ceiling tiles: {int(kept.sum()):,} points, searched for {', '.join(classes)} "
-        f"in {timings['ceilings']:.1f} s")
-    return CeilingResults(results, templates, classes, tiles)
+    lower = [f"{lv.storey + ' ' if lv.storey else ''}{z:.2f} m" for lv in levels or [] for z in lv.z]
+    log(f"{len(results)} ceiling tiles" + (f" (lower ceilings at {', '.join(lower)})" if lower else "")
+        + f": {int(kept.sum()):,} points, searched for {', '.join(classes)} in {timings['ceilings']:.1f} s")
+    return CeilingResults(results, templates, classes, [t for t in tiles if t.id in results])

@@ -15,7 +15,11 @@ column (origin at its lower-left corner, ``axis_v`` up, ``normal`` out), ids
 unrolled around its axis: ``u`` is the arc length counter-clockwise from +x (radius times
 the angle), ``v`` the height above the floor, depth the distance out of the cylinder; its
 ``surfaces`` entry gives ``radius_m`` and ``centre``, and a detection's ``position`` is put
-back on the cylinder.
+back on the cylinder. So that an object on the seam (at +x, where the angle wraps) is whole
+somewhere, the image is ``wrap_m`` longer than the circumference: its first ``wrap_m`` are
+repeated at its end. Only candidates centred between ``wrap_m / 2`` and the circumference
+plus ``wrap_m / 2`` are kept (each place of the cylinder once: no duplicates), and a
+detection's ``u`` is given modulo the circumference.
 
 The scan is read once more: points near a column are binned into its faces' partitions;
 each face goes through the walls' stages with the classes whose ``mount`` has ``column``
@@ -32,8 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .ceilings import MemoryPart, part_chunks
 from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
-from .partition import ScanPart, _part_chunks, append_records, folder_records
+from .partition import ScanPart, append_records, folder_records
 from .settings import ColumnSettings, OrthoimageSettings
 from .types import Orthoimage, PointCloud, Segmentation, WallFrame
 
@@ -71,6 +76,22 @@ class ColumnFace:
     frame: WallFrame
     radius_m: float | None = None  # round: the frame is unrolled around the axis
     centre: tuple[float, float] | None = None
+    wrap_m: float = 0.0  # round: the image repeats this much of its start at its end
+
+    @property
+    def circumference_m(self) -> float | None:
+        return None if self.radius_m is None else 2 * math.pi * self.radius_m
+
+    def arc_u(self, u: float) -> float:
+        """``u`` of the unrolled image as the arc length in [0, circumference) (planar: as is)."""
+        return u if self.radius_m is None else float(u % self.circumference_m)
+
+    def owns(self, u: float) -> bool:
+        """Whether a candidate centred at ``u`` is kept: a round face keeps one circumference,
+        from ``wrap_m / 2`` on, so that an object on the seam is found once and whole."""
+        if self.radius_m is None:
+            return True
+        return self.wrap_m / 2 <= u < self.circumference_m + self.wrap_m / 2
 
     def coords(self, xyz: np.ndarray, origin: np.ndarray) -> np.ndarray:
         """(N, 3) float32 u, v, d of float32 points given relative to ``origin``."""
@@ -203,16 +224,17 @@ def _refine_rect(pts: np.ndarray, centre: np.ndarray, size: np.ndarray, angle_de
     return centre, size, angle_deg
 
 
-def column_faces(columns: list[FoundColumn]) -> list[ColumnFace]:
-    """The faces of the columns as surfaces (see the module docstring)."""
+def column_faces(columns: list[FoundColumn], *, wrap_m: float = 0.0) -> list[ColumnFace]:
+    """The faces of the columns as surfaces (see the module docstring); a round face's image
+    is ``wrap_m`` longer than the circumference."""
     faces: list[ColumnFace] = []
     for c in columns:
         cx, cy = c.centre
         if c.shape == "round":
             r = c.size_m[0] / 2
             frame = WallFrame(np.array([cx + r, cy, c.floor_z]), np.array([0.0, 1.0, 0.0]), _UP.copy(),
-                              np.array([1.0, 0.0, 0.0]), 2 * math.pi * r, c.height_m)
-            faces.append(ColumnFace(c.id, c.id, c.storey, frame, r, (cx, cy)))
+                              np.array([1.0, 0.0, 0.0]), 2 * math.pi * r + wrap_m, c.height_m)
+            faces.append(ColumnFace(c.id, c.id, c.storey, frame, r, (cx, cy), wrap_m))
             continue
         used: set[str] = set()
         for k in range(4):
@@ -235,19 +257,23 @@ def _face_dir(scratch: Path, k: int) -> Path:
     return scratch / "columns" / f"{k:05d}"
 
 
-def column_part(part: ScanPart, origin: np.ndarray, faces: list[ColumnFace], reach_m: list[float], scratch: str,
+def column_part(part: ScanPart | MemoryPart, origin: np.ndarray, faces: list[ColumnFace], reach_m: list[float], scratch: str,
                 ortho: OrthoimageSettings) -> list[int]:
     """Stream one part and append each face's binned points to its partition (records per face)."""
     root = Path(scratch)
     written = [0] * len(faces)
     centres = np.array([f.centre if f.centre is not None else _face_centre(f) for f in faces])
-    for chunk in _part_chunks(part, origin):
+    for chunk in part_chunks(part, origin):
         xy = chunk.xyz[:, :2].astype(np.float64) + origin[:2]
         for k, f in enumerate(faces):
             near = np.flatnonzero(np.hypot(xy[:, 0] - centres[k, 0], xy[:, 1] - centres[k, 1]) < reach_m[k])
             if not len(near):
                 continue
             uvd = f.coords(chunk.xyz[near], origin)
+            if f.radius_m is not None and f.wrap_m > 0:  # the seam: the start again at the end
+                again = np.flatnonzero(uvd[:, 0] < f.wrap_m)
+                uvd = np.vstack([uvd, uvd[again] + np.array([f.circumference_m, 0, 0], np.float32)])
+                near = np.concatenate([near, near[again]])
             keep, pixel = ortho_pixels(uvd, f.frame, ortho)
             if not len(pixel):
                 continue
@@ -267,11 +293,16 @@ def face_orthoimage(scratch: str | Path, k: int, face: ColumnFace, ortho: Orthoi
 
 def column_face_job(scratch: str, k: int, face: ColumnFace, templates: dict, prototypes, s) -> tuple:
     """One face's work (what a worker runs): orthoimage and the walls' stages."""
-    from .pipeline import process_orthoimage
+    from .pipeline import WallResult, process_orthoimage
 
     t = time.perf_counter()
     ortho = face_orthoimage(scratch, k, face, s.orthoimage)
     res, t_stage = process_orthoimage(ortho, templates, prototypes, s, {"orthoimage": time.perf_counter() - t})
+    if face.radius_m is not None:  # one circumference of the wrapped image
+        px = s.orthoimage.pixel_m
+        res = WallResult(res.ortho, res.area, res.depth_rois, res.colour_rois,
+                         [c for c in res.depth_candidates if face.owns((c.centre[1] + 0.5) * px)],
+                         [c for c in res.colour_candidates if face.owns((c.centre[1] + 0.5) * px)])
     return face.id, res, t_stage
 
 
@@ -287,14 +318,14 @@ class ColumnResults:
         return [f.surface() for f in self.faces]
 
 
-def detect_columns(parts: list[ScanPart], origin: np.ndarray, columns: list[FoundColumn], library,
+def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray, columns: list[FoundColumn], library,
                    expected: dict | None, s, *, executor, scratch: Path, parked: Path, in_flight: int, progress,
-                   timings: dict, log) -> ColumnResults:
+                   timings: dict, log, part_executor=None) -> ColumnResults:
     """Bin the columns' points into their faces, then run the walls' stages on every face."""
     from .pipeline import _search_classes, surface_stage
 
     t0 = time.perf_counter()
-    faces = column_faces(columns)
+    faces = column_faces(columns, wrap_m=s.columns.wrap_m)
     classes = _search_classes(library, expected, kind="column")
     if not faces or not classes:
         return ColumnResults({}, {}, classes, columns, [])
@@ -304,8 +335,9 @@ def detect_columns(parts: list[ScanPart], origin: np.ndarray, columns: list[Foun
     jobs = [(part, origin, faces, reach, str(scratch), s.orthoimage) for part in parts]
     kept, results, templates = surface_stage(
         executor, stage="columns", part_fn=column_part, part_jobs=jobs, job_fn=column_face_job, surfaces=faces,
-        library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress)
+        library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress,
+        part_executor=part_executor)
     timings["columns"] = time.perf_counter() - t0
     log(f"{len(columns)} columns ({', '.join(c.shape for c in columns)}), {len(faces)} faces: "
         f"{int(kept.sum()):,} points, searched for {', '.join(classes)} in {timings['columns']:.1f} s")
-    return ColumnResults(results, templates, classes, columns, faces)
+    return ColumnResults(results, templates, classes, columns, [f for f in faces if f.id in results])

@@ -506,24 +506,27 @@ def _in_order(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int)
 def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_jobs: list[tuple], job_fn: Callable,
                   surfaces: Sequence, library: ModelLibrary, classes: list[str], s: DetectionSettings,
                   scratch: Path, parked: Path, in_flight: int, progress: Progress,
+                  part_executor: Executor | None = None,
                   ) -> tuple[np.ndarray, dict[str, WallResult], dict[str, ModelTemplate]]:
     """A stage on surfaces beyond the walls (ceiling tiles, column faces), run as the walls' is.
 
     ``part_fn(*job)`` bins one scan part's points into the surfaces' partitions and returns
     the points written per surface; then ``job_fn(scratch, k, surface, templates, prototypes,
     s)`` runs the walls' stages on surface number ``k`` and returns ``(id, result, timings)``.
-    Returns the points binned per surface, the results by surface id (their images parked
-    in ``parked``, :func:`park_wall`) and the templates of ``classes``.
+    Surfaces that got no point are left out (no work, no result). Returns the points binned
+    per surface, the results by surface id (their images parked in ``parked``,
+    :func:`park_wall`) and the templates of ``classes``. ``part_executor`` (default:
+    ``executor``) runs the binning (an in-memory cloud's parts are binned in this process).
     """
     kept = np.zeros(len(surfaces), np.int64)
-    for _, written in _as_done(executor, part_jobs, part_fn, in_flight):
+    for _, written in _as_done(part_executor or executor, part_jobs, part_fn, in_flight):
         kept += np.asarray(written, np.int64)
     templates, prototypes = _templates_job(library, s, classes)
-    jobs = [(str(scratch), k, sf, templates, prototypes, s) for k, sf in enumerate(surfaces)]
+    jobs = [(str(scratch), k, sf, templates, prototypes, s) for k, sf in enumerate(surfaces) if kept[k] > 0]
     results: dict[str, WallResult] = {}
     for i, (sid, res, _) in enumerate(_in_order(executor, jobs, job_fn, in_flight)):
         results[sid] = park_wall(res, parked)
-        progress(stage, (i + 1) / len(surfaces))
+        progress(stage, (i + 1) / len(jobs))
     return kept, results, templates
 
 
@@ -590,6 +593,11 @@ def detect_scans(
         from .columns import find_columns
 
         found_columns = find_columns(cloud, seg, s.columns)
+    levels = None
+    if s.ceilings.enabled:  # lower ceilings within a storey (stepped ceilings), measured in the sample
+        from .ceilings import ceiling_levels
+
+        levels = ceiling_levels(cloud, seg, s.ceilings)
     del cloud
     for wall in seg.walls:  # indices into the sample: the walls' points come from their partitions
         wall.point_index = np.zeros(0, np.int64)
@@ -634,7 +642,8 @@ def detect_scans(
         from .ceilings import detect_ceilings
 
         ceil = detect_ceilings(parts, origin, seg, library, counts, s, executor=executor, scratch=Path(scratch),
-                               parked=parked, in_flight=2 * workers, progress=progress, timings=timings, log=log)
+                               parked=parked, in_flight=2 * workers, progress=progress, timings=timings, log=log,
+                               levels=levels)
         walls.update(ceil.walls)
         templates = {**ceil.templates, **templates}
         classes = sorted(set(classes) | set(ceil.classes))
@@ -657,6 +666,7 @@ def detect_scans(
         for d in result.detections:
             d.surface = kinds.get(d.wall_id)
             if d.wall_id in faces:  # a round column's face is unrolled: put the object back on it
+                d.u = faces[d.wall_id].arc_u(d.u)
                 d.position = faces[d.wall_id].to_world(d.u, d.v)
         result.surfaces = surfaces
     timings["total"] = time.perf_counter() - t0

@@ -52,6 +52,7 @@ __all__ = ["segment_floor_ceiling_walls", "find_storeys", "find_floor_ceiling", 
 
 _DENSE_VOXELS = 1 << 24  # voxel grids up to this size are grouped with bincount, larger ones by sorting
 _CHUNK = 1 << 22  # points handled at once where temporaries would otherwise grow with the wall
+_PLANE_BLOCK = 1 << 15  # voxels compared with every plane at once (bounds a (voxels, planes) array)
 _ASSIGN_THREADS = 2  # threads assigning points to walls
 _THREAD_MIN_POINTS = 1 << 22  # clouds smaller than this are assigned in one thread
 
@@ -106,12 +107,17 @@ def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSetting
         raise NoWallsError("no walls found: the scan has no points")
     xyz = cloud.xyz
     box = dense_box(xyz, s, where=", ".join(cloud.sources) or "scan")
-    stray = n - _count_inside(xyz, box)
-
     # regular subsample of the dense part for the levels and for fitting
     step = max(1, math.ceil(n / (2 * s.fit_max_points)))
-    sample = xyz[::step]
-    sample = sample[inside_box(sample, box)]
+    if step == 1:  # the sample is the dense part itself: one test of the box
+        inside = inside_box(xyz, box)
+        stray = n - int(np.count_nonzero(inside))
+        sample = xyz[inside]
+        del inside
+    else:
+        stray = n - _count_inside(xyz, box)
+        sample = xyz[::step]
+        sample = sample[inside_box(sample, box)]
     levels = find_storeys(sample[:, 2], s, sample[:, :2])
     multi = len(levels) > 1
     z0 = float(cloud.origin[2])
@@ -430,11 +436,7 @@ def _wall_planes(cells: dict[str, np.ndarray], floor: float, height: float, s: S
         return []
     ns = np.array([p[0] for p in refined])
     ss = np.array([p[1] for p in refined])
-    dist = np.abs(c[:, :2] @ ns.T - ss[None, :])  # (cells, planes)
-    aligned = np.abs(nrm[:, :2] @ ns.T) >= math.cos(3 * tol)
-    dist[~aligned] = np.inf
-    best = np.argmin(dist, axis=1)
-    ok = dist[np.arange(len(c)), best] <= s.wall_plane_tolerance_m
+    best, ok = _nearest_planes(c[:, :2], nrm[:, :2], ns, ss, math.cos(3 * tol), s.wall_plane_tolerance_m)
     segs: list[_Segment] = []
     for k in range(len(refined)):
         mine = c[ok & (best == k)]
@@ -444,6 +446,23 @@ def _wall_planes(cells: dict[str, np.ndarray], floor: float, height: float, s: S
         segs += _runs(seg, s)
     return [g for g in segs if _big_enough(g, floor, height, s)]
 
+
+
+def _nearest_planes(xy: np.ndarray, nxy: np.ndarray, ns: np.ndarray, ss: np.ndarray, min_cos: float,
+                    tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """For each cell (plan centroid ``xy``, normal ``nxy``) the nearest plane ``ns . p = ss`` among
+    those whose normal is aligned with its own (``|cos| >= min_cos``): (plane index, within
+    ``tolerance``). Blockwise over the cells: the (cells, planes) distances of a building with
+    many walls are never held at once (memory bounded by ``_PLANE_BLOCK`` cells)."""
+    best = np.zeros(len(xy), np.int64)
+    ok = np.zeros(len(xy), bool)
+    for a in range(0, len(xy), _PLANE_BLOCK):
+        dist = np.abs(xy[a: a + _PLANE_BLOCK] @ ns.T - ss[None, :])  # (block, planes)
+        dist[np.abs(nxy[a: a + _PLANE_BLOCK] @ ns.T) < min_cos] = np.inf
+        b = np.argmin(dist, axis=1)
+        best[a: a + len(b)] = b
+        ok[a: a + len(b)] = dist[np.arange(len(b)), b] <= tolerance
+    return best, ok
 
 def _offset_planes(c: np.ndarray, th: float, min_cells: float, s: SegmentationSettings
                    ) -> list[tuple[np.ndarray, float]]:

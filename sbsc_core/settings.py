@@ -7,6 +7,7 @@ dict (e.g. loaded from JSON/YAML) and refuses unknown keys.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any
@@ -274,6 +275,11 @@ class CeilingSettings:
     tile_m: float = 6.0  # a storey's ceiling is cut into tiles at most this big each way
     overlap_m: float = 0.3  # ... each grown by this on every side (more than half an object)
     wall_clear_m: float = 0.05  # points this close to a wall's plane are the wall's, not the ceiling's
+    # stepped ceilings: rooms whose ceiling is lower than the storey's get a level of their own
+    level_cell_m: float = 0.25  # plan cells whose top (the ceiling above them) is measured
+    level_max_drop_m: float = 1.0  # a lower ceiling is at most this far below the storey's
+    level_tolerance_m: float = 0.03  # a cell whose top is this close to a level is under it
+    level_min_area_m2: float = 2.0  # a lower ceiling covers at least this much of the plan
 
 
 @dataclass
@@ -288,6 +294,7 @@ class ColumnSettings:
     max_side_m: float = 1.5  # ... and at most this wide
     round_rms_m: float = 0.012  # round when a circle fits its points within this (RMS)
     wall_clear_m: float = 0.15  # points this close to a wall's plane are the wall's
+    wrap_m: float = 0.4  # a round column's unrolled image repeats this much of its start at its end (the seam)
 
 
 @dataclass
@@ -325,10 +332,34 @@ def _build(kind: type, data: dict[str, Any], where: str) -> Any:
         if is_dataclass(default):
             kwargs[key] = _build(type(default), value, f"{where}.{key}")
         elif isinstance(default, tuple):
-            kwargs[key] = tuple(value)
+            any_length = "..." in str(known[key].type)  # tuple[float, ...]
+            if not isinstance(value, (list, tuple)) or not (any_length or len(value) == len(default)):
+                raise InputError(f"{where}.{key}", f"expected a list like {list(default)}")
+            kwargs[key] = tuple(_scalar(0.0, v, f"{where}.{key}") for v in value)
         else:
-            kwargs[key] = type(default)(value)
+            kwargs[key] = _scalar(default, value, f"{where}.{key}")
     return kind(**kwargs)
+
+
+def _scalar(default: Any, value: Any, where: str) -> Any:
+    """Check one setting's value against its default's type, without converting what it is not.
+
+    ``bool("false")`` is True and ``int("3x")`` raises a bare ValueError: a settings file's
+    value is taken only if it already is of the setting's kind (an integer is a float too).
+    """
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif isinstance(default, float):
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    elif isinstance(default, str):
+        ok = isinstance(value, str)
+    else:
+        ok = isinstance(value, type(default))
+    if not ok:
+        raise InputError(where, f"expected {type(default).__name__}, got {value!r}")
+    return float(value) if isinstance(default, float) else value
 
 
 def load_settings(path: Path | None) -> DetectionSettings:

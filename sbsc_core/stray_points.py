@@ -89,5 +89,10 @@ def inside_box(xyz: np.ndarray, box: DenseBox) -> np.ndarray:
     lo, hi = box.lo.astype(np.float32), box.hi.astype(np.float32)
     for a in range(0, len(xyz), _CHUNK):
         c = xyz[a: a + _CHUNK]
-        out[a: a + _CHUNK] = ((c >= lo) & (c <= hi)).all(axis=1)
+        m = out[a: a + _CHUNK]
+        np.greater_equal(c[:, 0], lo[0], out=m)  # one axis at a time: no (chunk, 3) temporaries
+        m &= c[:, 0] <= hi[0]
+        for k in (1, 2):
+            m &= c[:, k] >= lo[k]
+            m &= c[:, k] <= hi[k]
     return out

@@ -90,6 +90,61 @@ class WallFrame:
         )
 
 
+@dataclass(frozen=True)
+class Surface:
+    """A surface beyond walls (contract 4 ``surfaces``): a ceiling or a column face.
+
+    ``frame`` follows contract 4 (a ceiling's ``normal`` points down into the room). A round
+    column's face is unrolled around its axis: ``u`` is the arc length counter-clockwise
+    from +x around ``centre``, ``v`` the height above ``frame.origin``, and ``radius_m`` and
+    ``centre`` are given. ``column`` names the column a face belongs to; ``room`` (the
+    simulator's) and ``storey`` are optional.
+    """
+
+    id: str
+    kind: str  # "ceiling" | "column"
+    frame: WallFrame
+    room: str | None = None
+    column: str | None = None
+    radius_m: float | None = None
+    centre: tuple[float, float] | None = None
+    storey: str | None = None
+
+    @property
+    def round(self) -> bool:
+        return self.radius_m is not None and self.centre is not None
+
+    def to_dict(self, *, digits: int | None = None) -> dict:
+        """The contract-4 ``surfaces`` entry; ``digits``: round the frame to that many decimals."""
+        frame = self.frame.to_dict()
+        if digits is not None:
+            frame = {k: ([round(x, digits) + 0.0 for x in v] if isinstance(v, list) else round(v, digits))
+                     for k, v in frame.items()}
+        doc: dict = {"id": self.id, "kind": self.kind}
+        if self.room is not None:
+            doc["room"] = self.room
+        doc.update(frame)
+        if self.column:
+            doc["column"] = self.column
+        if self.radius_m is not None:
+            doc["radius_m"] = round(float(self.radius_m), 4)
+            doc["centre"] = [round(float(c), 4) for c in self.centre]
+        if self.storey is not None:
+            doc["storey"] = self.storey
+        return doc
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Surface:
+        """A ``surfaces`` entry (already checked: ``id``, ``kind`` and the frame fields)."""
+        centre = d.get("centre")
+        radius = d.get("radius_m")
+        return cls(id=str(d["id"]), kind=str(d["kind"]), frame=WallFrame.from_dict(d),
+                   room=d.get("room"), column=d.get("column"),
+                   radius_m=float(radius) if radius is not None else None,
+                   centre=(float(centre[0]), float(centre[1])) if centre is not None else None,
+                   storey=d.get("storey"))
+
+
 @dataclass
 class Wall:
     """A segmented wall: its frame and the indices of its points in the cloud."""

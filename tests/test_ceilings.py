@@ -8,11 +8,11 @@ from functools import partial
 import numpy as np
 import pytest
 
-from sbsc_core.ceilings import ceiling_part, ceiling_tiles, in_core, tile_orthoimage
+from sbsc_core.ceilings import ceiling_levels, ceiling_part, ceiling_tiles, in_core, tile_orthoimage
 from sbsc_core.io.ply import write_ply
 from sbsc_core.partition import plan_parts, scan_origin
 from sbsc_core.settings import CeilingSettings, OrthoimageSettings
-from sbsc_core.types import Box, Candidate, Segmentation, Storey
+from sbsc_core.types import Box, Candidate, PointCloud, Segmentation, Storey
 from tests.synthetic_rooms import plan_wall
 
 _wall = partial(plan_wall, height=2.8)
@@ -124,3 +124,72 @@ def test_evaluate_gives_figures_per_surface_kind(tmp_path):
     assert rows["ceiling"].h_mean_mm == pytest.approx(3.0)
     assert (rows["wall"].tp, rows["wall"].fp, rows["column"].fn) == (1, 0, 1)
     assert "on ceilings" in format_table(table) and table.to_dict()["surfaces"][1]["class"] == "ceiling"
+
+
+def _stepped_cloud(rng, low_x: float = 8.0, low_z: float = 2.5) -> PointCloud:
+    """A 13 m x 7 m room, ceiling at 2.8 m, lower (``low_z``) over x > ``low_x``; walls to the ceiling."""
+    n = 120_000
+    xy = rng.uniform((0.0, 0.0), (13.0, 7.0), (n, 2))
+    z = np.where(xy[:, 0] > low_x, low_z, 2.8) + rng.normal(0, 0.002, n)
+    ceiling = np.column_stack([xy, z])
+    step = np.column_stack([np.full(4000, low_x), rng.uniform(0, 7, 4000), rng.uniform(low_z, 2.8, 4000)])
+    floor = np.column_stack([rng.uniform((0.0, 0.0), (13.0, 7.0), (40_000, 2)), np.zeros(40_000)])
+    xyz = np.vstack([ceiling, step, floor]).astype(np.float32)
+    return PointCloud(xyz, np.full((len(xyz), 3), 200, np.uint8), np.zeros(3))
+
+
+def test_a_lower_ceiling_gets_its_own_level_and_tiles(tmp_path):
+    seg = _room()
+    s = CeilingSettings()
+    (levels,) = ceiling_levels(_stepped_cloud(np.random.default_rng(3)), seg, s)
+    assert levels.storey == "S1" and levels.z == pytest.approx((2.5,), abs=0.003)
+    lab = levels.label(np.array([[10.5, 3.5], [4.0, 3.5], [12.8, 0.2], [7.5, 3.5], [50.0, 50.0]]))
+    assert list(lab) == [1, 0, 1, 0, 0]
+    tiles = ceiling_tiles(seg, s, [levels])
+    main, low = [t for t in tiles if t.level == 0], [t for t in tiles if t.level == 1]
+    assert [t.id for t in main] == [f"C0{k}" for k in range(1, 7)]  # as without levels
+    assert [t.id for t in low] == ["C07", "C08"] and low[0].frame.origin[2] == pytest.approx(2.5, abs=0.003)
+    assert 7.5 <= low[0].frame.origin[0] <= 8.3 and low[0].frame.width_m <= 5.5
+    # the low ceiling's points go to its own tile at depth ~0, not to the storey's tiles
+    cloud = _stepped_cloud(np.random.default_rng(4))
+    write_ply(tmp_path / "scan.ply", cloud.xyz, cloud.rgb)
+    parts, _ = plan_parts([tmp_path / "scan.ply"])
+    origin = scan_origin(tmp_path / "scan.ply")
+    ortho = OrthoimageSettings()
+    walls = [w.frame for w in seg.walls]
+    written = sum(np.asarray(ceiling_part(p, origin, tiles, walls, str(tmp_path), ortho, 0.05)) for p in parts)
+    img = tile_orthoimage(tmp_path, 6, low[0], ortho)
+    assert written[6] > 10_000 and np.nanmedian(img.depth) == pytest.approx(0.0, abs=0.003)
+    for k, t in enumerate(main):
+        x0 = t.frame.origin[0]
+        if x0 > 8.5:  # over the low ceiling only: the storey's tile gets nothing there
+            assert written[k] == 0
+    no_levels = ceiling_levels(_stepped_cloud(np.random.default_rng(3), low_z=2.8), seg, s)
+    assert no_levels == []
+
+
+def test_surfaces_without_points_are_left_out(tmp_path):
+    from sbsc_core.pipeline import InlineExecutor, surface_stage
+    from sbsc_core.settings import DetectionSettings
+
+    ran = []
+
+    def part_fn(n):
+        return [0, n, 0]
+
+    def job_fn(scratch, k, sf, templates, prototypes, s):
+        ran.append(k)
+        return sf, "result", {}
+
+    import sbsc_core.pipeline as pl
+
+    saved = pl.park_wall, pl._templates_job
+    pl.park_wall, pl._templates_job = (lambda res, parked: res), (lambda library, s, classes: ({}, None))
+    try:
+        kept, results, _ = surface_stage(InlineExecutor(), stage="x", part_fn=part_fn, part_jobs=[(3,), (4,)],
+                                         job_fn=job_fn, surfaces=["A", "B", "C"], library=None, classes=[],
+                                         s=DetectionSettings(), scratch=tmp_path, parked=tmp_path, in_flight=2,
+                                         progress=lambda *a: None)
+    finally:
+        pl.park_wall, pl._templates_job = saved
+    assert list(kept) == [0, 7, 0] and ran == [1] and results == {"B": "result"}

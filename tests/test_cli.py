@@ -383,3 +383,32 @@ def test_web_commands_register_through_the_entry_point_group() -> None:
     assert res.returncode == 0 and "serve" in res.stdout and "user" in res.stdout
     res = subprocess.run([sys.executable, "-m", "app", "user", "add", "x"], capture_output=True, text=True, env=env)
     assert res.returncode == 2 and "--role" in res.stderr
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("ceilings: {enabled: 'false'}\n", r"settings.yaml.ceilings.enabled: expected bool, got 'false'"),
+    ("workers: 2.5\n", r"settings.yaml.workers: expected int, got 2.5"),
+    ("workers: '3x'\n", r"settings.yaml.workers: expected int, got '3x'"),
+    ("depth: {rotations: 90}\n", r"settings.yaml.depth.rotations: expected a list"),
+    ("depth: {gain_range: [0.5]}\n", r"settings.yaml.depth.gain_range: expected a list like \[0.5, 2.0\]"),
+    ("depth: {gain_range: [0.5, yes]}\n", r"settings.yaml.depth.gain_range: expected float, got True"),
+])
+def test_settings_values_are_checked_not_converted(tmp_path, text, message) -> None:
+    from sbsc_core.errors import InputError
+    from sbsc_core.settings import load_settings
+
+    bad = tmp_path / "settings.yaml"
+    bad.write_text(text)
+    with pytest.raises(InputError, match=message):
+        load_settings(bad)
+
+
+def test_settings_values_of_the_right_kind_are_taken(tmp_path) -> None:
+    from sbsc_core.settings import load_settings
+
+    good = tmp_path / "settings.yaml"
+    good.write_text("ceilings: {enabled: true}\nworkers: 1\ndepth: {gain_range: [1, 3], rotations: [0, 45]}\n")
+    s = load_settings(good)
+    assert s.ceilings.enabled is True and s.workers == 1
+    assert s.depth.gain_range == (1.0, 3.0) and s.depth.rotations == (0.0, 45.0)
+    assert all(isinstance(v, float) for v in s.depth.gain_range)

@@ -11,7 +11,7 @@ import pytest
 
 from sbsc_core.columns import column_faces, find_columns
 from sbsc_core.settings import ColumnSettings
-from sbsc_core.types import PointCloud, Segmentation, Storey
+from sbsc_core.types import Box, PointCloud, Segmentation, Storey
 from tests.synthetic_rooms import plan_wall
 
 _wall = partial(plan_wall, height=3.0)
@@ -104,3 +104,44 @@ def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
     assert rows["column"].tp == rows["column"].instances and rows["column"].fp == 0
     assert rows["ceiling"].tp == rows["ceiling"].instances and rows["ceiling"].fp == 0
     assert json.loads((det / "detections.json").read_text())["surfaces"][0]["kind"] == "ceiling"
+
+
+def test_round_column_image_wraps_its_seam(tmp_path):
+    from sbsc_core.columns import column_part, face_orthoimage
+    from sbsc_core.io.ply import write_ply
+    from sbsc_core.partition import plan_parts, scan_origin
+    from sbsc_core.settings import OrthoimageSettings
+    from sbsc_core.types import Candidate, Orthoimage
+
+    cloud, seg = _scene(np.random.default_rng(5))
+    # a 10 cm box standing 4 cm out of the round column, centred on its seam (+x, angle 0)
+    by, bz = np.meshgrid(np.arange(-0.05, 0.05, 0.004), np.arange(1.15, 1.25, 0.004))
+    box = np.column_stack([np.full(by.size, 7.0 + 0.25 + 0.04), 4.0 + by.ravel(), bz.ravel()])
+    xyz = np.vstack([cloud.xyz, box]).astype(np.float32)
+    write_ply(tmp_path / "scan.ply", xyz, np.full((len(xyz), 3), 200, np.uint8))
+    cols = find_columns(cloud, seg, ColumnSettings(enabled=True))
+    (rf,) = [f for f in column_faces(cols, wrap_m=0.4) if f.radius_m is not None]
+    circ = rf.circumference_m
+    assert rf.frame.width_m == pytest.approx(circ + 0.4) and rf.wrap_m == 0.4
+    parts, _ = plan_parts([tmp_path / "scan.ply"])
+    origin = scan_origin(tmp_path / "scan.ply")
+    ortho = OrthoimageSettings()
+    for p in parts:
+        column_part(p, origin, [rf], [0.6], str(tmp_path), ortho)
+    img: Orthoimage = face_orthoimage(tmp_path, 0, rf, ortho)
+    # the box is whole past the circumference (the start repeated) and cut at the start
+    r = int(img.uv_to_pixel(0.0, 1.2)[0])
+    cols_out = np.flatnonzero(np.nan_to_num(img.depth[r], nan=0.0) > 0.03) * ortho.pixel_m
+    whole = cols_out[cols_out > circ - 0.1]
+    assert whole.min() == pytest.approx(circ - 0.05 * 0.25 / 0.29, abs=0.015)
+    assert whole.max() == pytest.approx(circ + 0.05 * 0.25 / 0.29, abs=0.015)
+    # a candidate on the seam is kept once: at its whole copy, not at its cut start
+    px = ortho.pixel_m
+
+    def cand(u):
+        return Candidate("socket_x1", rf.id, "depth", Box(0, 0, 1, 1), (float(r), u / px - 0.5), 0.9)
+
+    kept = [u for u in (0.01, circ + 0.01, circ - 0.3, 0.3, circ + 0.3) if rf.owns((cand(u).centre[1] + 0.5) * px)]
+    assert kept == pytest.approx([circ + 0.01, circ - 0.3, 0.3])
+    assert rf.arc_u(circ + 0.01) == pytest.approx(0.01)
+    assert rf.to_world(circ + 0.01, 1.2) == pytest.approx(rf.to_world(0.01, 1.2))

@@ -180,3 +180,26 @@ def test_l_shaped_room_with_an_outside_corner() -> None:
     seg = segment_floor_ceiling_walls(cloud)
     assert len(seg.walls) == 6
     _check_frames(seg, truth, tol_m=0.025)
+
+
+def test_nearest_planes_blockwise_equals_all_at_once(monkeypatch):
+    """The voxel-to-plane assignment is computed in blocks of voxels (bounded memory for a
+    building with many walls); the block size does not change it."""
+    from sbsc_core import segmentation as seg
+
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(-20, 20, (5000, 2))
+    ang = rng.uniform(0, np.pi, 5000)
+    nxy = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    pa = rng.uniform(0, np.pi, 40)
+    ns = np.stack([np.cos(pa), np.sin(pa)], axis=1)
+    ss = rng.uniform(-20, 20, 40)
+    best, ok = seg._nearest_planes(xy, nxy, ns, ss, 0.95, 0.5)
+    dist = np.abs(xy @ ns.T - ss)
+    dist[np.abs(nxy @ ns.T) < 0.95] = np.inf
+    assert ok.any() and not ok.all()
+    assert np.array_equal(ok, dist.min(axis=1) <= 0.5)
+    assert np.array_equal(best[ok], np.argmin(dist, axis=1)[ok])
+    monkeypatch.setattr(seg, "_PLANE_BLOCK", 77)
+    best2, ok2 = seg._nearest_planes(xy, nxy, ns, ss, 0.95, 0.5)
+    assert np.array_equal(best, best2) and np.array_equal(ok, ok2)

@@ -137,3 +137,31 @@ def test_building_storeys_put_ceiling_objects_under_their_own_ceilings():
     assert b.columns and all(o.position[2] > plans[1].floor_z for o in b.objects)
     plain = build_storey(plan_building(2)[1])
     assert not plain.surfaces and all(o.surface == "wall" for o in plain.objects)
+
+
+def test_survey_frame_moves_columns_surfaces_and_storeys():
+    from sbsc_core.simulate.survey import SurveyFrame
+
+    desc = _hall(ceiling_objects=True, columns=True)
+    desc["rooms"].append({"id": "K", "rect": [8.15, 0, 16.15, 7]})  # a second column: round
+    truth = build_building(parse_scene(desc, "hall.yaml")).truth_document()
+    truth["storeys"] = [{"id": "S1", "floor_z": 0.0, "ceiling_z": 2.8, "room_ceilings": {"H": 2.5}}]
+    frame = SurveyFrame((412000.0, 5612000.0, 100.0), 30.0)
+    moved = frame.truth(json.loads(json.dumps(truth)))
+    for before, after in zip(truth["columns"], moved["columns"], strict=True):
+        want = frame.points(np.array([[*before["centre"], 0.0]]))[0][:2]
+        assert np.allclose(after["centre"], want, atol=1e-4)
+    rounds = [(a, m) for a, m in zip(truth["surfaces"], moved["surfaces"], strict=True) if "radius_m" in a]
+    assert rounds and truth["columns"]
+    for before, after in rounds:
+        assert len(after["centre"]) == 2
+        assert np.allclose(after["centre"], frame.points(np.array([[*before["centre"], 0.0]]))[0][:2], atol=1e-4)
+    assert moved["storeys"][0]["floor_z"] == 100.0 and moved["storeys"][0]["ceiling_z"] == 102.8
+    assert moved["storeys"][0]["room_ceilings"] == {"H": 102.5}
+    # the objects on a round column stay on its cylinder in the survey frame
+    for (sf, msf) in rounds:
+        on = [o for o in moved["objects"] if o["wall"] == sf["id"]]
+        assert on
+        for o in on:
+            r = np.hypot(o["position"][0] - msf["centre"][0], o["position"][1] - msf["centre"][1])
+            assert abs(r - msf["radius_m"]) < 0.05

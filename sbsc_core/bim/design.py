@@ -225,6 +225,8 @@ def open_ifc(path: Path) -> ifcopenshell.file:
         raise InputError(path, "not an IFC file (expected an ISO-10303-21 STEP file)")
     if b"END-ISO-10303-21" not in tail:  # the parser reads a cut file up to the cut, silently
         raise InputError(path, "malformed IFC file: truncated (no END-ISO-10303-21; at its end)")
+    # ifcopenshell.validate switches the parser's log to JSON for good: read "[error]" lines
+    ifcopenshell.ifcopenshell_wrapper.set_log_format_text()
     ifcopenshell.ifcopenshell_wrapper.get_log()  # drop messages of earlier reads
     try:
         f = ifcopenshell.open(str(path))

@@ -15,7 +15,14 @@ recognized", meant to augment the as-is BIM model. This module writes that model
   detection's ``position``), a box body footprint x depth standing out into the room,
   connected to its wall (IfcRelConnectsElements), contained in the storey, typed by one
   shared type object per class, with the property set ``SBSC_Recognition``;
-- the sign-off as an IfcApproval associated with the project and the objects.
+- the sign-off as an IfcApproval associated with the project and the objects;
+- beyond walls (contract 4 ``surfaces``, issue 11): each ceiling an IfcCovering (CEILING), a
+  thin plate above its plane, and each column (from its faces, :mod:`.surfaces`) an IfcColumn,
+  a rectangle or circle extruded floor to ceiling; an object on a ceiling or a column is
+  placed relative to its IfcCovering / IfcColumn (its body standing out into the room) and
+  connected to it;
+- several storeys (contract 4 ``storeys``): one IfcBuildingStorey each, every wall, surface
+  and object contained in its own.
 
 :class:`IfcModelBuilder` is shared with :mod:`.design` (the as-designed writer).
 """
@@ -26,7 +33,7 @@ import math
 import os
 import tempfile
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -49,14 +56,16 @@ from ..errors import InputError
 from ..io.crs import CRS, parse_crs
 from ..io.detections_model import parse_detections, show
 from ..io.safe_json import load_json_file
-from ..types import ModelLibrary, WallFrame
+from ..types import ModelLibrary, Surface, WallFrame
 from . import DEFAULT_DEPTH_M, PSET_RECOGNITION, ClassTyping, class_typings, normalise_schema
 from .georeference import Georeference, plan_georeference, projected_crs_name, write_georeference
+from .surfaces import ColumnBody, ceiling_matrix, column_bodies, object_matrix, read_surfaces
 
 WALL_THICKNESS_M = 0.20  # thickness given to a wall face with no partner face behind it
 PARTNER_MAX_GAP_M = 0.60  # two opposite faces closer than this are one partition
 OPENING_CLEARANCE_M = 0.01  # an opening body sticks out of its wall by this on both sides
 DOOR_LEAF_M = 0.05  # thickness of the simple door / window body
+CEILING_THICKNESS_M = 0.02  # an IfcCovering (CEILING) is a plate this thick above the scanned plane
 REVIEW_STATUSES = ("pending", "accepted", "rejected")
 
 
@@ -72,6 +81,13 @@ class DetectionsDocument:
     detections: list[dict]
     signoff: dict | None = None
     crs: CRS | None = None  # the scan's coordinate reference system, when recorded
+    surfaces: dict[str, Surface] = field(default_factory=dict)  # ceilings and column faces by id
+    storeys: list[dict] = field(default_factory=list)  # contract 4 ``storeys`` ({id, floor_z, ceiling_z})
+    wall_storeys: dict[str, str] = field(default_factory=dict)  # wall id -> storey id, where given
+
+    def frames(self) -> dict[str, WallFrame]:
+        """The frames of walls and surfaces by id (a detection's ``wall`` names one of them)."""
+        return {**self.walls, **{k: s.frame for k, s in self.surfaces.items()}}
 
 
 def review_status(det: dict) -> str:
@@ -102,7 +118,10 @@ def parse_detections_document(doc: Any, where: str = "detections") -> Detections
             raise InputError(f"{where}: detections[{i}].review.status", f"unknown status {show(status)}")
     signoff = doc.get("signoff") if isinstance(doc.get("signoff"), dict) else None
     crs = CRS.from_dict(doc["crs"], f"{where}: crs") if doc.get("crs") is not None else None
-    return DetectionsDocument(walls, list(doc["openings"]), list(doc["detections"]), signoff, crs)
+    storeys = [st.model_dump() for st in model.storeys or ()]
+    wall_storeys = {w.id: w.storey for w in model.walls if w.storey}
+    return DetectionsDocument(walls, list(doc["openings"]), list(doc["detections"]), signoff, crs,
+                              surfaces=read_surfaces(doc, where), storeys=storeys, wall_storeys=wall_storeys)
 
 
 def load_json(path: Path) -> Any:
@@ -193,9 +212,14 @@ class IfcModelBuilder:
         self._storey_matrix = np.eye(4)
         self._storey_matrix[2, 3] = float(storey_elevation)
         self.storey.ObjectPlacement = self._placement(self.building.ObjectPlacement, self._storey_matrix)
+        self.storeys: dict[str | None, tuple[Any, np.ndarray]] = {None: (self.storey, self._storey_matrix)}
         self.typings = dict(typings or {})
         self.walls: dict[str, Any] = {}
         self.wall_frames: dict[str, WallFrame] = {}
+        self.element_storey: dict[str, str | None] = {}  # wall / surface id -> its storey key
+        # surface id -> (host element: IfcCovering or IfcColumn, the host's world matrix, the surface)
+        self.surface_hosts: dict[str, tuple[Any, np.ndarray, Surface]] = {}
+        self.columns: dict[str, Any] = {}
         self._wall_thickness: dict[str, float] = {}
         self._types: dict[str, Any] = {}
 
@@ -243,16 +267,52 @@ class IfcModelBuilder:
     def _assign_body(self, product: Any, rep: Any) -> None:
         ifcopenshell.api.geometry.assign_representation(self.file, product=product, representation=rep)
 
-    def _new_contained(self, ifc_class: str, predefined_type: str | None, name: str) -> Any:
-        """A new element contained in the storey.
+    def _new_contained(self, ifc_class: str, predefined_type: str | None, name: str,
+                       storey: str | None = None) -> Any:
+        """A new element contained in the storey ``storey`` (a key of :attr:`storeys`; None or
+        an unknown key: the first storey).
 
         Containment comes before the placement: ``spatial.assign_container`` rewrites an
         existing placement relative to the storey, which would undo "relative to its wall".
         """
         el = ifcopenshell.api.root.create_entity(self.file, ifc_class=ifc_class,
                                                  predefined_type=predefined_type, name=name)
-        ifcopenshell.api.spatial.assign_container(self.file, products=[el], relating_structure=self.storey)
+        ifcopenshell.api.spatial.assign_container(self.file, products=[el],
+                                                  relating_structure=self._storey(storey)[0])
         return el
+
+    def _storey(self, key: str | None) -> tuple[Any, np.ndarray]:
+        return self.storeys.get(key) or self.storeys[None]
+
+    def add_storey(self, key: str, elevation: float, name: str | None = None) -> Any:
+        """Another IfcBuildingStorey at ``elevation`` (world Z), looked up by ``key``.
+
+        The first call names and moves the storey made by the constructor (while it holds
+        nothing yet, or when it is at the same elevation) instead of adding one.
+        """
+        f = self.file
+        default, matrix = self.storeys[None]
+        first = len(self.storeys) == 1
+        if first and (not default.ContainsElements or abs(matrix[2, 3] - elevation) < 1e-9):
+            default.Name = name or key
+            default.Elevation = float(elevation)
+            matrix[2, 3] = float(elevation)
+            default.ObjectPlacement.RelativePlacement = self._axis2placement(matrix)
+            self.storeys[key] = (default, matrix)
+            return default
+        storey = ifcopenshell.api.root.create_entity(f, ifc_class="IfcBuildingStorey", name=name or key)
+        storey.Elevation = float(elevation)
+        ifcopenshell.api.aggregate.assign_object(f, products=[storey], relating_object=self.building)
+        m = np.eye(4)
+        m[2, 3] = float(elevation)
+        storey.ObjectPlacement = self._placement(self.building.ObjectPlacement, m)
+        self.storeys[key] = (storey, m)
+        return storey
+
+    def _storey_placement(self, storey: str | None, world: np.ndarray) -> Any:
+        """A placement relative to a storey for the world matrix ``world``."""
+        element, matrix = self._storey(storey)
+        return self._placement(element.ObjectPlacement, np.linalg.inv(matrix) @ world)
 
     def _has_entity(self, name: str) -> bool:
         try:
@@ -263,14 +323,15 @@ class IfcModelBuilder:
 
     # -- walls and openings ------------------------------------------------------
 
-    def add_wall(self, wall_id: str, frame: WallFrame, thickness: float = WALL_THICKNESS_M) -> Any:
+    def add_wall(self, wall_id: str, frame: WallFrame, thickness: float = WALL_THICKNESS_M, *,
+                 storey: str | None = None) -> Any:
         """An IfcWall behind the face ``frame`` (contract-4 frame), named ``wall_id``."""
         f = self.file
-        wall = self._new_contained("IfcWall", "NOTDEFINED", wall_id)
+        wall = self._new_contained("IfcWall", "NOTDEFINED", wall_id, storey)
         wall.Tag = wall_id
         wall.Description = f"wall behind the scanned face {wall_id}"
-        local = np.linalg.inv(self._storey_matrix) @ wall_matrix(frame)
-        wall.ObjectPlacement = self._placement(self.storey.ObjectPlacement, local)
+        wall.ObjectPlacement = self._storey_placement(storey, wall_matrix(frame))
+        self.element_storey[wall_id] = storey
         offset = 0.0 if face_sign(frame) > 0 else -thickness
         rep = ifcopenshell.api.geometry.add_wall_representation(
             f, context=self.body, length=float(frame.width_m), height=float(frame.height_m),
@@ -301,7 +362,7 @@ class IfcModelBuilder:
         if not fill:
             return opening, None
         cls = "IfcWindow" if kind == "window" else "IfcDoor"
-        filling = self._new_contained(cls, cls[3:].upper(), f"{kind} in {wall_id}")
+        filling = self._new_contained(cls, cls[3:].upper(), f"{kind} in {wall_id}", self.element_storey.get(wall_id))
         filling.OverallWidth, filling.OverallHeight = w, h
         filling.ObjectPlacement = self._placement(opening.ObjectPlacement, np.eye(4))
         leaf = min(DOOR_LEAF_M, t)
@@ -309,6 +370,61 @@ class IfcModelBuilder:
         self._assign_body(filling, self._box_representation(w, leaf, h, (0.0, yc, 0.0)))
         ifcopenshell.api.feature.add_filling(f, opening=opening, element=filling)
         return opening, filling
+
+    # -- ceilings and columns (issue 11) -------------------------------------------
+
+    def add_ceiling(self, surface: Surface, *, storey: str | None = None,
+                    thickness: float = CEILING_THICKNESS_M) -> Any:
+        """An IfcCovering (CEILING) for a ceiling surface: a plate over its frame's rectangle,
+        ``thickness`` thick above the scanned plane, placed in the frame (X = ``axis_u``,
+        Z = ``normal``, down into the room)."""
+        covering = self._new_contained("IfcCovering", "CEILING", f"ceiling {surface.id}", storey)
+        covering.Tag = surface.id
+        covering.Description = f"ceiling seen from below: scanned surface {surface.id}"
+        m = ceiling_matrix(surface)
+        covering.ObjectPlacement = self._storey_placement(storey, m)
+        fr = surface.frame
+        y0 = 0.0 if float(np.dot(m[:3, 1], fr.axis_v)) >= 0 else -fr.height_m
+        self._assign_body(covering, self._box_representation(fr.width_m, fr.height_m, thickness,
+                                                             (0.0, y0, -thickness)))
+        self.surface_hosts[surface.id] = (covering, m, surface)
+        self.element_storey[surface.id] = storey
+        return covering
+
+    def add_column(self, body: ColumnBody, surfaces: dict[str, Surface], *, storey: str | None = None) -> Any:
+        """An IfcColumn: a rectangle or a circle extruded from the floor to the ceiling, its
+        local origin at the centre on the floor; its faces (``surfaces`` by id) host objects."""
+        f = self.file
+        column = self._new_contained("IfcColumn", "COLUMN", f"column {body.id}", storey)
+        column.Tag = body.id
+        column.Description = f"free-standing {body.shape} column, scanned faces {', '.join(body.faces)}"
+        m = body.matrix()
+        column.ObjectPlacement = self._storey_placement(storey, m)
+        origin2d = f.createIfcAxis2Placement2D(f.createIfcCartesianPoint([0.0, 0.0]), None)
+        if body.shape == "round":
+            profile = f.createIfcCircleProfileDef("AREA", None, origin2d, float(body.size_m[0] / 2))
+        else:
+            profile = f.createIfcRectangleProfileDef("AREA", None, origin2d, float(body.size_m[0]),
+                                                     float(body.size_m[1]))
+        solid = f.createIfcExtrudedAreaSolid(
+            profile, f.createIfcAxis2Placement3D(f.createIfcCartesianPoint([0.0, 0.0, 0.0]), None, None),
+            f.createIfcDirection([0.0, 0.0, 1.0]), float(body.height_m))
+        self._assign_body(column, f.createIfcShapeRepresentation(self.body, "Body", "SweptSolid", [solid]))
+        for sid in body.faces:
+            if sid in surfaces:
+                self.surface_hosts[sid] = (column, m, surfaces[sid])
+                self.element_storey[sid] = storey
+        self.columns[body.id] = column
+        return column
+
+    def add_surfaces(self, surfaces: dict[str, Surface], storey_of: dict[str, str | None] | None = None) -> None:
+        """Every ceiling as an IfcCovering and every column (from its faces) as an IfcColumn."""
+        storey_of = storey_of or {}
+        for sid, s in surfaces.items():
+            if s.kind == "ceiling":
+                self.add_ceiling(s, storey=storey_of.get(sid))
+        for body in column_bodies(surfaces.values()):
+            self.add_column(body, surfaces, storey=storey_of.get(body.faces[0]))
 
     # -- secondary components ------------------------------------------------------
 
@@ -362,12 +478,23 @@ class IfcModelBuilder:
         f = self.file
         typing = self.typing_of(class_id, width_m or 0.1, height_m or 0.1)
         cls, pre, obj = self.resolve_typing(typing)
-        element = self._new_contained(cls, pre, name or typing.name)
+        element = self._new_contained(cls, pre, name or typing.name, self.element_storey.get(wall_id or ""))
         if tag:
             element.Tag = tag
         position = np.asarray(position, dtype=np.float64)
+        host = self.surface_hosts.get(wall_id) if wall_id else None
         wall = self.walls.get(wall_id) if wall_id else None
-        if wall is not None:
+        w, h, d = typing.width_m, typing.height_m, typing.depth_m
+        if host is not None:  # on a ceiling or a column: relative to its IfcCovering / IfcColumn
+            host_element, host_matrix, surface = host
+            m = object_matrix(surface, position)
+            element.ObjectPlacement = self._placement(host_element.ObjectPlacement, np.linalg.inv(host_matrix) @ m)
+            if surface.kind == "ceiling":  # local Z points down into the room: the body hangs below
+                self._assign_body(element, self._box_representation(w, h, d, (-w / 2, -h / 2, 0.0)))
+            else:  # like on a wall: local Y into the column
+                self._assign_body(element, self._box_representation(w, d, h, (-w / 2, -d, -h / 2)))
+            wall = host_element
+        elif wall is not None:
             frame = self.wall_frames[wall_id]
             m = wall_matrix(frame)
             local = np.eye(4)
@@ -380,12 +507,11 @@ class IfcModelBuilder:
                 n = np.array([normal[0], normal[1], 0.0]) / np.linalg.norm(normal[:2])
                 m[:3, 0], m[:3, 1] = np.cross(n, [0.0, 0.0, 1.0]), -n
             m[:3, 3] = position
-            element.ObjectPlacement = self._placement(self.storey.ObjectPlacement,
-                                                      np.linalg.inv(self._storey_matrix) @ m)
+            element.ObjectPlacement = self._storey_placement(None, m)
             into_room = -1.0
-        w, h, d = typing.width_m, typing.height_m, typing.depth_m
-        y0 = -d if into_room < 0 else 0.0
-        self._assign_body(element, self._box_representation(w, d, h, (-w / 2, y0, -h / 2)))
+        if host is None:
+            y0 = -d if into_room < 0 else 0.0
+            self._assign_body(element, self._box_representation(w, d, h, (-w / 2, y0, -h / 2)))
         # assign_type moves the predefined type to the type object (IFC4: the occurrence's
         # PredefinedType is only used without a type); ObjectType is kept on both.
         ifcopenshell.api.type.assign_type(f, related_objects=[element], relating_type=self.type_for(typing))
@@ -451,11 +577,14 @@ def _same_opening(a: dict, fa: WallFrame, b: dict, fb: WallFrame, tol: float = 0
             and abs((a["u_max"] - a["u_min"]) - (b["u_max"] - b["u_min"])) < tol)
 
 
-def add_walls_and_openings(builder: IfcModelBuilder, walls: dict[str, WallFrame], openings: list[dict]) -> None:
-    """Walls (thickness from partner faces) and their openings; one filling per hole."""
+def add_walls_and_openings(builder: IfcModelBuilder, walls: dict[str, WallFrame], openings: list[dict],
+                           storey_of: dict[str, str | None] | None = None) -> None:
+    """Walls (thickness from partner faces) and their openings; one filling per hole.
+    ``storey_of``: the storey key (of ``builder.storeys``) of each wall, where known."""
     thickness = wall_thicknesses(walls)
+    storey_of = storey_of or {}
     for wid, frame in walls.items():
-        builder.add_wall(wid, frame, thickness[wid])
+        builder.add_wall(wid, frame, thickness[wid], storey=storey_of.get(wid))
     filled: list[dict] = []
     for o in openings:
         frame = walls[o["wall"]]
@@ -468,6 +597,31 @@ def add_walls_and_openings(builder: IfcModelBuilder, walls: dict[str, WallFrame]
 
 def storey_elevation(walls: dict[str, WallFrame]) -> float:
     return float(min(f.origin[2] for f in walls.values())) if walls else 0.0
+
+
+def storey_of_height(storeys: list[dict], z: float, tol: float = 0.05) -> str | None:
+    """The storey (contract 4 ``storeys``) a height belongs to: the highest whose floor is
+    below ``z`` (within ``tol``); None without storeys."""
+    below = [st for st in storeys if float(st["floor_z"]) <= z + tol]
+    if not below:
+        return storeys[0]["id"] if storeys else None
+    return max(below, key=lambda st: float(st["floor_z"]))["id"]
+
+
+def add_storeys_and_surfaces(builder: IfcModelBuilder, doc: DetectionsDocument) -> dict[str, str | None]:
+    """The document's storeys (one IfcBuildingStorey each), its walls and openings, its
+    ceilings and columns; returns each wall's and surface's storey key."""
+    for st in sorted(doc.storeys, key=lambda st: float(st["floor_z"])):
+        builder.add_storey(st["id"], float(st["floor_z"]), f"storey {st['id']}")
+    storey_of: dict[str, str | None] = {}
+    if doc.storeys:
+        for wid, f in doc.walls.items():
+            storey_of[wid] = doc.wall_storeys.get(wid) or storey_of_height(doc.storeys, float(f.origin[2]))
+        for sid, s in doc.surfaces.items():
+            storey_of[sid] = s.storey or storey_of_height(doc.storeys, float(s.frame.origin[2]))
+    add_walls_and_openings(builder, doc.walls, doc.openings, storey_of)
+    builder.add_surfaces(doc.surfaces, storey_of)
+    return storey_of
 
 
 # --------------------------------------------------------------------------- export
@@ -514,10 +668,10 @@ def export_ifc(document: dict, *, library: ModelLibrary | None = None, schema: s
     builder = IfcModelBuilder(schema, project_name="sbsc as-is model", typings=typings,
                               storey_elevation=storey_elevation(doc.walls),
                               description="secondary building service components recognized in a scan")
-    add_walls_and_openings(builder, doc.walls, doc.openings)
+    add_storeys_and_surfaces(builder, doc)
     elements = []
     for det in selected_detections(doc.detections, accepted_only):
-        wall_id = det.get("wall") if det.get("wall") in doc.walls else None
+        wall_id = det.get("wall") if det.get("wall") in doc.walls or det.get("wall") in doc.surfaces else None
         label = str(det.get("id") or "")
         typing = builder.typing_of(det["class"], det.get("width_m") or 0.1, det.get("height_m") or 0.1)
         elements.append(builder.add_component(
@@ -547,11 +701,17 @@ def localised(doc: DetectionsDocument, crs: str | CRS | None = None) -> LocalDoc
         crs = None  # degrees are no map coordinates; IfcMapConversion needs a projected CRS
     positions = [np.asarray(d["position"], float) for d in doc.detections]
     geo = plan_georeference(doc.walls, positions, crs)
+    same = {"surfaces": doc.surfaces, "storeys": doc.storeys, "wall_storeys": doc.wall_storeys}
     if geo is None:
-        return LocalDocument(doc.walls, doc.openings, doc.detections, doc.signoff, doc.crs, None)
+        return LocalDocument(doc.walls, doc.openings, doc.detections, doc.signoff, doc.crs, **same, georeference=None)
     walls = {k: geo.local_frame(f) for k, f in doc.walls.items()}
     dets = [{**d, "position": [float(c) for c in geo.to_local(p)]} for d, p in zip(doc.detections, positions, strict=True)]
-    return LocalDocument(walls, doc.openings, dets, doc.signoff, crs, geo)
+    surfaces = {k: replace(s, frame=geo.local_frame(s.frame),
+                           centre=None if s.centre is None else
+                           tuple(float(c) for c in geo.to_local([*s.centre, 0.0])[:2]))
+                for k, s in doc.surfaces.items()}
+    return LocalDocument(walls, doc.openings, dets, doc.signoff, crs, **{**same, "surfaces": surfaces},
+                         georeference=geo)
 
 
 def write_ifc_atomic(model: ifcopenshell.file, out: Path) -> None:
@@ -585,4 +745,5 @@ def export_ifc_file(detections: Path, out: Path, schema: str = "IFC4", accepted_
     write_ifc_atomic(model, out)
     return {"schema": schema, "crs": projected_crs_name(model), "walls": len(model.by_type("IfcWall")),
             "openings": len(model.by_type("IfcOpeningElement")),
+            "ceilings": len(model.by_type("IfcCovering")), "columns": len(model.by_type("IfcColumn")),
             "objects": len(selected_detections(raw.get("detections", []), accepted_only))}

@@ -74,7 +74,7 @@ class Building:
     objects: list[PlacedObject]
     stations: np.ndarray  # (S, 3) scanner origins, world
     distractors: list = field(default_factory=list)  # clutter.Distractor: clutter and furniture
-    surfaces: list = field(default_factory=list)  # surfaces.Surface: ceilings and column faces
+    surfaces: list = field(default_factory=list)  # types.Surface: ceilings and column faces
     columns: list = field(default_factory=list)  # surfaces.Column
 
     def frame_of(self, obj: PlacedObject) -> WallFrame:
@@ -98,7 +98,7 @@ class Building:
         if self.surfaces or self.columns:
             for o, d in zip(self.objects, doc["objects"], strict=True):
                 d["surface"] = o.surface
-            doc["surfaces"] = [s.to_truth() for s in self.surfaces]
+            doc["surfaces"] = [s.to_dict(digits=6) for s in self.surfaces]
             doc["columns"] = [c.to_truth() for c in self.columns]
         return doc
 

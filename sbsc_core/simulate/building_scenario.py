@@ -288,7 +288,7 @@ def simulate_building(out: Path, storeys: int = 2, *, scene: str = "scenario", f
                 truth_objects.append({**o.to_truth(), "wall": f"{plan.id}-{o.wall}", "storey": plan.id,
                                       **({"surface": o.surface} if ceiling_objects or columns else {})})
             for sf in b.surfaces:
-                d = sf.to_truth()
+                d = sf.to_dict(digits=6)
                 truth_surfaces.append({**d, "id": f"{plan.id}-{sf.id}", "storey": plan.id,
                                        **({"column": f"{plan.id}-{sf.column}"} if sf.column else {})})
             for c in b.columns:

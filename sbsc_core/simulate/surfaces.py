@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..types import WallFrame
+from ..types import Surface, WallFrame
 from . import mesh as M
 from .catalogue import CATALOGUE
 from .mesh import ColouredMesh
@@ -63,28 +63,6 @@ ROUND_COLUMN_OBJECTS: list[tuple[str, float, float]] = [
 ]
 _SIDE_NORMALS = {"N": (0.0, 1.0), "E": (1.0, 0.0), "S": (0.0, -1.0), "W": (-1.0, 0.0)}
 _UP = np.array([0.0, 0.0, 1.0])
-
-
-@dataclass(frozen=True)
-class Surface:
-    """A surface beyond walls (contract 4 ``surfaces``): a room's ceiling or a column face."""
-
-    id: str
-    kind: str  # "ceiling" | "column"
-    room: str
-    frame: WallFrame
-    column: str | None = None
-    radius_m: float | None = None  # round columns: the frame is unrolled around the axis
-    centre: tuple[float, float] | None = None
-
-    def to_truth(self) -> dict:
-        doc = {"id": self.id, "kind": self.kind, "room": self.room, **_rounded(self.frame.to_dict())}
-        if self.column:
-            doc["column"] = self.column
-        if self.radius_m is not None:
-            doc["radius_m"] = round(self.radius_m, 4)
-            doc["centre"] = [round(c, 4) for c in self.centre]
-        return doc
 
 
 @dataclass(frozen=True)
@@ -185,7 +163,7 @@ def _plan_ceilings(scene: SceneDescription, layout: Layout, stations: np.ndarray
     for room in scene.rooms:
         frame = ceiling_frame(room, heights[room.id])
         frames[room.id] = frame
-        plan.surfaces.append(Surface(f"{room.id}-C", "ceiling", room.id, frame))
+        plan.surfaces.append(Surface(f"{room.id}-C", "ceiling", frame, room=room.id))
         for x0, y0, x1, y1 in _merged_cells(room):
             for x in _axis_positions(x0, x1, SMOKE_SPACING_M, CEILING_MARGIN_M + 0.5):
                 for y in _axis_positions(y0, y1, SMOKE_SPACING_M, CEILING_MARGIN_M + 0.5):
@@ -333,7 +311,7 @@ def _rect_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[f
         frame = _face_frame(np.asarray(centre), _SIDE_NORMALS[side], s / 2, s, h)
         sid = f"{col_id}-{side}"
         faces.append(sid)
-        plan.surfaces.append(Surface(sid, "column", room.id, frame, column=col_id))
+        plan.surfaces.append(Surface(sid, "column", frame, room=room.id, column=col_id))
         if not _seen(centre, np.asarray(_SIDE_NORMALS[side]), s / 2, stations):
             continue
         for cls, v in objs:
@@ -348,7 +326,7 @@ def _round_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[
     c = np.asarray(centre)
     unrolled = _face_frame(c, (1.0, 0.0), r, 0.0, h)
     unrolled = WallFrame(unrolled.origin, unrolled.axis_u, unrolled.axis_v, unrolled.normal, 2 * math.pi * r, h)
-    plan.surfaces.append(Surface(col_id, "column", room.id, unrolled, column=col_id, radius_m=r, centre=centre))
+    plan.surfaces.append(Surface(col_id, "column", unrolled, room=room.id, column=col_id, radius_m=r, centre=centre))
     for cls, deg, v in ROUND_COLUMN_OBJECTS:
         a = math.radians(deg)
         if not _seen(centre, np.array([math.cos(a), math.sin(a)]), r, stations):
@@ -359,8 +337,4 @@ def _round_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[
                           2 * math.pi * r, h)  # the object at (u, v) of this frame touches the column
         plan.objects.append(SurfaceObject(cls, col_id, "column", frame, u, v))
     plan.columns.append(Column(col_id, room.id, "round", centre, (2 * r, 2 * r), h, room.paint, (col_id,)))
-
-
-def _rounded(d: dict) -> dict:
-    return {k: ([round(x, 6) + 0.0 for x in v] if isinstance(v, list) else round(v, 6)) for k, v in d.items()}
 

@@ -5,7 +5,10 @@ Real scans come georeferenced: a projected frame such as UTM puts a building nea
 simulator's local frame to such a frame, ``world = R_z(rotation_deg) local + offset``, and
 is applied to the scan (written as double-precision PLY, since float32 has only ~0.5 m
 resolution at 5.6e6 m) and to every point and direction of the ground truth alike, so
-that both stay consistent. The truth records the frame under ``survey_frame``.
+that both stay consistent: objects, walls, distractors, surfaces (a round column's plan
+``centre`` too), columns (plan ``centre``, ``floor_z``), storeys (``floor_z``,
+``ceiling_z``, ``room_ceilings``) and stations. The truth records the frame under
+``survey_frame``.
 """
 
 from __future__ import annotations
@@ -18,8 +21,9 @@ import numpy as np
 UTM_LIKE_OFFSET = (412000.0, 5612000.0, 100.0)
 DEFAULT_ROTATION_DEG = 23.5
 
-_POINT_KEYS = ("position", "centre", "origin")
+_POINT_KEYS = ("position", "centre", "origin")  # [x, y, z], or a plan point [x, y]
 _VECTOR_KEYS = ("normal", "axis_u", "axis_v")
+_LEVEL_KEYS = ("floor_z", "ceiling_z")
 
 
 @dataclass(frozen=True)
@@ -43,6 +47,16 @@ class SurveyFrame:
     def vectors(self, v: np.ndarray) -> np.ndarray:
         return np.asarray(v, np.float64) @ self.rotation.T
 
+    def level(self, z: float) -> float:
+        """A height (a floor or ceiling level) in the survey frame."""
+        return float(z) + float(self.offset[2])
+
+    def _point(self, p: list) -> list[float]:
+        """A point [x, y, z] or a plan point [x, y] in the survey frame, rounded."""
+        if len(p) == 2:
+            return [round(float(x), 5) for x in self.points(np.array([[p[0], p[1], 0.0]]))[0][:2]]
+        return [round(float(x), 5) for x in self.points(np.array([p]))[0]]
+
     def truth(self, doc: dict) -> dict:
         """A ground-truth document (contract 5) moved into the survey frame (a new dict)."""
         out = dict(doc)
@@ -51,13 +65,18 @@ class SurveyFrame:
             d = dict(d)
             for k in _POINT_KEYS:
                 if k in d:
-                    d[k] = [round(float(x), 5) for x in self.points(np.array([d[k]]))[0]]
+                    d[k] = self._point(d[k])
             for k in _VECTOR_KEYS:
                 if k in d:
                     d[k] = [round(float(x), 6) for x in self.vectors(np.array(d[k]))]
+            for k in _LEVEL_KEYS:
+                if k in d:
+                    d[k] = round(self.level(d[k]), 5)
+            if "room_ceilings" in d:
+                d["room_ceilings"] = {r: round(self.level(z), 5) for r, z in d["room_ceilings"].items()}
             return d
 
-        for key in ("objects", "walls", "distractors", "surfaces"):
+        for key in ("objects", "walls", "distractors", "surfaces", "columns", "storeys"):
             if key in doc:
                 out[key] = [item(d) for d in doc[key]]
         if "stations" in doc:
