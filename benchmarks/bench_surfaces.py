@@ -1,7 +1,7 @@
 """Recognition beyond walls (issue 11): figures per surface kind with ``detect --ceilings --columns``.
 
     .venv/bin/python benchmarks/bench_surfaces.py [--scenario I|II|building] [--storeys N] [--realistic]
-        [--scene NAME|FILE] [--full] [--no-columns] [--designs standard alt] [--seed 0]
+        [--survey-frame] [--scene NAME|FILE] [--full] [--no-columns] [--designs standard alt] [--seed 0]
         [--run-dir /tmp/bench_surfaces] [--redo] [--simulate-only] [--json FILE]
 
 Simulates the floor with ``--ceiling-objects --columns`` (``--no-columns``: ceilings only),
@@ -12,7 +12,8 @@ seconds of the detect run.
 
 - ``--scenario I`` / ``II``: the paper's floors (``--full`` is ``--scenario I``);
   ``--scenario building --storeys N``: the simulated building, one scan file per station;
-- ``--realistic``: the realistic scanner (Scenario I / II and scenes);
+- ``--realistic``: the realistic scanner; ``--survey-frame``: scan and truth at UTM-like
+  coordinates, turned 23.5 degrees (both for Scenario I / II and scenes);
 - ``--scene NAME|FILE``: a bundled scene or a description (default: ``one_room``).
 
 Scenario and building runs are heavy (~4 GiB and minutes each): run them under
@@ -29,17 +30,18 @@ import time
 from pathlib import Path
 
 
-def run_tag(scene: str, design: str, seed: int, *, columns: bool, storeys: int, realistic: bool) -> str:
+def run_tag(scene: str, design: str, seed: int, *, columns: bool, storeys: int, realistic: bool,
+            survey_frame: bool = False) -> str:
     """The run's folder name in the run directory."""
     name = Path(scene).stem if scene.endswith((".yaml", ".json")) else scene
     if scene == "building":
         name += f"{storeys}"
-    return (f"{name}_{design}_s{seed}" + ("_realistic" if realistic else "")
+    return (f"{name}_{design}_s{seed}" + ("_realistic" if realistic else "") + ("_survey" if survey_frame else "")
             + ("_columns" if columns else ""))
 
 
 def simulate_args(scene: str, design: str, seed: int, *, columns: bool, storeys: int, realistic: bool,
-                  out: Path) -> list[str]:
+                  out: Path, survey_frame: bool = False) -> list[str]:
     """``sbsc simulate`` arguments of a run."""
     if scene in ("I", "II", "building"):
         args = ["--scenario", scene]
@@ -47,8 +49,8 @@ def simulate_args(scene: str, design: str, seed: int, *, columns: bool, storeys:
         args = ["--scene", scene]
     if scene == "building":
         args += ["--storeys", str(storeys)]
-    elif realistic:
-        args.append("--realistic")
+    else:
+        args += (["--realistic"] if realistic else []) + (["--survey-frame"] if survey_frame else [])
     return ["-q", "simulate", *args, "--designs", design, "--seed", str(seed), "--ceiling-objects",
             "--out", str(out)] + (["--columns"] if columns else [])
 
@@ -61,18 +63,19 @@ def scan_files(sim: Path) -> list[str]:
 
 
 def run(scene: str, design: str, seed: int, columns: bool, run_dir: Path, redo: bool, *, storeys: int = 2,
-        realistic: bool = False, simulate_only: bool = False) -> dict | None:
+        realistic: bool = False, survey_frame: bool = False, simulate_only: bool = False) -> dict | None:
     from sbsc_core.cli import main
     from sbsc_core.evaluate import evaluate, format_table
     from sbsc_core.io.documents import read_detections, read_truth
 
-    tag = run_tag(scene, design, seed, columns=columns, storeys=storeys, realistic=realistic)
+    tag = run_tag(scene, design, seed, columns=columns, storeys=storeys, realistic=realistic,
+                  survey_frame=survey_frame)
     sim, det = run_dir / tag / "sim", run_dir / tag / "detect"
     sim.parent.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
     if redo or not (sim / "ground_truth.json").exists():
         assert main(simulate_args(scene, design, seed, columns=columns, storeys=storeys, realistic=realistic,
-                                  out=sim)) == 0
+                                  out=sim, survey_frame=survey_frame)) == 0
         print(f"{tag}: simulated in {time.perf_counter() - t:.0f} s", flush=True)
     if simulate_only:
         return None
@@ -100,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="the paper's floor I or II, or the simulated building")
     p.add_argument("--storeys", type=int, default=2, help="--scenario building: storeys (default: 2)")
     p.add_argument("--realistic", action="store_true", help="the realistic scanner (not for the building)")
+    p.add_argument("--survey-frame", action="store_true", help="UTM-like coordinates, turned (not for the building)")
     p.add_argument("--full", action="store_true", help="the same as --scenario I")
     p.add_argument("--scene", default=None, help="a bundled scene or a description file (default: one_room)")
     p.add_argument("--columns", action="store_true", help="(the default) simulate columns with objects too")
@@ -113,11 +117,11 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     if a.scenario and a.scene:
         p.error("give --scenario or --scene, not both")
-    if a.scenario == "building" and a.realistic:
-        p.error("--realistic is not available for --scenario building")
+    if a.scenario == "building" and (a.realistic or a.survey_frame):
+        p.error("--realistic and --survey-frame are not available for --scenario building")
     scene = a.scenario or ("I" if a.full else (a.scene or "one_room"))
     out = [run(scene, d, a.seed, not a.no_columns, a.run_dir, a.redo, storeys=a.storeys, realistic=a.realistic,
-               simulate_only=a.simulate_only) for d in a.designs]
+               survey_frame=a.survey_frame, simulate_only=a.simulate_only) for d in a.designs]
     if a.json and not a.simulate_only:
         a.json.write_text(json.dumps(out, indent=1) + "\n")
     return 0

@@ -22,17 +22,27 @@ segmentation, one partition file per wall, tasks on a local pool or a Dask clust
 from __future__ import annotations
 
 import contextlib
+import importlib
 import itertools
 import json
 import multiprocessing
 import os
 import shutil
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from concurrent.futures import (
+    FIRST_COMPLETED,
+    Executor,
+    Future,
+    ProcessPoolExecutor,
+    ThreadPoolExecutor,
+    wait,
+)
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -52,12 +62,11 @@ from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
 from .io.crs import georeference_fields, scan_crs
-from .io.documents import ExpectedCounts, detections_document, read_expected_counts
-from .io.models import load_model_library
 from .lookalikes import resolve_on_wall
 from .orthoimage import build_orthoimage
 from .partition import (
     WallIndex,
+    drop_wall_partition,
     partition_part,
     plan_parts,
     sample_cloud,
@@ -154,7 +163,8 @@ def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], p
     c_img = colour_image(ortho, area, s.colour)  # J_C and J_BW, computed once per wall
     c_rois = colour_rois(ortho, area, s.colour, c_img)
     c_cands = match_colour(ortho, area, c_rois, prototypes, s.colour, c_img)
-    d_cands, c_cands = resolve_on_wall(d_cands, c_cands, c_img, prototypes, s.lookalikes)
+    d_cands, c_cands = resolve_on_wall(d_cands, c_cands, c_img, prototypes, s.lookalikes,
+                                       relief=d_img.levelled)
     t_stage["colour"] = time.perf_counter() - t
     return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
 
@@ -281,10 +291,15 @@ def _walls_results(cloud: PointCloud, seg: Segmentation, templates: dict[str, Mo
             pool.shutdown(wait=True, cancel_futures=True)
 
 
-Expected = dict[str, int] | ExpectedCounts  # contract 3: counts, or counts with per-storey counts
+if TYPE_CHECKING:  # the documents (and pydantic) are imported where used: the wall workers never need them
+    from .io.documents import ExpectedCounts
+
+    Expected = dict[str, int] | ExpectedCounts  # contract 3: counts, or counts with per-storey counts
 
 
 def _as_expected(expected: Expected | None) -> ExpectedCounts | None:
+    from .io.documents import ExpectedCounts
+
     if expected is None or isinstance(expected, ExpectedCounts):
         return expected
     return ExpectedCounts(dict(expected))
@@ -394,6 +409,8 @@ def detect(
     :class:`~sbsc_core.io.documents.ExpectedCounts` with per-storey counts for the storeys
     found, each storey's counts limit the instances on its walls (:func:`consensus_by_storey`).
     ``pool`` (see :func:`wall_pool`) runs the per-wall stages; by default one is made.
+    With ``settings.ceilings`` / ``settings.columns`` enabled the ceilings and the columns'
+    faces are searched too, as by :func:`detect_scans` (the result's ``surfaces``).
     :func:`detect_scans` does the same on scan files without holding the cloud.
     """
     s = settings or DetectionSettings()
@@ -413,9 +430,49 @@ def detect(
     timings["templates"] = time.perf_counter() - t
     walls = _collect_walls(_walls_results(cloud, seg, templates, prototypes, s, pool), len(seg.walls),
                            progress, timings)
+    if s.ceilings.enabled or s.columns.enabled:  # objects on ceilings and columns (issue 11)
+        beyond = _beyond_walls_in_memory(cloud, seg, library, expected, s, pool, progress, timings)
+        walls.update(beyond.walls)
+        templates, classes = {**beyond.templates, **templates}, sorted(set(classes) | set(beyond.classes))
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
+    if s.ceilings.enabled or s.columns.enabled:
+        beyond.place(result)
     timings["total"] = time.perf_counter() - t0
     return result
+
+
+def _beyond_walls_in_memory(cloud: PointCloud, seg: Segmentation, library: ModelLibrary,
+                            expected: ExpectedCounts | None, s: DetectionSettings,
+                            pool: ProcessPoolExecutor | None, progress: Progress,
+                            timings: dict[str, float]) -> _BeyondWalls:
+    """:func:`_beyond_walls` on an in-memory cloud: the levels and columns are measured on a
+    regular sample of it (as :func:`detect_scans` does), its points are binned into the
+    surfaces' partitions in a temporary folder in this process, and the surfaces' stages
+    run in ``pool`` (or one made here), their images kept in the results."""
+    import tempfile
+
+    from .ceilings import ceiling_levels, memory_parts
+
+    step = max(1, -(-len(cloud) // (2 * s.segmentation.fit_max_points)))
+    sample = cloud if step == 1 else PointCloud(cloud.xyz[::step], cloud.rgb[::step], cloud.origin, cloud.sources)
+    levels = ceiling_levels(sample, seg, s.ceilings) if s.ceilings.enabled else None
+    columns = []
+    if s.columns.enabled:
+        from .columns import find_columns
+
+        columns = find_columns(sample, seg, s.columns)
+    del sample
+    own = pool is None
+    executor: Executor = (wall_pool(s) if own else pool) or InlineExecutor()
+    try:
+        with tempfile.TemporaryDirectory(prefix=".sbsc-surfaces-", dir=os.environ.get("SBSC_SCRATCH_DIR")) as tmp:
+            return _beyond_walls(memory_parts(cloud), np.asarray(cloud.origin, np.float64), seg, levels, columns,
+                                 library, expected, s, executor=executor, scratch=Path(tmp), parked=None,
+                                 in_flight=2 * max(1, _worker_count(s)), progress=progress, timings=timings,
+                                 log=lambda msg: None, part_executor=InlineExecutor())
+    finally:
+        if own and isinstance(executor, ProcessPoolExecutor):
+            executor.shutdown(wait=True, cancel_futures=True)
 
 
 # --------------------------------------------------------------------------- out of core
@@ -505,7 +562,7 @@ def _in_order(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int)
 
 def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_jobs: list[tuple], job_fn: Callable,
                   surfaces: Sequence, library: ModelLibrary, classes: list[str], s: DetectionSettings,
-                  scratch: Path, parked: Path, in_flight: int, progress: Progress,
+                  scratch: Path, parked: Path | None, in_flight: int, progress: Progress,
                   part_executor: Executor | None = None,
                   ) -> tuple[np.ndarray, dict[str, WallResult], dict[str, ModelTemplate]]:
     """A stage on surfaces beyond the walls (ceiling tiles, column faces), run as the walls' is.
@@ -515,7 +572,7 @@ def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_job
     s)`` runs the walls' stages on surface number ``k`` and returns ``(id, result, timings)``.
     Surfaces that got no point are left out (no work, no result). Returns the points binned
     per surface, the results by surface id (their images parked in ``parked``,
-    :func:`park_wall`) and the templates of ``classes``. ``part_executor`` (default:
+    :func:`park_wall`, unless it is None) and the templates of ``classes``. ``part_executor`` (default:
     ``executor``) runs the binning (an in-memory cloud's parts are binned in this process).
     """
     kept = np.zeros(len(surfaces), np.int64)
@@ -525,9 +582,64 @@ def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_job
     jobs = [(str(scratch), k, sf, templates, prototypes, s) for k, sf in enumerate(surfaces) if kept[k] > 0]
     results: dict[str, WallResult] = {}
     for i, (sid, res, _) in enumerate(_in_order(executor, jobs, job_fn, in_flight)):
-        results[sid] = park_wall(res, parked)
+        results[sid] = res if parked is None else park_wall(res, parked)
         progress(stage, (i + 1) / len(jobs))
     return kept, results, templates
+
+
+@dataclass
+class _BeyondWalls:
+    """What the ceiling and column stages add to the walls' results for the consensus."""
+
+    walls: dict[str, WallResult] = field(default_factory=dict)
+    templates: dict[str, ModelTemplate] = field(default_factory=dict)
+    classes: list[str] = field(default_factory=list)
+    surfaces: list[dict] = field(default_factory=list)
+    faces: dict = field(default_factory=dict)  # column faces by id
+
+    def place(self, result: DetectionResult) -> None:
+        """Name each detection's surface kind and put those on a round column back on it."""
+        if not self.surfaces:
+            return
+        kinds = {sf["id"]: sf["kind"] for sf in self.surfaces}
+        for d in result.detections:
+            d.surface = kinds.get(d.wall_id)
+            if d.wall_id in self.faces:  # a round column's face is unrolled: put the object back on it
+                d.u = self.faces[d.wall_id].arc_u(d.u)
+                d.position = self.faces[d.wall_id].to_world(d.u, d.v)
+        result.surfaces = self.surfaces
+
+
+def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, levels: list | None, columns: list,
+                  library: ModelLibrary, expected: ExpectedCounts | None, s: DetectionSettings, *,
+                  executor: Executor, scratch: Path, parked: Path | None, in_flight: int, progress: Progress,
+                  timings: dict[str, float], log: Callable[[str], None],
+                  part_executor: Executor | None = None) -> _BeyondWalls:
+    """The ceiling tiles' and column faces' results (issue 11), when the settings ask for them."""
+    out = _BeyondWalls()
+    counts = None if expected is None else expected.counts
+    if s.ceilings.enabled:  # objects on ceilings: the tiles join the walls in the consensus
+        from .ceilings import detect_ceilings
+
+        ceil = detect_ceilings(parts, origin, seg, library, counts, s, executor=executor, scratch=scratch,
+                               parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
+                               levels=levels, part_executor=part_executor)
+        out.walls.update(ceil.walls)
+        out.templates.update(ceil.templates)
+        out.classes = sorted(set(out.classes) | set(ceil.classes))
+        out.surfaces += ceil.surfaces()
+    if columns:  # objects on columns: their faces join the walls in the consensus too
+        from .columns import detect_columns
+
+        cols = detect_columns(parts, origin, columns, library, counts, s, executor=executor, scratch=scratch,
+                              parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
+                              part_executor=part_executor)
+        out.walls.update(cols.walls)
+        out.templates = {**cols.templates, **out.templates}
+        out.classes = sorted(set(out.classes) | set(cols.classes))
+        out.surfaces += cols.surfaces()
+        out.faces = {f.id: f for f in cols.faces}
+    return out
 
 
 def detect_scans(
@@ -568,6 +680,8 @@ def detect_scans(
     step = sample_step(estimate, s)
     sample_jobs = [(part, origin, step, str(scratch)) for part in parts]
     samples: list = [None] * len(parts)
+    if workers > 1:  # this process waits while the workers read: it imports what segmentation needs meanwhile
+        threading.Thread(target=importlib.import_module, args=("scipy.signal",), daemon=True).start()
     for i, (k, smp) in enumerate(_as_done(executor, sample_jobs, sample_part, 2 * workers)):
         samples[k] = smp
         progress("reading", (i + 1) / len(parts))
@@ -633,42 +747,23 @@ def detect_scans(
     # each task writes its wall's images itself: this process only receives the small results
     wall_jobs = [(str(scratch), w, seg.walls[w].id, seg.walls[w].frame, templates, prototypes, s, str(parked))
                  for w in order]
-    results = (res for _, res in _as_done(executor, wall_jobs, _partition_wall_job, 2 * workers))
-    done = _collect_walls(results, len(seg.walls), progress, timings)
+    with ThreadPoolExecutor(max_workers=1) as cleaner:  # frees the disk while the walls run, not at the end
+
+        def results() -> Iterator[tuple[str, WallResult, dict[str, float]]]:
+            for k, res in _as_done(executor, wall_jobs, _partition_wall_job, 2 * workers):
+                cleaner.submit(drop_wall_partition, scratch, order[k])  # its points are not read again
+                yield res
+
+        done = _collect_walls(results(), len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
-    surfaces: list[dict] = []
-    counts = None if expected is None else expected.counts
-    if s.ceilings.enabled:  # objects on ceilings (issue 11): the tiles join the walls in the consensus
-        from .ceilings import detect_ceilings
-
-        ceil = detect_ceilings(parts, origin, seg, library, counts, s, executor=executor, scratch=Path(scratch),
-                               parked=parked, in_flight=2 * workers, progress=progress, timings=timings, log=log,
-                               levels=levels)
-        walls.update(ceil.walls)
-        templates = {**ceil.templates, **templates}
-        classes = sorted(set(classes) | set(ceil.classes))
-        surfaces = ceil.surfaces()
-    faces = {}
-    if found_columns:  # objects on columns: their faces join the walls in the consensus too
-        from .columns import detect_columns
-
-        cols = detect_columns(parts, origin, found_columns, library, counts, s, executor=executor,
-                              scratch=Path(scratch), parked=parked, in_flight=2 * workers, progress=progress,
-                              timings=timings, log=log)
-        walls.update(cols.walls)
-        templates = {**cols.templates, **templates}
-        classes = sorted(set(classes) | set(cols.classes))
-        surfaces += cols.surfaces()
-        faces = {f.id: f for f in cols.faces}
+    beyond = _beyond_walls(parts, origin, seg, levels, found_columns, library, expected, s, executor=executor,
+                           scratch=Path(scratch), parked=parked, in_flight=2 * workers, progress=progress,
+                           timings=timings, log=log)
+    walls.update(beyond.walls)
+    if s.ceilings.enabled or found_columns:
+        templates, classes = {**beyond.templates, **templates}, sorted(set(classes) | set(beyond.classes))
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings, log)
-    if surfaces:
-        kinds = {sf["id"]: sf["kind"] for sf in surfaces}
-        for d in result.detections:
-            d.surface = kinds.get(d.wall_id)
-            if d.wall_id in faces:  # a round column's face is unrolled: put the object back on it
-                d.u = faces[d.wall_id].arc_u(d.u)
-                d.position = faces[d.wall_id].to_world(d.u, d.v)
-        result.surfaces = surfaces
+    beyond.place(result)
     timings["total"] = time.perf_counter() - t0
     return result, points
 
@@ -696,14 +791,23 @@ def detect_to_dir(
     progress = progress or _noop_progress
     s = settings or load_settings(settings_file)
     progress("reading", 0.0)
-    library = load_model_library(Path(models))
-    counts = read_expected_counts(expected) if isinstance(expected, (str, Path)) else expected
     paths = [Path(p) for p in scans]
     if not paths:
         raise InputError("scans", "no scan files given")
-    origin = scan_origin(paths[0])  # read once: the recentring origin and the georeference
-    georef = georeference_fields(scan_crs(paths), origin)
-    with wall_executor(s, scheduler) as ex, scratch_folder(Path(out), scratch) as work:
+    stack = contextlib.ExitStack()
+    ex = stack.enter_context(wall_executor(s, scheduler))  # the workers start while the inputs are read
+    try:
+        from .io.documents import read_expected_counts
+        from .io.models import load_model_library
+
+        library = load_model_library(Path(models))
+        counts = read_expected_counts(expected) if isinstance(expected, (str, Path)) else expected
+        origin = scan_origin(paths[0])  # read once: the recentring origin and the georeference
+        georef = georeference_fields(scan_crs(paths), origin)
+    except BaseException:
+        stack.close()
+        raise
+    with stack, scratch_folder(Path(out), scratch) as work:
         result, points = detect_scans(paths, library, counts, s, progress, executor=ex, scratch=work, log=log,
                                       origin=origin)
         seg = result.segmentation
@@ -841,6 +945,8 @@ def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dic
         fields["storeys"] = [st.to_dict() for st in seg.storeys]
     if result.surfaces:
         fields["surfaces"] = result.surfaces
+    from .io.documents import detections_document
+
     doc = detections_document([(wall.id, wall.frame) for wall in seg.walls], result.openings,
                               result.detections, extra=fields)
     if len(seg.storeys) > 1:

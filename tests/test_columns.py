@@ -104,6 +104,31 @@ def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
     assert rows["column"].tp == rows["column"].instances and rows["column"].fp == 0
     assert rows["ceiling"].tp == rows["ceiling"].instances and rows["ceiling"].fp == 0
     assert json.loads((det / "detections.json").read_text())["surfaces"][0]["kind"] == "ceiling"
+    # the library's in-memory detect() runs the ceiling and column stages too, with the same result
+    from sbsc_core.io.documents import read_expected_counts
+    from sbsc_core.io.models import load_model_library
+    from sbsc_core.io.scans import read_scan
+    from sbsc_core.pipeline import detect
+    from sbsc_core.settings import DetectionSettings
+
+    settings = DetectionSettings()
+    settings.ceilings.enabled = settings.columns.enabled = True
+    res = detect(read_scan(sim / "scan.ply"), load_model_library(sim / "models"),
+                 read_expected_counts(sim / "expected.json"), settings)
+    assert [sf["id"] for sf in res.surfaces] == [sf["id"] for sf in doc["surfaces"]]
+    mem = sorted((d.class_id, d.wall_id, d.surface) for d in res.detections)
+    assert mem == sorted((d["class"], d["wall"], d.get("surface")) for d in doc["detections"])
+    by_key = {(d["class"], d["wall"]): d["position"] for d in doc["detections"]}
+    for d in res.detections:
+        assert np.linalg.norm(np.subtract(d.position, by_key[(d.class_id, d.wall_id)])) < 0.002
+    # the walls keep their ids and frames without the options
+    plain = detect(read_scan(sim / "scan.ply"), load_model_library(sim / "models"),
+                   read_expected_counts(sim / "expected.json"), DetectionSettings())
+    assert not plain.surfaces and all(d.surface is None for d in plain.detections)
+    assert [(w.id, list(np.round(w.frame.origin, 4))) for w in plain.segmentation.walls] == \
+        [(w["id"], list(np.round(w["origin"], 4))) for w in doc["walls"]]
+    assert sorted((d.class_id, d.wall_id) for d in plain.detections) == \
+        sorted((d["class"], d["wall"]) for d in doc["detections"] if d.get("surface") in (None, "wall"))
 
 
 def test_round_column_image_wraps_its_seam(tmp_path):
@@ -145,3 +170,38 @@ def test_round_column_image_wraps_its_seam(tmp_path):
     assert kept == pytest.approx([circ + 0.01, circ - 0.3, 0.3])
     assert rf.arc_u(circ + 0.01) == pytest.approx(0.01)
     assert rf.to_world(circ + 0.01, 1.2) == pytest.approx(rf.to_world(0.01, 1.2))
+
+
+@pytest.mark.slow
+def test_objects_on_a_round_columns_seam_are_found_once(tmp_path, monkeypatch):
+    import yaml
+
+    import sbsc_core.simulate.surfaces as sim_surfaces
+    from sbsc_core.cli import main
+
+    # two halls: the second one's column is round, with an extinguisher and a socket across its seam (+x)
+    monkeypatch.setattr(sim_surfaces, "ROUND_COLUMN_OBJECTS",
+                        [("fire_extinguisher", 0.0, 1.2), ("socket_x1", 2.0, 0.3), ("fire_alarm_switch", 180.0, 1.4)])
+    scene = {"schema": "sbsc.scene/1", "name": "halls", "ceiling_height_m": 2.8,
+             "rooms": [{"id": "H", "rect": [0, 0, 8, 7]}, {"id": "K", "rect": [8.15, 0, 16.15, 7]}],
+             "openings": [{"wall": "H-S", "kind": "door", "u": 2.0, "width_m": 0.9, "height_m": 2.1},
+                          {"wall": "K-S", "kind": "door", "u": 2.0, "width_m": 0.9, "height_m": 2.1}],
+             "objects": [{"class": "switch", "wall": "H-S", "u": 3.0, "v": 1.1}],
+             "scanner": {"angular_step_deg": 0.1}}
+    (tmp_path / "hall.yaml").write_text(yaml.safe_dump(scene))
+    sim, det = tmp_path / "sim", tmp_path / "det"
+    assert main(["-q", "simulate", "--scene", str(tmp_path / "hall.yaml"), "--columns", "--out", str(sim)]) == 0
+    assert main(["-q", "detect", str(sim / "scan.ply"), "--models", str(sim / "models"), "--expected",
+                 str(sim / "expected.json"), "--columns", "--out", str(det)]) == 0
+    truth = json.loads((sim / "ground_truth.json").read_text())
+    doc = json.loads((det / "detections.json").read_text())
+    (col,) = [sf for sf in doc["surfaces"] if sf.get("radius_m")]
+    circ = 2 * math.pi * col["radius_m"]
+    on_column = [d for d in doc["detections"] if d["wall"] == col["id"]]
+    want = [o for o in truth["objects"] if o["wall"] == "K-COL2"]
+    assert sorted(o["class"] for o in want) == ["fire_alarm_switch", "fire_extinguisher", "socket_x1"]
+    assert sorted(d["class"] for d in on_column) == sorted(o["class"] for o in want)  # each once
+    for o in want:
+        (d,) = [d for d in on_column if d["class"] == o["class"]]
+        assert np.linalg.norm(np.subtract(d["position"], o["position"])) < 0.015
+        assert 0.0 <= d["u"] < circ

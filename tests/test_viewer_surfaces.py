@@ -117,7 +117,8 @@ def test_ceiling_seen_from_below_reviewed_in_the_scene(setup) -> None:
         eye = session.view_point(scene.detections["D0101"])
         target = scene.local(scene.detections["D0101"]["position"])
         assert eye[2] < target[2] - 0.5 and np.hypot(*(eye - target)[:2]) > 0.3
-        assert session.ui_colour.visible and session.ui_depth.visible  # crops of the ceiling's images
+        # crops of the ceiling's images (set after the info text, in the scene's thread)
+        wait_for(lambda: session.ui_colour.visible and session.ui_depth.visible, what="crops")
         tab.set_gui(session.ui_token, "tok-alice")
         tab.press(session.ui_sign_in)
         wait_for(lambda: session.user is not None and not session.ui_accept.disabled, what="sign-in")
