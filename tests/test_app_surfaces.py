@@ -7,6 +7,7 @@ import io
 import math
 
 import ifcopenshell
+import ifcopenshell.util.placement
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
@@ -155,17 +156,30 @@ def test_export_of_ceiling_and_column_objects(project, client, tmp_path) -> None
     settings, pid, doc = project
     h = auth(client.token)
     served = client.get(f"/api/projects/{pid}/detections", headers=h).json()
-    accepted = [d for d in served["detections"] if d["review"]["status"] == "accepted"]
-    on_surfaces = [d for d in accepted if d.get("surface")]
-    assert len(on_surfaces) >= 5
+    pending = [d["id"] for d in served["detections"] if d.get("surface") and d["review"]["status"] == "pending"]
+    if pending:
+        assert client.post(f"/api/projects/{pid}/decisions", headers=h,
+                           json={"status": "accepted", "ids": pending}).status_code == 200
+    served = client.get(f"/api/projects/{pid}/detections", headers=h).json()
+    on_surfaces = [d for d in served["detections"] if d.get("surface") and d["review"]["status"] == "accepted"]
+    assert len(on_surfaces) >= len(SURFACE_OBJECTS)
     r = client.get(f"/api/projects/{pid}/export.ifc", headers=h)
     assert r.status_code == 200, r.text  # not 422 "unknown wall"
     path = tmp_path / "export.ifc"
     path.write_bytes(r.content)
     model = ifcopenshell.open(str(path))
-    tags = {e.Tag for e in model.by_type("IfcElement") if getattr(e, "Tag", None)}
+    objects = {e.Tag: e for e in model.by_type("IfcElement") if getattr(e, "Tag", None)}
+    hosts = {c.Tag: c for c in [*model.by_type("IfcCovering"), *model.by_type("IfcColumn")]}
+
+    by_id = {sf["id"]: sf for sf in served["surfaces"]}
     for d in on_surfaces:
-        assert d["ref"] in tags
+        el = objects[d["ref"]]
+        at = ifcopenshell.util.placement.get_local_placement(el.ObjectPlacement)[:3, 3]
+        assert np.linalg.norm(at - np.asarray(d["position"])) <= 0.001  # back within 1 mm
+        sf = by_id[d["wall"]]
+        host = hosts.get(sf["id"] if sf["kind"] == "ceiling" else sf.get("column"))
+        assert host is not None  # an IfcCovering per ceiling, an IfcColumn per column
+        assert el.ObjectPlacement.PlacementRelTo == host.ObjectPlacement  # placed relative to it
     js = client.get(f"/api/projects/{pid}/export.json", headers=h).json()
     assert len(js["surfaces"]) == len(surfaces())
 

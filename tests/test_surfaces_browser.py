@@ -71,6 +71,16 @@ def test_ceiling_object_reviewed_and_added_in_the_gallery(browser, srv):  # noqa
         # the columns' objects under "On: columns"
         page.select_option("#f-surface", "column")
         page.wait_for_function("document.querySelectorAll('.det').length === 2")
+        # a bulk accept under "On: columns" takes the columns' objects only, and says so
+        page.fill("#bulk-min", "0")
+        page.click("#bulk-go")
+        page.wait_for_selector("#bulk-dialog[open]")
+        assert page.locator("#bulk-text").inner_text().startswith("Accept 2 pending detection(s) on columns")
+        page.click("#bulk-ok")
+        page.wait_for_selector(".det[data-status='pending']", state="detached")
+        now = detections(srv, pid)
+        assert all(x["review"]["status"] == "accepted" for x in now if x.get("surface") == "column")
+        assert all(x["review"]["status"] == "pending" for x in now if not x.get("surface"))
         # add a missed smoke detector: choose the ceiling, click on its image (seen from below)
         page.select_option("#add-wall", "C01")
         page.select_option("#add-class", "smoke_detector")

@@ -82,6 +82,7 @@ def test_scene_draws_ceilings_and_columns(setup) -> None:
     assert 0 < f.to_uvd((img.position + c)[None])[0][2] < 0.02
     # the ceiling's image is not in the shared scene: it would hide the floor seen from above
     assert "images_colour/C01" not in scene.nodes and "images_colour/COL1-S" in scene.nodes
+    assert "images_colour/COL2" in scene.nodes  # the round column's image, wrapped round it
     for did, *_ in SURFACE_OBJECTS:
         det = scene.detections[did]
         assert np.allclose(scene.spots[did].position + c, det["position"])
@@ -122,6 +123,7 @@ def test_ceiling_seen_from_below_reviewed_in_the_scene(setup) -> None:
         tab.set_gui(session.ui_token, "tok-alice")
         tab.press(session.ui_sign_in)
         wait_for(lambda: session.user is not None and not session.ui_accept.disabled, what="sign-in")
+        session.ui_auto.value = False  # stay on the object (no race with the selection below)
         tab.press(session.ui_accept)
         det = wait_for(lambda: (d := next(x for x in backend.project_data(1).detections["detections"]
                                          if x["id"] == "D0101"))["review"]["status"] == "accepted" and d,

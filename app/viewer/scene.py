@@ -17,8 +17,8 @@ What the reviewer sees (paper, section 5 and figures 18, 19 and 21):
     surfaces beyond walls (contract 4's ``surfaces``, ``sbsc detect --ceilings --columns``):
     each ceiling tile outlined, and its orthoimage seen from below: a tab shows it only while
     its camera is below the ceiling, so the floor stays visible from above; each column
-    as a box (its four faces with their orthoimages) or a cylinder (a round column, whose
-    unrolled image is shown in the panel's crops only).
+    as a box (its four faces with their orthoimages) or a cylinder (a round column, its
+    unrolled image wrapped back round it as a textured mesh).
 ``/spots/<D>``, ``/spot_labels/<D>``
     every recognized object as a spot at its ``position`` (the paper's red spots), coloured
     by review state; clicking one selects it. The labels of all objects are a layer that is
@@ -303,6 +303,34 @@ def column_meshes(surfaces: list[dict], inset_m: float = 0.003) -> dict[str, tup
         ring = mid + (ring - mid) * (1.0 - inset_m / max(float(np.linalg.norm(ring - mid, axis=1).min()), 1e-3))
         out[cid] = prism_mesh(ring, z0, z1)
     return out
+
+
+def wrapped_cylinder(img: np.ndarray, sf: dict, pixel_m: float, offset_m: float, segments: int = 64) -> Any:
+    """A round column's unrolled orthoimage wrapped back round it: a textured ``trimesh.Trimesh``
+    (seen from outside only), in world coordinates. The image's column c is at the arc length
+    ``(c + 0.5) * pixel_m`` counter-clockwise from +x, its rows from the top (contract 4)."""
+    import trimesh
+    from PIL import Image
+
+    r = float(sf["radius_m"]) + offset_m
+    cx, cy = (float(c) for c in sf["centre"])
+    z0 = float(sf["origin"][2])
+    circ = 2 * np.pi * float(sf["radius_m"])
+    w_m, h_m = img.shape[1] * pixel_m, img.shape[0] * pixel_m
+    top = z0 + float(sf["height_m"])
+    a = np.linspace(0.0, 2 * np.pi, segments + 1)
+    ring = np.column_stack([cx + r * np.cos(a), cy + r * np.sin(a)])
+    n = segments + 1
+    verts = np.concatenate([np.column_stack([ring, np.full(n, top - h_m)]), np.column_stack([ring, np.full(n, top)])])
+    u = (a / (2 * np.pi)) * circ / w_m  # the image may be longer than the circumference (its seam repeated)
+    uv = np.concatenate([np.column_stack([u, np.zeros(n)]), np.column_stack([u, np.ones(n)])])
+    faces = []
+    for k in range(segments):
+        faces += [[k, k + 1, n + k + 1], [k, n + k + 1, n + k]]  # outwards
+    material = trimesh.visual.material.PBRMaterial(  # matte, not metallic (glTF's default is metallic)
+        baseColorTexture=Image.fromarray(np.ascontiguousarray(img)), metallicFactor=0.0, roughnessFactor=1.0)
+    visual = trimesh.visual.TextureVisuals(uv=uv, material=material)
+    return trimesh.Trimesh(verts, np.asarray(faces), visual=visual, process=False)
 
 
 def surface_text(wid: str | None, sf: dict | None) -> str:
@@ -668,6 +696,9 @@ class ProjectScene:
         them). Ceilings are sent per tab (:meth:`ReviewSession.update_ceilings`)."""
         assert self.images is not None
         faces = [sid for sid, sf in self.surfaces.items() if kind_of(sf) == "column" and not is_round(sf)]
+        for sid, sf in self.surfaces.items():
+            if is_round(sf) and f"images_{kind}/{sid}" not in self.nodes:
+                self._add_round_image(sid, sf, kind)
         for wid in [*self.frames, *faces]:
             name = f"images_{kind}/{wid}"
             if name in self.nodes:
@@ -680,6 +711,22 @@ class ProjectScene:
                 f"/{name}", tex, render_width=w_m, render_height=h_m, format="jpeg",
                 jpeg_quality=self.s.jpeg_quality, cast_shadow=False, receive_shadow=False,
                 wxyz=wxyz, position=pos)
+
+    def _add_round_image(self, sid: str, sf: dict, kind: str) -> None:
+        """A round column's unrolled image, wrapped round it (a textured mesh)."""
+        assert self.images is not None
+        img = self.images.image(sid, kind)
+        if img is None:
+            return
+        tex = texture(img, self.images.pixel_m, self.s.texture_pixel_m, self.s.texture_max_px)
+        px = self.images.pixel_m * img.shape[1] / tex.shape[1]
+        try:
+            mesh = wrapped_cylinder(tex, sf, px, self.s.image_offset_m)
+        except Exception:  # no texture is no reason to lose the scene
+            log.exception("viewer: the image of round column %s", sid)
+            return
+        mesh.apply_translation(-self.centre)
+        self.nodes[f"images_{kind}/{sid}"] = self.server.scene.add_mesh_trimesh(f"/images_{kind}/{sid}", mesh)
 
     def set_image_mode(self, mode: str) -> None:
         """Show the colour or depth orthoimages on the walls, or none."""
