@@ -11,7 +11,7 @@ checked, recorded and audited the same way whichever side it comes from:
   (``project_events``);
 - a new job carries the decisions over to the objects it finds again (:func:`carry_over`).
 
-Errors are :class:`ServiceError` subclasses carrying the HTTP status the API answers.
+Errors are :mod:`app.errors` classes (``ServiceError`` here) carrying the HTTP status the API answers.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from .auth import Principal
+from .errors import Conflict, Forbidden, Invalid, Locked, NotFound, ReviewError, StaleVersion
 from .models import (
     REVIEW_STATUSES,
     DetectionRow,
@@ -50,38 +51,7 @@ CARRY_TOLERANCE_M = 0.10  # a new detection within this of an old one (or half i
 BULK_MAX = 100_000
 
 
-class ServiceError(Exception):
-    """A review operation refused; ``status`` is the HTTP code, ``current`` the detection now."""
-
-    status = 400
-
-    def __init__(self, message: str, current: dict | None = None) -> None:
-        super().__init__(message)
-        self.current = current
-
-
-class NotFound(ServiceError):
-    status = 404
-
-
-class Forbidden(ServiceError):
-    status = 403
-
-
-class Conflict(ServiceError):
-    status = 409
-
-
-class StaleVersion(Conflict):
-    pass
-
-
-class Invalid(ServiceError):
-    status = 422
-
-
-class Locked(ServiceError):
-    status = 423
+ServiceError = ReviewError  # the name the REST routes use
 
 
 # --------------------------------------------------------------------------- look-ups

@@ -317,14 +317,6 @@ def library_summary(library) -> dict:  # noqa: ANN001 - sbsc_core.types.ModelLib
             for cid, m in sorted(library.models.items())}
 
 
-def bundled_library_summary() -> dict:
-    """Classes of the bundled library (read from each ``model.json`` only)."""
-    from sbsc_core.io.models import load_model_library
-    from sbsc_core.paths import bundled_models_dir
-
-    return library_summary(load_model_library(bundled_models_dir()))
-
-
 # --------------------------------------------------------------------------- housekeeping
 
 

@@ -14,12 +14,15 @@ reports, the CPU seconds of all its processes (less sensitive than the wall-cloc
 other work on a shared machine), and the peak resident memory of the whole process tree
 (the command and its workers, sampled every 0.1 s from /proc): all resident pages, and the
 anonymous ones (without file pages the kernel may drop). ``--repeat N`` runs the trees N
-times, taking turns, and compares the fastest run of each.
+times, taking turns, and compares the fastest run of each. At the end it prints a digest of
+each tree's documents (detections, RoIs, suggestions) of its last run, and which trees'
+are identical: a speed-up must not change the results.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import resource
@@ -144,6 +147,17 @@ def tile_scans(scan: Path, tiles: int, out_dir: Path) -> list[Path]:
     return paths
 
 
+def output_digest(out: Path) -> str:
+    """SHA-256 (first 16 hex digits) of a detection's documents (detections, RoIs, suggestions):
+    equal digests mean byte-identical results."""
+    h = hashlib.sha256()
+    for name in ("detections.json", "rois.json", "suggestions.json"):
+        f = out / name
+        h.update(name.encode())
+        h.update(f.read_bytes() if f.exists() else b"-")
+    return h.hexdigest()[:16]
+
+
 def _children_cpu() -> float:
     """User + system CPU seconds of this process's finished descendants."""
     ru = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -206,6 +220,10 @@ def main() -> int:
             for stage, sec in r["timings"].items():
                 rate = n / sec / 1e6 if sec > 0 else float("inf")
                 print(f"  {stage:<14}{sec:>10.2f}{rate:>12.2f}", flush=True)
+    digests = {str(t): output_digest(run / f"detect_{k}") for k, t in enumerate(trees)}
+    for t, dig in digests.items():
+        same = [str(u) for u in trees if str(u) != t and digests[str(u)] == dig]
+        print(f"outputs of {t}: {dig}" + (f" (identical to {', '.join(same)})" if same else ""))
     if len(trees) > 1:  # the fastest run of each tree (the one least disturbed by other work)
         best = [min((r for r in results if r["tree"] == str(t)), key=lambda r: r["wall_s"]) for t in trees]
         base = best[0]

@@ -511,8 +511,13 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     summary = comparison.summary()
     con.info(f"wrote {out}/comparison.json, report.html, findings.bcf: "
              + ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in summary.items()))
+    by_surface = comparison.summary_by_surface()
+    if set(by_surface) - {"wall"}:  # objects on ceilings or columns: one line per kind of surface
+        for kind, counts in by_surface.items():
+            con.info(f"  on {kind}s: " + ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in counts.items()))
     if args.json:
-        con.result({"out": out, "summary": summary, "findings": len(comparison.findings)})
+        con.result({"out": out, "summary": summary, "summary_by_surface": by_surface,
+                    "findings": len(comparison.findings)})
     return 0
 
 

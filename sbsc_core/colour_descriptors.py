@@ -190,16 +190,16 @@ def glcm_energy(lightness: np.ndarray, mask: np.ndarray, levels: int) -> float:
     """
     q = np.clip((lightness / 100.0 * levels).astype(int), 0, levels - 1)
     h, w = q.shape
-    counts = np.zeros(levels * levels, np.float64)
+    pairs = []
     for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
         r0, r1 = 0, h - dr
         c0, c1 = max(0, -dc), w - max(0, dc)
         a = q[r0:r1, c0:c1]
         b = q[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
         ok = mask[r0:r1, c0:c1] & mask[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
-        ia, ib = a[ok], b[ok]
-        counts += np.bincount(ia * levels + ib, minlength=levels * levels)
-        counts += np.bincount(ib * levels + ia, minlength=levels * levels)
+        pairs.append(a[ok] * levels + b[ok])
+    one_way = np.bincount(np.concatenate(pairs), minlength=levels * levels).reshape(levels, levels)
+    counts = (one_way + one_way.T).ravel().astype(np.float64)  # symmetric: each pair both ways (exact counts)
     total = counts.sum()
     if total <= 0:
         return 1.0

@@ -304,6 +304,7 @@ def wall_prototype(t: ModelTemplate, wall_rgb: np.ndarray, threshold: float,
                 comp = _median(np.round(img).astype(np.uint8), settings.median_px)
                 lab = _to_lab(comp)
                 delta = np.linalg.norm(lab - wall_lab[None, None, :], axis=2)
+                described: dict[bytes, np.ndarray] = {}  # jittered thresholds often give the same foreground
                 for factor in jitter:
                     if factor != 1.0 and k > 0:
                         continue
@@ -314,7 +315,10 @@ def wall_prototype(t: ModelTemplate, wall_rgb: np.ndarray, threshold: float,
                     r0, r1, c0, c1 = rr.min(), rr.max() + 1, cc.min(), cc.max() + 1
                     if max(r1 - r0, c1 - c0) < settings.roi_min_px:
                         continue
-                    samples.append(normalise_descriptors(global_descriptors(comp, fg, settings), settings))
+                    key = np.packbits(fg).tobytes()
+                    if key not in described:
+                        described[key] = normalise_descriptors(global_descriptors(comp, fg, settings), settings)
+                    samples.append(described[key])
                     if factor == 1.0:
                         sizes.append((r1 - r0, c1 - c0))
                         offsets.append(((r0 + r1 - 1) / 2.0 - cy, (c0 + c1 - 1) / 2.0 - cx))

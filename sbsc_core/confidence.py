@@ -20,7 +20,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import minimize
 
 from .consensus import ConsensusHit, consensus_all
 from .matching import box_overlap
@@ -163,6 +162,8 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int
         nll = float(np.sum(np.logaddexp(0.0, z) - y * z)) + 0.5 * l2 * float(w[1:] @ w[1:])
         g = np.concatenate([[np.sum(p - y)], x.T @ (p - y) + l2 * w[1:]])
         return nll, g
+
+    from scipy.optimize import minimize  # here: only calibration needs it, not every detection
 
     res = minimize(loss, np.zeros(x.shape[1] + 1), jac=True, method="L-BFGS-B", bounds=bounds)
     return Calibration(res.x[1:], float(res.x[0]))

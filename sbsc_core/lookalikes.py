@@ -21,6 +21,20 @@ less than another look-alike's by more than ``min_margin`` is relabelled to that
 provided that print does correlate (``min_print_ncc``: a white switch on a white wall
 shows too little of its print to decide anything).
 The margin (own print minus the best other look-alike's) is kept on the candidate.
+
+Classes are also look-alikes on a wall where the colour classifier cannot tell them apart
+(:func:`colour_confusable`): same-size objects whose wall prototypes lie within mu_C of each
+other (a white switch and a white one-gang socket on a white wall), whatever their depth
+models. For such classes the print alone is weak (little of a white plate differs from a
+white wall), so the fine relief decides with it (:func:`relief_score`): the NCC of each
+class's depth model, cropped to its content, with the relief above the wall at the
+candidate's place and turn, at the full resolution (the socket's cup, the switch's rocker).
+A class's evidence is the mean of the comparisons available for every class of the set;
+with the relief in it, the better class is taken at a smaller margin and level
+(``min_margin_relief``, ``min_evidence_relief``): two independent comparisons agree.
+Its margin is then taken over ``min_evidence_relief`` as well as over the other classes: a
+room controller that fits the switch a little better than the socket, and both badly, has
+a small or negative margin (the confidence reads it).
 """
 
 from __future__ import annotations
@@ -30,7 +44,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from .colour_recognition import ColourImage, ColourPrototypes
+from .colour_recognition import ColourImage, ColourPrototypes, prototype_distance
 from .matching import box_at, crop_padded, ncc_map, nms, padded_template, rotate_template
 from .settings import LookalikeSettings
 from .templates import ModelTemplate
@@ -148,21 +162,79 @@ def print_score(diff: np.ndarray, view: np.ndarray, centre: tuple[float, float],
     return best
 
 
+def relief_score(relief: np.ndarray, model: np.ndarray, centre: tuple[float, float], rotation_deg: float,
+                 *, search_px: int) -> float | None:
+    """How well a class's depth model (cropped to its content, (h, w) metres) turned by
+    ``rotation_deg`` or a quarter turn more explains the relief above the wall ``relief``
+    around ``centre``, within the footprint only (the plate's step to the wall says nothing
+    about which plate it is); None when the model is flat inside its content (a sign).
+
+    The score is the best NCC less the amplitude misfit there: depth is metric, so a
+    relief ``g`` times the model's (least squares) costs ``1 - min(g, 1/g)`` (a flush
+    socket is not a 5 cm smoke detector however alike their outlines correlate).
+    """
+    m = np.asarray(model, np.float32)
+    if m.size == 0 or float(m.std()) < _FLAT_M * max(float(np.abs(m).max()), 1e-9):
+        return None
+    best = -np.inf
+    for k in range(4):
+        v = np.ascontiguousarray(rotate_template(m, float(rotation_deg) + 90.0 * k), np.float32)
+        h, w = v.shape[:2]
+        b = box_at(centre, h, w)
+        region = np.ascontiguousarray(crop_padded(relief, b.r0 - search_px, b.r1 + search_px,
+                                                  b.c0 - search_px, b.c1 + search_px), np.float32)
+        if float(np.ptp(v)) <= 0 or float(np.ptp(region)) <= 0:
+            continue
+        ncc = ncc_map(region, v)
+        r, c = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
+        gain = float((region[r:r + h, c:c + w] * v).sum() / max(float((v * v).sum()), 1e-12))
+        fit = min(gain, 1.0 / gain) if gain > 0 else 0.0
+        best = max(best, float(ncc[r, c]) - (1.0 - fit))
+    return None if not np.isfinite(best) else best
+
+
+_FLAT_M = 0.05  # a depth model varying by less than this share of its height inside its content is flat
+
+
+def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[str, np.ndarray],
+              offsets: dict[str, tuple[float, float]], relief: np.ndarray | None,
+              models: dict[str, np.ndarray], search_px: int) -> tuple[dict[str, float], bool]:
+    """Each class's evidence at a candidate: the mean of its print NCC and, when every
+    class of ``seen`` has a relief model (and ``relief`` is given), its relief score
+    (:func:`relief_score`); and whether the relief was compared."""
+    prints = {c: print_score(diff, views[c], _shifted(cand.centre, offsets.get(c), cand.rotation_deg),
+                             cand.rotation_deg, search_px=search_px) for c in seen}
+    if relief is None or any(c not in models for c in seen):
+        return prints, False
+    reliefs = {c: relief_score(relief, models[c], _shifted(cand.centre, offsets.get(c), cand.rotation_deg),
+                               cand.rotation_deg, search_px=search_px) for c in seen}
+    if any(v is None for v in reliefs.values()):
+        return prints, False
+    return {c: 0.5 * (prints[c] + float(reliefs[c])) for c in seen}, True  # type: ignore[arg-type]
+
+
 def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str, np.ndarray],
                        groups: list[frozenset[str]], settings: LookalikeSettings, *,
-                       offsets: dict[str, tuple[float, float]] | None = None) -> list[Candidate]:
+                       offsets: dict[str, tuple[float, float]] | None = None,
+                       relief: np.ndarray | None = None,
+                       models: dict[str, np.ndarray] | None = None) -> list[Candidate]:
     """Candidates with every look-alike class decided by its print (see the module).
 
     ``diff`` is the wall's Lab difference to the local wall colour (0 off the foreground);
     ``views`` the upright front view of each class as seen on this wall, ``offsets`` (row,
-    col) of each view's centre from its footprint's centre (0 when not given). Candidates of a
-    class outside every group, or whose group has fewer than two views here, are kept as
-    they are. Relabelled candidates that then coincide with another of the same class and
-    source are folded (:func:`~sbsc_core.matching.nms`).
+    col) of each view's centre from its footprint's centre (0 when not given). With
+    ``relief`` (the wall's relief above its plane, metres) and ``models`` (each class's depth
+    model cropped like its view), the fine relief is compared too (:func:`relief_score`).
+    Candidates of a class outside every group, or whose group has fewer than two views here,
+    are kept as they are. Relabelled candidates that then coincide with another of the same
+    class and source are folded (:func:`~sbsc_core.matching.nms`).
     """
     if not groups or not cands:
         return cands
-    group_of = {c: g for g in groups for c in g}
+    group_of: dict[str, set[str]] = {}
+    for g in groups:
+        for c in g:
+            group_of.setdefault(c, set()).update(g)
     out: list[Candidate] = []
     touched = False
     for cand in cands:
@@ -171,16 +243,17 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
         if g is None or len(seen) < 2 or cand.class_id not in views:
             out.append(cand)
             continue
-        scores = {c: print_score(diff, views[c], _shifted(cand.centre, (offsets or {}).get(c), cand.rotation_deg),
-                                 cand.rotation_deg, search_px=settings.search_px)
-                  for c in seen}
+        scores, both = _evidence(cand, seen, diff, views, offsets or {}, relief, models or {}, settings.search_px)
         own = scores[cand.class_id]
         other, other_score = max(((c, s) for c, s in scores.items() if c != cand.class_id), key=lambda x: x[1])
-        if other_score > own + settings.min_margin and other_score >= settings.min_print_ncc:
-            out.append(replace(cand, class_id=other, lookalike_margin=other_score - own))
+        margin, least = ((settings.min_margin_relief, settings.min_evidence_relief) if both
+                         else (settings.min_margin, settings.min_print_ncc))
+        floor = least if both else -np.inf  # with the relief: a class below it is like none of the set
+        if other_score > own + margin and other_score >= least:
+            out.append(replace(cand, class_id=other, lookalike_margin=other_score - max(own, floor)))
             touched = True
         else:
-            out.append(replace(cand, lookalike_margin=own - other_score))
+            out.append(replace(cand, lookalike_margin=own - max(other_score, floor)))
     if not touched:
         return out
     folded: list[Candidate] = []
@@ -219,25 +292,74 @@ def print_views(protos: dict, templates: dict[str, ModelTemplate]
     return views, offsets
 
 
+def relief_models(templates: dict[str, ModelTemplate], views: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Each class's depth model cropped like its print view (:func:`print_views`): to its
+    content when the view is, else whole."""
+    out = {}
+    for c, v in views.items():
+        t = templates.get(c)
+        d = None if t is None else t.depth_filled()
+        if d is None:
+            continue
+        if v.shape[:2] != d.shape[:2]:
+            b = content_box(t)
+            d = d[b.r0:b.r1, b.c0:b.c1]
+        out[c] = np.ascontiguousarray(d, np.float32)
+    return out
+
+
+def same_size_pairs(templates: dict[str, ModelTemplate], settings: LookalikeSettings) -> list[tuple[str, str]]:
+    """The pairs of classes whose contents have the same size (:func:`content_box`, ``size_tolerance``)."""
+    ids = sorted(templates)
+    return [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
+            if _same_size(templates[a], templates[b], settings.size_tolerance)]
+
+
+def colour_confusable(protos: dict, templates: dict[str, ModelTemplate], settings: LookalikeSettings,
+                      mu_c: float, *, pairs: list[tuple[str, str]] | None = None) -> list[frozenset[str]]:
+    """Pairs of same-size classes (:func:`same_size_pairs`, or ``pairs`` when given) that the
+    colour classifier cannot tell apart on a wall: either's wall prototype (``protos``, class
+    -> :class:`~sbsc_core.colour_recognition.WallPrototype`) lies within ``mu_c`` of the other's."""
+    out = []
+    for a, b in (same_size_pairs(templates, settings) if pairs is None else pairs):
+        if a not in protos or b not in protos:
+            continue
+        pa, pb = protos[a], protos[b]
+        if min(prototype_distance(pa.descriptor, pb), prototype_distance(pb.descriptor, pa)) <= mu_c:
+            out.append(frozenset((a, b)))
+    return out
+
+
 def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: ColourImage,
-                    prototypes: ColourPrototypes, settings: LookalikeSettings
-                    ) -> tuple[list[Candidate], list[Candidate]]:
+                    prototypes: ColourPrototypes, settings: LookalikeSettings, *,
+                    relief: np.ndarray | None = None) -> tuple[list[Candidate], list[Candidate]]:
     """:func:`resolve_lookalikes` for one wall's depth and colour candidates.
 
-    The look-alike sets are found once per library (cached on ``prototypes``); the views
-    are the classes' front views as seen on this wall's colour.
+    The look-alike sets are found once per library (cached on ``prototypes``) and joined by
+    the pairs the colour classifier cannot tell apart on this wall (:func:`colour_confusable`,
+    with ``settings.colour_confusable``); the views are the classes' front views as seen on
+    this wall's colour. ``relief``: the wall's relief above its plane (metres, the
+    orthoimage's pixels), for the fine relief comparison.
     """
     if not settings.enabled:
         return depth, colour
     key = ("lookalike_sets", settings.size_tolerance, settings.min_depth_ncc, settings.max_colour_delta_e)
     if key not in prototypes._cache:
         prototypes._cache[key] = lookalike_sets(prototypes.templates, settings)  # type: ignore[assignment]
-    groups: list[frozenset[str]] = prototypes._cache[key]  # type: ignore[assignment]
+    groups: list[frozenset[str]] = list(prototypes._cache[key])  # type: ignore[arg-type]
+    protos = prototypes.for_wall(image.wall_rgb, image.threshold, image.noise_rgb)
+    if settings.colour_confusable:
+        pkey = ("same_size_pairs", settings.size_tolerance)
+        if pkey not in prototypes._cache:
+            prototypes._cache[pkey] = same_size_pairs(prototypes.templates, settings)  # type: ignore[assignment]
+        pairs: list[tuple[str, str]] = prototypes._cache[pkey]  # type: ignore[assignment]
+        groups += [g for g in colour_confusable(protos, prototypes.templates, settings, prototypes.settings.mu_c,
+                                                pairs=pairs) if not any(g <= h for h in groups)]
     if not groups:
         return depth, colour
-    protos = prototypes.for_wall(image.wall_rgb, image.threshold, image.noise_rgb)
     views, offsets = print_views(protos, prototypes.templates)
+    models = relief_models(prototypes.templates, views)
     diff = np.ascontiguousarray(image.lab - image.background, dtype=np.float32)
     diff[~image.foreground] = 0.0
-    return (resolve_lookalikes(depth, diff, views, groups, settings, offsets=offsets),
-            resolve_lookalikes(colour, diff, views, groups, settings, offsets=offsets))
+    return (resolve_lookalikes(depth, diff, views, groups, settings, offsets=offsets, relief=relief, models=models),
+            resolve_lookalikes(colour, diff, views, groups, settings, offsets=offsets, relief=relief, models=models))

@@ -50,7 +50,8 @@ from .settings import DetectionSettings, OrthoimageSettings, SegmentationSetting
 from .types import Orthoimage, PointCloud, Wall, WallFrame
 
 __all__ = ["ScanPart", "WallIndex", "plan_parts", "sample_part", "partition_part", "assign_chunk",
-           "band_rows", "wall_records", "wall_orthoimage", "scratch_dir", "worker_ready", "RECORD"]
+           "band_rows", "wall_records", "wall_orthoimage", "drop_wall_partition", "scratch_dir", "worker_ready",
+           "RECORD"]
 
 BAND_PIXELS = 1 << 19  # orthoimage pixels of one band of a wall's partition (bounds the points binned at once)
 PART_POINTS = 1 << 22  # points of a seekable (binary PLY / PCD) file read by one task (small: balanced workers)
@@ -371,6 +372,7 @@ def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch
     chunks = _spilled_chunks(root, part, origin, points) if spilled else _part_chunks(part, origin)
     written = [0] * len(index.frames)
     band_px = [band_rows(f, ortho) * ortho_shape(f, ortho.pixel_m)[1] for f in index.frames]
+    made: set[tuple[int, int]] = set()
     for chunk in chunks:
         for w, idx, uvd in assign_chunk(chunk.xyz, index):
             keep, pixel = ortho_pixels(uvd, index.frames[w], ortho)
@@ -391,7 +393,9 @@ def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch
                 a, z = int(cuts[b - b0]), int(cuts[b - b0 + 1])
                 if z > a:
                     d = _band_dir(root, w, b)
-                    d.mkdir(parents=True, exist_ok=True)
+                    if (w, b) not in made:  # one mkdir per band folder and part, not per chunk
+                        d.mkdir(parents=True, exist_ok=True)
+                        made.add((w, b))
                     with open(d / f"{part.key}.rec", "ab") as fh:
                         rec[a:z].tofile(fh)
             written[w] += len(rec)
@@ -399,6 +403,11 @@ def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch
         for p in _spill_paths(root, part):
             p.unlink(missing_ok=True)
     return written
+
+
+def drop_wall_partition(scratch: Path | str, w: int) -> None:
+    """Delete the partition of wall number ``w`` (once its task is done: it is not read again)."""
+    shutil.rmtree(_wall_dir(Path(scratch), w), ignore_errors=True)
 
 
 def _read_records(files: Sequence[Path]) -> np.ndarray:

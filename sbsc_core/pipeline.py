@@ -22,17 +22,27 @@ segmentation, one partition file per wall, tasks on a local pool or a Dask clust
 from __future__ import annotations
 
 import contextlib
+import importlib
 import itertools
 import json
 import multiprocessing
 import os
 import shutil
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from concurrent.futures import (
+    FIRST_COMPLETED,
+    Executor,
+    Future,
+    ProcessPoolExecutor,
+    ThreadPoolExecutor,
+    wait,
+)
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -52,12 +62,11 @@ from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
 from .io.crs import georeference_fields, scan_crs
-from .io.documents import ExpectedCounts, detections_document, read_expected_counts
-from .io.models import load_model_library
 from .lookalikes import resolve_on_wall
 from .orthoimage import build_orthoimage
 from .partition import (
     WallIndex,
+    drop_wall_partition,
     partition_part,
     plan_parts,
     sample_cloud,
@@ -154,7 +163,8 @@ def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], p
     c_img = colour_image(ortho, area, s.colour)  # J_C and J_BW, computed once per wall
     c_rois = colour_rois(ortho, area, s.colour, c_img)
     c_cands = match_colour(ortho, area, c_rois, prototypes, s.colour, c_img)
-    d_cands, c_cands = resolve_on_wall(d_cands, c_cands, c_img, prototypes, s.lookalikes)
+    d_cands, c_cands = resolve_on_wall(d_cands, c_cands, c_img, prototypes, s.lookalikes,
+                                       relief=d_img.levelled)
     t_stage["colour"] = time.perf_counter() - t
     return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
 
@@ -281,10 +291,15 @@ def _walls_results(cloud: PointCloud, seg: Segmentation, templates: dict[str, Mo
             pool.shutdown(wait=True, cancel_futures=True)
 
 
-Expected = dict[str, int] | ExpectedCounts  # contract 3: counts, or counts with per-storey counts
+if TYPE_CHECKING:  # the documents (and pydantic) are imported where used: the wall workers never need them
+    from .io.documents import ExpectedCounts
+
+    Expected = dict[str, int] | ExpectedCounts  # contract 3: counts, or counts with per-storey counts
 
 
 def _as_expected(expected: Expected | None) -> ExpectedCounts | None:
+    from .io.documents import ExpectedCounts
+
     if expected is None or isinstance(expected, ExpectedCounts):
         return expected
     return ExpectedCounts(dict(expected))
@@ -665,6 +680,8 @@ def detect_scans(
     step = sample_step(estimate, s)
     sample_jobs = [(part, origin, step, str(scratch)) for part in parts]
     samples: list = [None] * len(parts)
+    if workers > 1:  # this process waits while the workers read: it imports what segmentation needs meanwhile
+        threading.Thread(target=importlib.import_module, args=("scipy.signal",), daemon=True).start()
     for i, (k, smp) in enumerate(_as_done(executor, sample_jobs, sample_part, 2 * workers)):
         samples[k] = smp
         progress("reading", (i + 1) / len(parts))
@@ -730,8 +747,14 @@ def detect_scans(
     # each task writes its wall's images itself: this process only receives the small results
     wall_jobs = [(str(scratch), w, seg.walls[w].id, seg.walls[w].frame, templates, prototypes, s, str(parked))
                  for w in order]
-    results = (res for _, res in _as_done(executor, wall_jobs, _partition_wall_job, 2 * workers))
-    done = _collect_walls(results, len(seg.walls), progress, timings)
+    with ThreadPoolExecutor(max_workers=1) as cleaner:  # frees the disk while the walls run, not at the end
+
+        def results() -> Iterator[tuple[str, WallResult, dict[str, float]]]:
+            for k, res in _as_done(executor, wall_jobs, _partition_wall_job, 2 * workers):
+                cleaner.submit(drop_wall_partition, scratch, order[k])  # its points are not read again
+                yield res
+
+        done = _collect_walls(results(), len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
     beyond = _beyond_walls(parts, origin, seg, levels, found_columns, library, expected, s, executor=executor,
                            scratch=Path(scratch), parked=parked, in_flight=2 * workers, progress=progress,
@@ -768,14 +791,23 @@ def detect_to_dir(
     progress = progress or _noop_progress
     s = settings or load_settings(settings_file)
     progress("reading", 0.0)
-    library = load_model_library(Path(models))
-    counts = read_expected_counts(expected) if isinstance(expected, (str, Path)) else expected
     paths = [Path(p) for p in scans]
     if not paths:
         raise InputError("scans", "no scan files given")
-    origin = scan_origin(paths[0])  # read once: the recentring origin and the georeference
-    georef = georeference_fields(scan_crs(paths), origin)
-    with wall_executor(s, scheduler) as ex, scratch_folder(Path(out), scratch) as work:
+    stack = contextlib.ExitStack()
+    ex = stack.enter_context(wall_executor(s, scheduler))  # the workers start while the inputs are read
+    try:
+        from .io.documents import read_expected_counts
+        from .io.models import load_model_library
+
+        library = load_model_library(Path(models))
+        counts = read_expected_counts(expected) if isinstance(expected, (str, Path)) else expected
+        origin = scan_origin(paths[0])  # read once: the recentring origin and the georeference
+        georef = georeference_fields(scan_crs(paths), origin)
+    except BaseException:
+        stack.close()
+        raise
+    with stack, scratch_folder(Path(out), scratch) as work:
         result, points = detect_scans(paths, library, counts, s, progress, executor=ex, scratch=work, log=log,
                                       origin=origin)
         seg = result.segmentation
@@ -913,6 +945,8 @@ def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dic
         fields["storeys"] = [st.to_dict() for st in seg.storeys]
     if result.surfaces:
         fields["surfaces"] = result.surfaces
+    from .io.documents import detections_document
+
     doc = detections_document([(wall.id, wall.frame) for wall in seg.walls], result.openings,
                               result.detections, extra=fields)
     if len(seg.storeys) > 1:

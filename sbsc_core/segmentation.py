@@ -40,7 +40,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import find_peaks
 
 from .errors import NoWallsError
 from .settings import SegmentationSettings
@@ -163,10 +162,12 @@ def _storey_walls(xyz: np.ndarray, sample: np.ndarray, box: DenseBox, floor: flo
 
     index = _assign_points(xyz, segs, floor + s.slab_tolerance_m, ceiling - s.slab_tolerance_m, s, box)
     walls: list[tuple[WallFrame, np.ndarray]] = []
-    for seg, idx in zip(segs, index, strict=True):
-        done = _final_frame(xyz, idx, seg, floor, ceiling, origin, s)
-        if done is not None and done[0].width_m >= s.min_wall_length_m:
-            walls.append(done)
+    threads = min(_ASSIGN_THREADS, os.cpu_count() or 1) if len(xyz) >= _THREAD_MIN_POINTS else 1
+    with ThreadPoolExecutor(max_workers=threads) as pool:  # each wall on its own (numpy releases the GIL)
+        for done in pool.map(lambda job: _final_frame(xyz, job[1], job[0], floor, ceiling, origin, s),
+                             zip(segs, index, strict=True)):
+            if done is not None and done[0].width_m >= s.min_wall_length_m:
+                walls.append(done)
     if not walls:
         raise NoWallsError("no walls found: no wall kept its points")
     walls.sort(key=_order_key)
@@ -263,6 +264,9 @@ def find_floor_ceiling(z: np.ndarray, settings: SegmentationSettings | None = No
     counts = np.bincount(((zs - lo) / b).astype(np.int64)).astype(np.float64)
     smooth = np.convolve(counts, np.ones(3), mode="same")
     padded = np.concatenate(([0.0], smooth, [0.0]))  # a level in the first or last bin is a peak too
+    from scipy.signal import find_peaks  # here: scipy.signal imports scipy.stats (0.4 s), which the
+    # wall workers, importing this module with the pipeline, never need
+
     peaks, props = find_peaks(padded, prominence=s.min_level_fraction * float(smooth.max()))
     peaks = peaks - 1
     small = np.zeros(0, np.int64)
@@ -549,12 +553,13 @@ def _orient(segs: list[_Segment], slab_xy: np.ndarray, s: SegmentationSettings) 
         occ = None
     else:
         cell = s.xy_cell_m
-        lo = slab_xy.min(axis=0) - cell
-        ij = ((slab_xy - lo) / cell).astype(np.int64)
-        shape = tuple(ij.max(axis=0) + 2)
-        occ = np.zeros(shape, bool)
-        occ[ij[:, 0], ij[:, 1]] = True
-        centre = slab_xy.mean(axis=0)
+        # one column at a time (no (n, 2) temporaries); the same cells
+        lo = np.array([float(slab_xy[:, 0].min()), float(slab_xy[:, 1].min())]) - cell
+        ix = ((slab_xy[:, 0] - lo[0]) / cell).astype(np.int64)
+        iy = ((slab_xy[:, 1] - lo[1]) / cell).astype(np.int64)
+        occ = np.zeros((int(ix.max()) + 2, int(iy.max()) + 2), bool)
+        occ[ix, iy] = True
+        del ix, iy
     probes = np.linspace(s.facing_probe_m[0], s.facing_probe_m[1], 4)
     for g in segs:
         if occ is None:  # nothing but walls: face the middle of the scan

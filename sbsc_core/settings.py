@@ -242,6 +242,9 @@ class LookalikeSettings:
     search_px: int = 3  # the print is compared within this many pixels of the candidate's centre
     min_margin: float = 0.05  # another look-alike's print must correlate this much better to relabel
     min_print_ncc: float = 0.5  # ... and at least this much
+    min_margin_relief: float = 0.0  # with the fine relief compared too (mean of print and relief): this margin
+    min_evidence_relief: float = 0.3  # ... and this level
+    colour_confusable: bool = True  # same-size classes the colour classifier cannot tell apart on a wall too
 
 
 @dataclass

@@ -53,7 +53,9 @@ def dense_box(xyz: np.ndarray, settings: SegmentationSettings | None = None, whe
         raise InputError(where, "no points")
     step = max(1, math.ceil(n / s.stray_sample_points))
     p = np.asarray(xyz[::step], np.float64)
-    p = p[np.isfinite(p).all(axis=1)]
+    finite = np.isfinite(p[:, 0]) & np.isfinite(p[:, 1]) & np.isfinite(p[:, 2])  # one axis at a time
+    if not finite.all():
+        p = p[finite]
     if len(p) == 0:
         raise InputError(where, "no points with finite coordinates")
     cell = s.stray_cell_m
@@ -61,8 +63,9 @@ def dense_box(xyz: np.ndarray, settings: SegmentationSettings | None = None, whe
     centre = np.floor(np.median(p, axis=0) / cell) * cell  # the voxel grid is centred on the bulk
     with np.errstate(invalid="ignore", over="ignore"):
         f = np.floor((p - centre) / cell)
-    near = (np.abs(f) < half - 1).all(axis=1)  # farther voxels cannot be keyed: stray anyway
-    ijk = f[near].astype(np.int64) + int(half)
+    near = (np.abs(f[:, 0]) < half - 1) & (np.abs(f[:, 1]) < half - 1) & (np.abs(f[:, 2]) < half - 1)
+    ijk = (f[near] if not near.all() else f).astype(np.int64)  # farther voxels cannot be keyed: stray anyway
+    ijk += int(half)
     key = (ijk[:, 0] << (2 * _CELL_BITS)) | (ijk[:, 1] << _CELL_BITS) | ijk[:, 2]
     uniq, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
     typical = float(np.median(counts[inv]))

@@ -176,3 +176,213 @@ def test_export_storeys(tmp_path):
     objects = {el.Tag: el for el in f.by_type("IfcElement") if el.Tag and "D" in el.Tag}
     worst = max(np.linalg.norm(world(objects[d["id"]])[:3, 3] - d["position"]) for d in doc["detections"])
     assert worst <= 0.001
+
+
+# --------------------------------------------------------------------------- as-designed, compare, BCF
+
+
+def _design(tmp_path: Path, schema: str = "IFC4", seed: int = 0) -> tuple[Path, dict]:
+    from sbsc_core.bim.design import write_as_designed_ifc
+
+    path = tmp_path / f"design_{schema}.ifc"
+    res = write_as_designed_ifc(truth(), path, seed=seed, schema=schema)
+    return path, res
+
+
+@pytest.mark.parametrize("schema", SCHEMAS)
+def test_as_designed_holds_ceilings_and_columns_with_their_objects(tmp_path, schema):
+    from sbsc_core.bim.design import read_as_designed
+
+    t = truth()
+    path, res = _design(tmp_path, schema)
+    assert validate(path) == []
+    diffs = res["design_differences"]
+    for kind in ("ceiling", "column"):  # one of each difference on each kind of surface
+        assert sorted(d["kind"] for d in diffs if d["surface"] == kind) == ["added", "moved", "removed"], kind
+    design = read_as_designed(path)
+    assert sorted(h.kind for h in design.hosts) == ["ceiling", "ceiling", "column", "column"]
+    removed = {tuple(d["built_position"]) for d in diffs if d["kind"] == "removed"}
+    moved = {tuple(d["built_position"]): d["designed_position"] for d in diffs if d["kind"] == "moved"}
+    want = [(o["class"], o.get("surface", "wall"), moved.get(tuple(o["position"]), o["position"]))
+            for o in t["objects"] if tuple(o["position"]) not in removed]
+    want += [(d["class"], d["surface"], d["designed_position"]) for d in diffs if d["kind"] == "added"]
+    assert len(design.objects) == len(want)
+    for cls, kind, pos in want:  # every designed object back, on its surface, within 1 mm
+        o = min(design.objects, key=lambda o: np.linalg.norm(o.position - pos))
+        assert (o.class_id, o.surface) == (cls, kind) and np.linalg.norm(o.position - pos) <= 0.001
+        if kind == "ceiling":
+            assert np.allclose(o.normal, [0, 0, -1])
+    on_round = [o for o in design.objects if o.surface == "column" and o.width_m is not None]
+    assert on_round and all(abs(float(np.linalg.norm(o.normal)) - 1) < 1e-9 for o in on_round)
+
+
+def test_compare_finds_the_differences_per_kind_of_surface_and_bcf_validates(tmp_path):
+    from lxml import etree
+
+    from sbsc_core.bim.bcf import write_bcf
+    from sbsc_core.bim.compare import compare
+    from sbsc_core.bim.design import read_as_designed
+    from tests.test_bim_bcf import SCHEMAS as BCF_SCHEMAS
+    from tests.test_bim_bcf import bcf_errors, shared_data
+
+    t = truth()
+    path, res = _design(tmp_path, seed=3)
+    cmp = compare(read_as_designed(path), detections_of(t), 0.10)
+    by_kind = cmp.summary_by_surface()
+    diffs = res["design_differences"]
+    status = {"removed": "unexpected", "moved": "displaced", "added": "missing"}
+    for kind in ("wall", "ceiling", "column"):
+        want = {s: sum(d["surface"] == kind and status[d["kind"]] == s for d in diffs) for s in status.values()}
+        assert {s: by_kind[kind][s] for s in want} == want, (kind, by_kind[kind])
+        assert by_kind[kind]["found"] >= 1 and by_kind[kind]["not_scanned"] == 0
+    assert cmp.to_dict()["summary_by_surface"] == by_kind
+    for it in cmp.findings:  # each finding where the difference is
+        d = next(d for d in diffs if status[d["kind"]] == it.status and d["class"] == it.class_id
+                 and d["surface"] == it.surface)
+        if it.designed is not None:
+            assert np.linalg.norm(it.designed_position - d["designed_position"]) <= 0.001
+        if it.detection is not None:
+            assert np.linalg.norm(it.detected_position - d["built_position"]) <= 0.001
+    bcf = tmp_path / "findings.bcf"
+    write_bcf(cmp, bcf)
+    folder = shared_data("bcf-xsd-2.1")
+    xsd = {name: etree.XMLSchema(etree.parse(str(folder / name))) for name in set(BCF_SCHEMAS.values())}
+    errors, checked = bcf_errors(bcf, xsd)
+    assert errors == [] and checked["visinfo.xsd"] == len(cmp.findings)
+
+
+def test_bcf_viewpoints_from_below_a_ceiling_and_beside_a_column(tmp_path):
+    from sbsc_core.bim.bcf import _viewpoint
+    from sbsc_core.bim.compare import compare
+    from sbsc_core.bim.design import read_as_designed
+
+    path, _ = _design(tmp_path, seed=3)
+    cmp = compare(read_as_designed(path), detections_of(truth()), 0.10)
+    seen = set()
+    for it in cmp.findings:
+        cam = _viewpoint(cmp, it).perspective_camera
+        eye = np.array([cam.camera_view_point.x, cam.camera_view_point.y, cam.camera_view_point.z])
+        look = np.array([cam.camera_direction.x, cam.camera_direction.y, cam.camera_direction.z])
+        up = np.array([cam.camera_up_vector.x, cam.camera_up_vector.y, cam.camera_up_vector.z])
+        p = it.designed_position if it.designed is not None else it.detected_position
+        assert abs(float(look @ up)) < 1e-9
+        if it.surface == "ceiling":  # below, looking straight up
+            assert eye[2] < p[2] - 1.0 and look[2] == pytest.approx(1.0)
+        elif it.surface == "column":  # in front of the face, level with the object, looking at it
+            sf = cmp.surfaces[it.wall]
+            n = surface_normal(sf, p)
+            assert (eye - p) @ n > 1.0 and abs(look[2]) < 1e-9 and look @ n == pytest.approx(-1.0)
+        seen.add(it.surface)
+    assert seen == {"wall", "ceiling", "column"}
+
+
+def test_commands_with_ceilings_and_columns(tmp_path, capsys):
+    """``sbsc export-ifc`` counts ceilings and columns; ``sbsc compare`` writes the report and
+    the BCF and gives the verdicts per kind of surface."""
+    import json
+
+    from sbsc_core.cli import main
+
+    det = tmp_path / "detections.json"
+    det.write_text(json.dumps(detections_of(truth())))
+    assert main(["-q", "export-ifc", str(det), "--out", str(tmp_path / "asis.ifc"), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["ceilings"] == 2 and summary["columns"] == 2
+    design, _ = _design(tmp_path, seed=1)
+    out = tmp_path / "cmp"
+    assert main(["-q", "compare", "--as-designed", str(design), "--detections", str(det), "--out", str(out),
+                 "--json"]) == 0
+    by_surface = json.loads(capsys.readouterr().out)["summary_by_surface"]
+    assert set(by_surface) == {"wall", "ceiling", "column"}
+    data = json.loads((out / "comparison.json").read_text())
+    assert data["summary_by_surface"] == by_surface
+    assert {it["surface"] for it in data["items"]} == {"wall", "ceiling", "column"}
+    html = (out / "report.html").read_text()
+    assert "H-C" in html and "H-COL1-N" in html  # ceilings and planar column faces drawn like walls
+
+
+def test_turned_survey_frame_puts_surface_objects_back(tmp_path):
+    """At UTM coordinates, turned in plan: ceilings and columns go to the local frame with the
+    walls, and every object comes back within 1 mm through the map conversion."""
+    import math
+
+    from tests.test_bim_georeference import UTM, _turned, world_positions
+
+    doc = detections_of(truth())
+    turned = _turned(doc, 23.5, UTM)
+    a = math.radians(23.5)
+    r = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    for s in doc["surfaces"]:
+        s = {**s, "origin": list(r @ np.asarray(s["origin"]) + UTM),
+             **{k: list(r @ np.asarray(s[k])) for k in ("axis_u", "axis_v", "normal")}}
+        if "centre" in s:
+            s["centre"] = list((r @ np.array([*s["centre"], 0.0]) + UTM)[:2])
+        turned["surfaces"] = [*[x for x in turned["surfaces"] if x["id"] != s["id"]], s]
+    model = export_ifc(turned, schema="IFC4", crs="EPSG:25832")
+    world_pos, largest = world_positions(model)
+    assert largest < 1000.0
+    expected = {d["id"]: np.asarray(d["position"]) for d in turned["detections"]}
+    assert set(world_pos) == set(expected)
+    assert max(float(np.linalg.norm(world_pos[k] - expected[k])) for k in expected) < 1e-3
+    for c in model.by_type("IfcColumn"):  # the columns stand in the local frame, not at UTM coordinates
+        assert np.abs(world(c)[:2, 3]).max() < 1000.0
+
+
+def _two_storey_truth(lift: float = 3.5) -> dict:
+    """The two halls stacked: a truth with ``storeys``, ids prefixed by the storey."""
+    one = truth()
+    t = {"schema": "sbsc.truth/1", "storeys": [{"id": "S1", "floor_z": 0.0, "ceiling_z": 3.0},
+                                               {"id": "S2", "floor_z": lift, "ceiling_z": lift + 3.0}],
+         "walls": [], "openings": [], "objects": [], "surfaces": [], "columns": []}
+    up = np.array([0.0, 0.0, 1.0])
+    for sid, dz in (("S1", 0.0), ("S2", lift)):
+        t["walls"] += [{**w, "id": f"{sid}-{w['id']}", "storey": sid, "origin": list(np.add(w["origin"], dz * up))}
+                       for w in one["walls"]]
+        t["openings"] += [{**o, "wall": f"{sid}-{o['wall']}"} for o in one["openings"]]
+        t["objects"] += [{**o, "wall": f"{sid}-{o['wall']}", "storey": sid,
+                          "position": list(np.add(o["position"], dz * up))} for o in one["objects"]]
+        t["surfaces"] += [{**s, "id": f"{sid}-{s['id']}", "storey": sid, "origin": list(np.add(s["origin"], dz * up)),
+                           **({"column": f"{sid}-{s['column']}"} if s.get("column") else {})} for s in one["surfaces"]]
+    return t
+
+
+def test_design_and_compare_of_two_storeys(tmp_path):
+    from sbsc_core.bim.compare import compare
+    from sbsc_core.bim.design import read_as_designed, write_as_designed_ifc
+
+    t = _two_storey_truth()
+    path = tmp_path / "design.ifc"
+    res = write_as_designed_ifc(t, path, seed=5)
+    assert validate(path) == []
+    f = open_ifc(path)
+    assert sorted(s.Name for s in f.by_type("IfcBuildingStorey")) == ["storey S1", "storey S2"]
+    for el in [*f.by_type("IfcCovering"), *f.by_type("IfcColumn")]:
+        want = "storey S2" if el.Tag.startswith("S2-") else "storey S1"
+        assert ifcopenshell.util.element.get_container(el).Name == want
+    diffs = res["design_differences"]
+    cmp = compare(read_as_designed(path), detections_of(t), 0.10)
+    by_kind = cmp.summary_by_surface()
+    status = {"removed": "unexpected", "moved": "displaced", "added": "missing"}
+    for kind in ("wall", "ceiling", "column"):
+        want = {s: sum(d["surface"] == kind and status[d["kind"]] == s for d in diffs) for s in status.values()}
+        assert {s: by_kind[kind][s] for s in want} == want, (kind, by_kind[kind])
+        assert by_kind[kind]["not_scanned"] == 0
+
+
+def test_design_objects_without_connections_find_their_ceiling_or_column(tmp_path):
+    """A design that does not connect its objects to their hosts: each is on the ceiling
+    above it or the column it stands beside, not on the nearest wall."""
+    from sbsc_core.bim.design import read_as_designed
+
+    path, _ = _design(tmp_path, seed=2)
+    connected = read_as_designed(path)
+    f = ifcopenshell.open(str(path))
+    for rel in f.by_type("IfcRelConnectsElements"):
+        f.remove(rel)
+    loose = tmp_path / "loose.ifc"
+    f.write(str(loose))
+    got = read_as_designed(loose)
+    assert len(got.objects) == len(connected.objects)
+    for a, b in zip(connected.objects, got.objects, strict=True):
+        assert (a.guid, a.surface) == (b.guid, b.surface)
+        assert np.linalg.norm(a.position - b.position) <= 0.001

@@ -133,3 +133,67 @@ def test_rendered_lookalike_signs_are_not_swapped(rendered_signs, seed: int) -> 
     found = {h.class_id: h.centre for v in hits.values() for h in v}
     for cid, (r, col) in places.items():
         assert np.hypot(found[cid][0] - r, found[cid][1] - col) < 2.0, cid
+
+
+# --------------------------------------------------------------------------- white plates on a white wall
+
+def _switch_like(px: int = 16, relief_m: float = 0.012) -> tuple[np.ndarray, np.ndarray]:
+    """A white square plate with a proud rocker: the same size and colour as a white
+    :func:`socket_like`, another relief."""
+    rgb = np.empty((px, px, 3), np.uint8)
+    rgb[:] = (245, 245, 240)
+    depth = np.full((px, px), relief_m, np.float32)
+    depth[4:12, 5:11] = relief_m * 1.35
+    return _rgba(rgb), depth
+
+
+WALL = (200, 196, 185)  # a light wall: the white plates stand out in colour, their prints hardly
+
+
+@pytest.fixture(scope="module")
+def white_plates() -> ModelLibrary:
+    sock_v, sock_d = socket_like(body=(245, 245, 240), hole=(245, 245, 240))
+    sw_v, sw_d = _switch_like()
+    return ModelLibrary({"socket": make_model("socket", sock_v, sock_d), "switch": make_model("switch", sw_v, sw_d),
+                         "sign": make_model("sign", *_plate("flame"))}, root="synthetic")
+
+
+def test_plates_the_colour_classifier_cannot_tell_apart_are_lookalikes_on_a_wall(white_plates) -> None:
+    from sbsc_core.lookalikes import colour_confusable
+
+    s = DetectionSettings()
+    templates = make_templates(white_plates, 0.005)
+    ortho, area = make_wall(seed=0, holes=0, colour=WALL)
+    img = colour_image(ortho, area, s.colour)
+    protos = learn_prototypes(templates, s.colour).for_wall(img.wall_rgb, img.threshold, img.noise_rgb)
+    pairs = colour_confusable(protos, templates, s.lookalikes, s.colour.mu_c)
+    assert frozenset({"socket", "switch"}) in pairs
+    assert not any("sign" in p for p in pairs)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_white_plates_are_told_apart_by_their_fine_relief(white_plates, seed: int) -> None:
+    """A socket and a switch, plain white plates on a light wall: their prints are the same,
+    the fine relief (the socket's cup, the switch's rocker) decides."""
+    from sbsc_core.depth_recognition import depth_images
+
+    s = DetectionSettings()
+    templates = make_templates(white_plates, 0.005)
+    ortho, area = make_wall(seed=seed, holes=0, colour=WALL)
+    rng = np.random.default_rng(seed)
+    places = {"socket": (100.0 + rng.uniform(-0.5, 0.5), 120.0), "switch": (180.0, 330.0 + rng.uniform(-0.5, 0.5))}
+    for cid, c in places.items():
+        paste(ortho, area, templates[cid], c, 0, seed=seed)
+    protos = learn_prototypes(templates, s.colour)
+    d = match_depth(ortho, area, depth_rois(ortho, area, s.depth, templates), templates, s.depth)
+    img = colour_image(ortho, area, s.colour)
+    c = match_colour(ortho, area, colour_rois(ortho, area, s.colour, img), protos, s.colour, img)
+    relief = depth_images(ortho, area, s.depth).levelled
+    d2, c2 = resolve_on_wall(d, c, img, protos, s.lookalikes, relief=relief)
+    near = lambda cands, p: {x.class_id for x in cands if np.hypot(x.centre[0] - p[0], x.centre[1] - p[1]) < 3}  # noqa: E731
+    for cid, p in places.items():
+        assert near(d2, p) <= {cid}, (cid, near(d, p), near(d2, p))
+        assert near(c2, p) <= {cid}, (cid, near(c, p), near(c2, p))
+    hits = consensus_all(d2, c2, None, s.consensus, sorted(templates))
+    found = {h.class_id for v in hits.values() for h in v}
+    assert found == set(places)

@@ -24,6 +24,13 @@ from typing import Any, Protocol, runtime_checkable
 
 from sbsc_core.errors import InputError
 
+from ..errors import Conflict, Forbidden, Locked, NotFound, NotReady, ReviewError, StaleVersion
+from ..surfaces import point_on
+
+__all__ = ["Changes", "Conflict", "Forbidden", "InMemoryBackend", "Locked", "NotFound", "NotReady",
+           "ProjectData", "ProjectId", "ReviewBackend", "ReviewError", "Reviewer", "StaleVersion",
+           "load_detection_dir"]
+
 ProjectId = Hashable  # the service uses ints; the stand-alone viewer uses strings
 REVIEW_STATUSES: tuple[str, ...] = ("pending", "accepted", "rejected")
 DECIDING_ROLES: tuple[str, ...] = ("reviewer", "manager", "admin")
@@ -69,38 +76,6 @@ class Changes:
     locked: bool = False
     signoff: dict | None = None
     reload: bool = False  # the detections document was replaced: rebuild the scene
-
-
-class ReviewError(Exception):
-    """A decision that cannot be recorded; ``status`` is the HTTP code the REST API would give."""
-
-    status = 400
-
-    def __init__(self, message: str, current: dict | None = None) -> None:
-        super().__init__(message)
-        self.current = current  # the detection as it now stands, when known
-
-
-class NotFound(ReviewError):
-    status = 404
-
-
-class NotReady(ReviewError):
-    """The project exists but has no detections yet."""
-
-    status = 409
-
-
-class Forbidden(ReviewError):
-    status = 403
-
-
-class StaleVersion(ReviewError):
-    status = 409
-
-
-class Locked(ReviewError):
-    status = 423
 
 
 @runtime_checkable
@@ -241,13 +216,14 @@ class InMemoryBackend:
             p = self._project(pid)
             if p.data.locked:
                 raise Locked("project is signed off")
-            w = next((x for x in p.data.detections.get("walls", []) if x["id"] == wall), None)
+            doc = p.data.detections
+            w = next((x for x in [*doc.get("walls", []), *(doc.get("surfaces") or [])] if x["id"] == wall), None)
             if w is None:
                 raise NotFound(f"wall {wall}: not found")
-            pos = [round(o + u * a + v * b, 5) for o, a, b in zip(w["origin"], w["axis_u"], w["axis_v"],
-                                                                  strict=True)]
+            pos = point_on(w, u, v)  # on a wall, a ceiling, a column's face or round column
             did = f"A{len(p.by_id) + 1:04d}"
             det = {"id": did, "ref": did, "class": class_id, "detected_class": class_id, "wall": wall,
+                   **({"surface": w["kind"]} if w.get("kind") else {}),
                    "position": pos, "u": u, "v": v, "width_m": 0.08, "height_m": 0.08, "alpha": None,
                    "rho_depth": None, "rho_colour": None, "source": "reviewer", "note": note,
                    "review": {"status": "accepted", "by": user.name, "at": now_iso(), "version": 1}}

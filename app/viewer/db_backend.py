@@ -31,14 +31,11 @@ from ..results import detection_dict, project_document
 from .backend import (
     Changes,
     Forbidden,
-    Locked,
     NotFound,
     NotReady,
     ProjectData,
     ProjectId,
     Reviewer,
-    ReviewError,
-    StaleVersion,
 )
 
 # Decisions are re-read this far behind the cursor: on PostgreSQL ids are handed out before
@@ -46,8 +43,6 @@ from .backend import (
 # (the scene ignores a detection whose version it already shows).
 CURSOR_OVERLAP = 20
 
-_ERRORS: dict[int, type[ReviewError]] = {403: Forbidden, 404: NotFound, 409: StaleVersion,
-                                         423: Locked}  # other statuses: ReviewError
 
 
 class DbReviewBackend:
@@ -145,11 +140,10 @@ class DbReviewBackend:
         return user.ref
 
     def _call(self, op: Any) -> Any:
-        try:
-            with self.db.write() as s:
-                return op(s)
-        except svc.ServiceError as exc:
-            raise _ERRORS.get(exc.status, ReviewError)(str(exc), exc.current) from None
+        """Run a review service operation in one write transaction; its errors (:mod:`app.errors`,
+        the scene's own) pass through."""
+        with self.db.write() as s:
+            return op(s)
 
     def decide(self, pid: ProjectId, detection_id: str, status: str, new_class: str | None,
                version: int, user: Reviewer) -> dict:

@@ -13,6 +13,12 @@ What the reviewer sees (paper, section 5 and figures 18, 19 and 21):
     or off); depth planes are sent only when first asked for.
 ``/rois/depth/<W>`` (cyan), ``/rois/colour/<W>`` (magenta)
     the regions of interest of the depth and colour recognizers (figure 21 a).
+``/ceilings/<C>``, ``/columns/<COL>``, ``/ceiling_images/<kind>/<C>`` (per tab)
+    surfaces beyond walls (contract 4's ``surfaces``, ``sbsc detect --ceilings --columns``):
+    each ceiling tile outlined, and its orthoimage seen from below: a tab shows it only while
+    its camera is below the ceiling, so the floor stays visible from above; each column
+    as a box (its four faces with their orthoimages) or a cylinder (a round column, whose
+    unrolled image is shown in the panel's crops only).
 ``/spots/<D>``, ``/spot_labels/<D>``
     every recognized object as a spot at its ``position`` (the paper's red spots), coloured
     by review state; clicking one selects it. The labels of all objects are a layer that is
@@ -45,6 +51,7 @@ import viser.transforms as vtf
 
 from sbsc_core.types import WallFrame
 
+from ..surfaces import is_round, kind_of
 from .backend import (
     Changes,
     Locked,
@@ -70,6 +77,8 @@ COLOUR_ROI_RGB = (255, 0, 255)  # magenta, figure 21 a
 WALL_RGB = (255, 210, 0)
 OPENING_RGB = (255, 130, 0)
 SELECTION_RGB = (255, 240, 0)
+COLUMN_RGB = (190, 190, 196)
+CEILING_RGB = (120, 200, 255)
 IMAGE_MODES: tuple[str, ...] = ("colour", "depth", "off")
 SCAN_LEVELS: tuple[str, ...] = ("overview", "full", "off")
 
@@ -194,6 +203,120 @@ def wall_hit(frames: dict[str, WallFrame], origin: np.ndarray, direction: np.nda
     return None if best is None else best[1:]
 
 
+def _ray_cylinder(centre: np.ndarray, r: float, z0: float, z1: float, origin: np.ndarray,
+                  direction: np.ndarray) -> tuple[float, float, float] | None:
+    """Where a ray first meets a vertical cylinder from outside: (t, u, v), u the arc length
+    counter-clockwise from +x, v the height above ``z0``; None when it misses."""
+    ox, oy = origin[0] - centre[0], origin[1] - centre[1]
+    dx, dy = direction[0], direction[1]
+    a = dx * dx + dy * dy
+    if a < 1e-12:
+        return None
+    b = 2.0 * (ox * dx + oy * dy)
+    c = ox * ox + oy * oy - r * r
+    disc = b * b - 4 * a * c
+    if c <= 0 or disc < 0:  # the ray starts inside, or misses
+        return None
+    t = (-b - np.sqrt(disc)) / (2 * a)
+    if t <= 0:
+        return None
+    p = origin + t * direction
+    if not z0 <= p[2] <= z1:
+        return None
+    ang = float(np.arctan2(p[1] - centre[1], p[0] - centre[0])) % (2 * np.pi)
+    return float(t), ang * r, float(p[2] - z0)
+
+
+def surface_hit(frames: dict[str, WallFrame], rounds: dict[str, dict], origin: np.ndarray,
+                direction: np.ndarray) -> tuple[str, float, float] | None:
+    """The first wall or surface (id, u, v) a ray meets from its room side, or None.
+
+    ``frames`` are planar (walls, ceilings seen from below, a rectangular column's faces);
+    ``rounds`` the round columns' surfaces (contract 4: ``radius_m``, ``centre``).
+    """
+    d = np.asarray(direction, float)
+    o = np.asarray(origin, float)
+    best: tuple[float, str, float, float] | None = None
+    hit = wall_hit(frames, o, d)
+    if hit is not None:
+        f = frames[hit[0]]
+        t = float(np.dot(f.to_world(hit[1], hit[2]) - o, d) / max(float(np.dot(d, d)), 1e-12))
+        best = (t, *hit)
+    for sid, sf in rounds.items():
+        z0 = float(sf["origin"][2])
+        got = _ray_cylinder(np.asarray(sf["centre"], float), float(sf["radius_m"]), z0,
+                            z0 + float(sf["height_m"]), o, d)
+        if got is not None and (best is None or got[0] < best[0]):
+            best = (got[0], sid, got[1], got[2])
+    return None if best is None else best[1:]
+
+
+def cylinder_mesh(centre: Any, r: float, z0: float, z1: float, segments: int = 32
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """A closed vertical cylinder as (vertices, triangles), faces outwards."""
+    a = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
+    ring = np.column_stack([centre[0] + r * np.cos(a), centre[1] + r * np.sin(a)])
+    return prism_mesh(ring, z0, z1)
+
+
+def prism_mesh(ring: np.ndarray, z0: float, z1: float) -> tuple[np.ndarray, np.ndarray]:
+    """A vertical prism over a convex plan polygon (counter-clockwise) as (vertices, triangles)."""
+    n = len(ring)
+    v = np.concatenate([np.column_stack([ring, np.full(n, z0)]), np.column_stack([ring, np.full(n, z1)]),
+                        [[*ring.mean(axis=0), z0], [*ring.mean(axis=0), z1]]])
+    faces = []
+    for i in range(n):
+        j = (i + 1) % n
+        faces += [[i, j, n + j], [i, n + j, n + i],  # side
+                  [2 * n, j, i], [2 * n + 1, n + i, n + j]]  # bottom, top
+    return v.astype(np.float32), np.asarray(faces, np.uint32)
+
+
+def column_meshes(surfaces: list[dict], inset_m: float = 0.003) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each column of contract 4's ``surfaces`` (kind ``column``) as a mesh: a round one as its
+    cylinder, a rectangular one as the box its faces span (``inset_m`` inside them)."""
+    faces: dict[str, list[dict]] = {}
+    for sf in surfaces:
+        if kind_of(sf) == "column":
+            cid = str(sf.get("column") or sf["id"].rsplit("-", 1)[0])
+            faces.setdefault(cid, []).append(sf)
+    out = {}
+    for cid, fs in faces.items():
+        z0 = min(float(f["origin"][2]) for f in fs)
+        z1 = max(float(f["origin"][2]) + float(f["height_m"]) for f in fs)
+        rnd = next((f for f in fs if is_round(f)), None)
+        if rnd is not None:
+            out[cid] = cylinder_mesh(rnd["centre"], float(rnd["radius_m"]) - inset_m, z0, z1)
+            continue
+        pts = np.concatenate([[np.asarray(f["origin"], float)[:2],
+                               (np.asarray(f["origin"], float) + float(f["width_m"]) * np.asarray(f["axis_u"], float))[:2]]
+                              for f in fs])
+        mid = pts.mean(axis=0)
+        ang = np.arctan2(pts[:, 1] - mid[1], pts[:, 0] - mid[0])
+        ring = pts[np.argsort(ang)]
+        keep = np.concatenate([[True], np.linalg.norm(np.diff(ring, axis=0), axis=1) > 1e-3])
+        ring = ring[keep]
+        if len(ring) > 1 and np.linalg.norm(ring[0] - ring[-1]) <= 1e-3:
+            ring = ring[:-1]
+        if len(ring) < 3:
+            continue
+        ring = mid + (ring - mid) * (1.0 - inset_m / max(float(np.linalg.norm(ring - mid, axis=1).min()), 1e-3))
+        out[cid] = prism_mesh(ring, z0, z1)
+    return out
+
+
+def surface_text(wid: str | None, sf: dict | None) -> str:
+    """Where an object is, in words: on a wall, a ceiling seen from below, a column's face."""
+    if sf is None or kind_of(sf) == "wall":
+        return f"wall {wid}"
+    if kind_of(sf) == "ceiling":
+        return f"ceiling {wid} (seen from below)"
+    col = sf.get("column") or wid
+    if is_round(sf):
+        return f"round column {col} (unrolled)"
+    return f"column {col}, face {wid}"
+
+
 class ProjectScene:
     """The scene of one project in one viser server (the server shows nothing else)."""
 
@@ -206,7 +329,9 @@ class ProjectScene:
         self.data: ProjectData | None = None
         self.centre = np.zeros(3)
         self.lod: ScanLod | None = None
-        self.frames: dict[str, WallFrame] = {}
+        self.frames: dict[str, WallFrame] = {}  # the walls
+        self.surfaces: dict[str, dict] = {}  # contract 4's surfaces (ceilings, column faces) by id
+        self.surface_frames: dict[str, WallFrame] = {}
         self.storey_of: dict[str, str | None] = {}  # wall id -> its storey (several storeys)
         self.detections: dict[str, dict] = {}
         self.order: list[str] = []  # detection ids in review order
@@ -240,6 +365,8 @@ class ProjectScene:
         self._layers = gui.add_folder("Layers", order=30)
         with self._layers:
             self.ui_walls = gui.add_checkbox("Walls (outlines, names)", True)
+            self.ui_surfaces = gui.add_checkbox("Ceilings and columns", True,
+                                                hint="ceiling outlines, columns as boxes and cylinders")
             self.ui_openings = gui.add_checkbox("Openings", True)
             self.ui_images = gui.add_dropdown("Wall images", IMAGE_MODES, initial_value="colour")
             self.ui_depth_rois = gui.add_checkbox("Depth RoIs (cyan)", True)
@@ -248,6 +375,7 @@ class ProjectScene:
             self.ui_labels = gui.add_checkbox("All object labels", False,
                                               hint="off: only the selection and what is near the camera")
         for box, layers in ((self.ui_walls, ("walls",)), (self.ui_openings, ("openings",)),
+                            (self.ui_surfaces, ("ceilings", "columns")),
                             (self.ui_depth_rois, ("rois_depth",)),
                             (self.ui_colour_rois, ("rois_colour",)),
                             (self.ui_spots, ("spots",)), (self.ui_labels, ("spot_labels",))):
@@ -261,7 +389,7 @@ class ProjectScene:
                     self.groups[name].visible = bool(visible)
 
     def _layer_visible(self, name: str) -> bool:
-        box = {"walls": self.ui_walls,
+        box = {"walls": self.ui_walls, "ceilings": self.ui_surfaces, "columns": self.ui_surfaces,
                "openings": self.ui_openings, "rois_depth": self.ui_depth_rois,
                "rois_colour": self.ui_colour_rois, "spots": self.ui_spots,
                "spot_labels": self.ui_labels}.get(name)
@@ -281,7 +409,7 @@ class ProjectScene:
         storeys = sorted({st for st in self.storey_of.values() if st})
         where = f" in {len(storeys)} storeys ({', '.join(storeys)})" if len(storeys) > 1 else ""
         lines = [f"### {name}",
-                 f"{len(self.detections)} objects on {len(self.frames)} walls{where}: "
+                 f"{len(self.detections)} objects on {len(self.frames)} walls{self._surfaces_text()}{where}: "
                  f"**{counts['pending']} pending**, {counts['accepted']} accepted, "
                  f"{counts['rejected']} rejected."]
         if self.lod is not None:
@@ -293,6 +421,45 @@ class ProjectScene:
             lines.append(f"🔒 **Signed off** by {so.get('by', '?')} on {so.get('at', '?')}: "
                          "this scene is **read-only**.")
         return "\n\n".join(lines)
+
+    def _surfaces_text(self) -> str:
+        kinds = [kind_of(sf) for sf in self.surfaces.values()]
+        cols = {str(sf.get("column") or sid) for sid, sf in self.surfaces.items() if kind_of(sf) == "column"}
+        parts = ([f"{kinds.count('ceiling')} ceiling tile(s)"] if "ceiling" in kinds else []) + \
+                ([f"{len(cols)} column(s)"] if cols else [])
+        return f", {' and '.join(parts)}" if parts else ""
+
+    def frame_of(self, wid: str | None) -> WallFrame | None:
+        """The frame of a wall or of a surface (a round column's: its unrolled frame)."""
+        return self.frames.get(wid) or self.surface_frames.get(wid)
+
+    def normal_at(self, det: dict) -> np.ndarray | None:
+        """The outward normal where an object sits (radial on a round column)."""
+        sf = self.surfaces.get(det.get("wall"))
+        if sf is not None and is_round(sf):
+            radial = np.asarray(det["position"], float)[:2] - np.asarray(sf["centre"], float)
+            n = float(np.linalg.norm(radial))
+            return np.array([radial[0] / n, radial[1] / n, 0.0]) if n > 1e-9 else None
+        f = self.frame_of(det.get("wall"))
+        return None if f is None else f.normal
+
+    def label_lift(self, det: dict) -> np.ndarray:
+        """Where an object's label stands from its spot: above it, or below a ceiling object."""
+        n = self.normal_at(det)
+        if n is not None and n[2] < -0.7:  # on a ceiling: below the spot
+            return n * (self.s.spot_radius_m + self.s.label_lift_m)
+        lift = np.array([0.0, 0.0, self.s.label_lift_m])
+        return lift if n is None else lift + n * self.s.spot_radius_m
+
+    def planar_frames(self) -> dict[str, WallFrame]:
+        """Walls, ceilings and the faces of rectangular columns: what a ray can hit as a plane."""
+        return {**self.frames, **{sid: f for sid, f in self.surface_frames.items()
+                                  if not is_round(self.surfaces[sid])}}
+
+    def hit(self, origin: np.ndarray, direction: np.ndarray) -> tuple[str, float, float] | None:
+        """The wall or surface (id, u, v) a ray (world coordinates) meets first."""
+        rounds = {sid: sf for sid, sf in self.surfaces.items() if is_round(sf)}
+        return surface_hit(self.planar_frames(), rounds, origin, direction)
 
     def _refresh_status(self) -> None:
         self._status.content = self.status_text()
@@ -341,7 +508,10 @@ class ProjectScene:
         self.locked, self.signoff = bool(data.locked), data.signoff
         doc = data.detections
         self.frames = {w["id"]: WallFrame.from_dict(w) for w in doc.get("walls", [])}
-        self.storey_of = {w["id"]: w.get("storey") for w in doc.get("walls", [])}  # contract 4, several storeys
+        self.surfaces = {sf["id"]: sf for sf in doc.get("surfaces") or []}  # contract 4: ceilings, columns
+        self.surface_frames = {sid: WallFrame.from_dict(sf) for sid, sf in self.surfaces.items()}
+        self.storey_of = {w["id"]: w.get("storey")  # contract 4, several storeys
+                          for w in [*doc.get("walls", []), *self.surfaces.values()]}
         dets = doc.get("detections", [])
         self.detections = {d["id"]: d for d in dets}
         self.order = self.review_order()
@@ -349,13 +519,17 @@ class ProjectScene:
                                                       (data.rois or {}).get("pixel_m") or 0.005))
         self.centre = lod.centre.copy() if lod is not None else self._walls_centre()
 
-        for name in ("walls", "openings", "images_colour", "images_depth",
+        for name in ("walls", "ceilings", "columns", "openings", "images_colour", "images_depth",
                      "rois_depth", "rois_colour", "spots", "spot_labels"):
             self.groups[name] = scene.add_frame(f"/{name}", show_axes=False,
                                                 visible=self._layer_visible(name))
         self.scan_tiles = self._scan_layers(lod) if lod is not None else {}
         for wid, frame in self.frames.items():
             self._add_wall(wid, frame)
+        for sid, sf in self.surfaces.items():
+            if kind_of(sf) == "ceiling":
+                self._add_ceiling(sid, self.surface_frames[sid])
+        self._add_columns()
         for o in doc.get("openings", []):
             self._add_opening(o)
         rois = (data.rois or {}).get("walls", {})
@@ -425,6 +599,41 @@ class ProjectScene:
             f"/walls/{wid}/label", wall_label(wid, f, self.storey_of.get(wid)), position=top,
             anchor="bottom-center", font_screen_scale=1.1)
 
+    def _add_ceiling(self, sid: str, f: WallFrame) -> None:
+        """A ceiling tile's outline (its image is sent per tab, seen from below)."""
+        seg = rect_segments(f, 0.0, f.width_m, 0.0, f.height_m, self.s.image_offset_m) - self.centre
+        self.nodes[f"ceilings/{sid}"] = self.server.scene.add_line_segments(
+            f"/ceilings/{sid}", seg, CEILING_RGB, thickness=self.s.wall_thickness_px * 0.6,
+            thickness_units="screen")
+
+    def _add_columns(self) -> None:
+        """Each column as a box or a cylinder, named at its top."""
+        for cid, (verts, faces) in column_meshes(list(self.surfaces.values())).items():
+            v = verts.astype(np.float64) - self.centre
+            self.nodes[f"columns/{cid}"] = self.server.scene.add_mesh_simple(
+                f"/columns/{cid}/body", v.astype(np.float32), faces, color=COLUMN_RGB, side="double",
+                cast_shadow=False, receive_shadow=False)
+            top = np.array([v[:, 0].mean(), v[:, 1].mean(), v[:, 2].max() - 0.15])
+            self.nodes[f"columns/{cid}/label"] = self.server.scene.add_label(
+                f"/columns/{cid}/label", cid, position=top, anchor="bottom-center", font_screen_scale=1.0)
+
+    def ceiling_ids(self) -> list[str]:
+        return [sid for sid, sf in self.surfaces.items() if kind_of(sf) == "ceiling"]
+
+    def image_texture(self, wid: str, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float] | None:
+        """A wall's or planar surface's orthoimage as (texture, wxyz, position, width, height)."""
+        f = self.frame_of(wid)
+        if f is None or self.images is None:
+            return None
+        img = self.images.image(wid, kind)
+        if img is None:
+            return None
+        tex = texture(img, self.images.pixel_m, self.s.texture_pixel_m, self.s.texture_max_px)
+        # the image covers its pixels: cols * px by rows * px from the top-left (u = 0, v = height)
+        w_m, h_m = img.shape[1] * self.images.pixel_m, img.shape[0] * self.images.pixel_m
+        centre = f.to_world(w_m / 2.0, f.height_m - h_m / 2.0, self.s.image_offset_m)
+        return tex, plane_wxyz(f), centre - self.centre, w_m, h_m
+
     def _add_opening(self, o: dict) -> None:
         f = self.frames.get(o.get("wall"))
         if f is None:
@@ -455,23 +664,22 @@ class ProjectScene:
                 thickness_units="screen")
 
     def _add_images(self, kind: str) -> None:
-        """Textured planes of one kind on every wall (once; later calls only show them)."""
+        """Textured planes of one kind on every wall and column face (once; later calls only show
+        them). Ceilings are sent per tab (:meth:`ReviewSession.update_ceilings`)."""
         assert self.images is not None
-        for wid, f in self.frames.items():
+        faces = [sid for sid, sf in self.surfaces.items() if kind_of(sf) == "column" and not is_round(sf)]
+        for wid in [*self.frames, *faces]:
             name = f"images_{kind}/{wid}"
             if name in self.nodes:
                 continue
-            img = self.images.image(wid, kind)
-            if img is None:
+            got = self.image_texture(wid, kind)
+            if got is None:
                 continue
-            tex = texture(img, self.images.pixel_m, self.s.texture_pixel_m, self.s.texture_max_px)
-            # the image covers its pixels: cols * px by rows * px from the wall's top-left
-            w_m, h_m = img.shape[1] * self.images.pixel_m, img.shape[0] * self.images.pixel_m
-            centre = f.to_world(w_m / 2.0, f.height_m - h_m / 2.0, self.s.image_offset_m)
+            tex, wxyz, pos, w_m, h_m = got
             self.nodes[name] = self.server.scene.add_image(
                 f"/{name}", tex, render_width=w_m, render_height=h_m, format="jpeg",
                 jpeg_quality=self.s.jpeg_quality, cast_shadow=False, receive_shadow=False,
-                wxyz=plane_wxyz(f), position=centre - self.centre)
+                wxyz=wxyz, position=pos)
 
     def set_image_mode(self, mode: str) -> None:
         """Show the colour or depth orthoimages on the walls, or none."""
@@ -485,6 +693,9 @@ class ProjectScene:
             for kind in ("colour", "depth"):
                 if f"images_{kind}" in self.groups:
                     self.groups[f"images_{kind}"].visible = mode == kind
+            sessions = list(self.sessions.values())
+        for session in sessions:
+            session.update_ceilings()
 
     def _add_spot(self, d: dict) -> None:
         did = d["id"]
@@ -495,12 +706,8 @@ class ProjectScene:
             subdivisions=2, cast_shadow=False, receive_shadow=False, position=pos)
         spot.on_click(lambda ev, did=did: self._on_spot_click(ev, did))
         self.spots[did] = spot
-        f = self.frames.get(d.get("wall"))
-        lift = np.array([0.0, 0.0, self.s.label_lift_m])
-        if f is not None:
-            lift = lift + f.normal * self.s.spot_radius_m
         self.spot_labels[did] = self.server.scene.add_label(
-            f"/spot_labels/{did}", spot_label(d), position=pos + lift, anchor="bottom-center",
+            f"/spot_labels/{did}", spot_label(d), position=pos + self.label_lift(d), anchor="bottom-center",
             font_screen_scale=0.8, depth_test=False)
 
     def _set_initial_camera(self) -> None:
@@ -661,6 +868,7 @@ class ReviewSession:
         self.scan_groups: dict[str, Any] = {}  # layer -> this tab's frame holding its tiles
         self.scan_nodes: dict[str, list[Any]] = {}  # layer -> this tab's point cloud tiles
         self._model_cache: dict[str, np.ndarray | None] = {}
+        self.ceiling_nodes: dict[str, Any] = {}  # "kind/id" -> this tab's ceiling image
         gui = client.gui
         blank = np.zeros((scene.s.crop_px, scene.s.crop_px, 3), np.uint8)
         self.f_user = gui.add_folder("Reviewer", order=10)
@@ -691,8 +899,9 @@ class ReviewSession:
         with self.f_add:
             classes = self._classes() or ["-"]
             self.ui_add_class = gui.add_dropdown("Class to add", classes, initial_value=classes[0])
-            self.ui_add_help = gui.add_markdown("**Shift-click on a wall** to add an object of this "
-                                                "class there (accepted, source *reviewer*).")
+            self.ui_add_help = gui.add_markdown("**Shift-click on a wall** (or a ceiling from below, or a "
+                                                "column) to add an object of this class there "
+                                                "(accepted, source *reviewer*).")
         self.f_scan = gui.add_folder("Scan (this tab)", order=25)
         with self.f_scan:
             self.ui_scan = gui.add_dropdown(
@@ -700,7 +909,11 @@ class ReviewSession:
                 hint="overview: light for any computer; full: every point sent "
                      "(up to max_points), for a good graphics card; off: none")
             self.ui_ceiling = gui.add_checkbox("Ceiling", False)
+            self.ui_ceiling_images = gui.add_checkbox(
+                "Ceiling images (from below)", True,
+                hint="the ceilings' orthoimages, shown while the camera is below the ceiling")
         self.ui_scan.on_update(lambda ev: self.update_scan())
+        self.ui_ceiling_images.on_update(lambda ev: self.update_ceilings())
         self.ui_ceiling.on_update(lambda ev: self.update_scan())
         self.ui_sign_in.on_click(lambda ev: self.sign_in(self.ui_token.value))
         self.ui_accept.on_click(lambda ev: self.decide("accepted"))
@@ -709,7 +922,7 @@ class ReviewSession:
         self.ui_prev.on_click(lambda ev: self.step(-1))
         self.ui_next.on_click(lambda ev: self.step(+1))
         client.scene.on_click(modifier="shift")(self._on_shift_click)
-        client.camera.on_update(lambda cam: self.update_labels())
+        client.camera.on_update(lambda cam: self._on_camera())
         self.show()
         self.stream_scan_later()
 
@@ -739,6 +952,10 @@ class ReviewSession:
         for node in self.labels.values():
             node.remove()
         self.labels.clear()
+        for node in self.ceiling_nodes.values():
+            node.remove()
+        self.ceiling_nodes.clear()
+        self.update_ceilings()
         with self._scan_lock:
             for g in self.scan_groups.values():
                 g.remove()
@@ -746,6 +963,52 @@ class ReviewSession:
             self.scan_nodes.clear()
         self.show()
         self.stream_scan_later()
+
+    # -- ceilings, per tab: seen from below ----------------------------------------------
+    def _on_camera(self) -> None:
+        self.update_labels()
+        self.update_ceilings()
+
+    def camera_z(self) -> float | None:
+        try:
+            return float(np.asarray(self.client.camera.position, float)[2])
+        except (AssertionError, AttributeError, IndexError):
+            return None
+
+    def update_ceilings(self) -> None:
+        """Show each ceiling's orthoimage (of the scene's image mode) while this tab's camera is
+        below it; an image seen from above would hide the floor."""
+        sc = self.scene
+        ids = sc.ceiling_ids()
+        if not ids or sc.images is None:
+            return
+        mode = sc.ui_images.value
+        cam_z = self.camera_z()
+        with self._scan_lock:
+            for sid in ids:
+                f = sc.surface_frames[sid]
+                below = cam_z is not None and cam_z < f.origin[2] - sc.centre[2] - sc.s.image_offset_m
+                for kind in ("colour", "depth"):
+                    key = f"{kind}/{sid}"
+                    want = bool(self.ui_ceiling_images.value) and mode == kind and below
+                    node = self.ceiling_nodes.get(key)
+                    if node is None and want:
+                        got = sc.image_texture(sid, kind)
+                        if got is None:
+                            continue
+                        tex, wxyz, pos, w_m, h_m = got
+                        node = self.client.scene.add_image(
+                            f"/ceiling_images/{key}", tex, render_width=w_m, render_height=h_m,
+                            format="jpeg", jpeg_quality=sc.s.jpeg_quality, cast_shadow=False,
+                            receive_shadow=False, wxyz=wxyz, position=pos)
+                        self.ceiling_nodes[key] = node
+                    elif node is not None and node.visible != want:
+                        node.visible = want
+
+    def ceiling_images_shown(self) -> list[str]:
+        """The ceiling images this tab shows now ("kind/id")."""
+        with self._scan_lock:
+            return sorted(k for k, n in self.ceiling_nodes.items() if n.visible)
 
     # -- the scan, per tab ----------------------------------------------------------------
     def stream_scan_later(self) -> None:
@@ -836,12 +1099,9 @@ class ReviewSession:
         return did
 
     def fly_to(self, det: dict) -> None:
-        """Move this tab's camera in front of the object, looking at it."""
+        """Move this tab's camera in front of the object, looking at it (from below at a ceiling)."""
         target = self.scene.local(det["position"])
-        f = self.scene.frames.get(det.get("wall"))
-        normal = f.normal if f is not None else np.array([0.0, -1.0, 0.0])
-        dist = self.scene.s.view_distance_m
-        eye = target + normal * dist + np.array([0.0, 0.0, 0.25 * dist])
+        eye = self.view_point(det)
         cam = self.client.camera
         try:
             p0, l0 = np.array(cam.position), np.array(cam.look_at)
@@ -856,6 +1116,21 @@ class ReviewSession:
                 cam.look_at = l0 + (target - l0) * t
             if i < n:
                 time.sleep(self.scene.s.fly_s / n)
+        self.update_ceilings()
+
+    def view_point(self, det: dict) -> np.ndarray:
+        """Where the camera looks at an object from (scene coordinates): in front of it; under
+        a ceiling object, below it and a little towards the middle of the floor."""
+        target = self.scene.local(det["position"])
+        normal = self.scene.normal_at(det)
+        normal = np.array([0.0, -1.0, 0.0]) if normal is None else normal
+        dist = self.scene.s.view_distance_m
+        if normal[2] < -0.7:  # a ceiling: look up at it, not straight up (the camera keeps z up)
+            towards = -target[:2]
+            n = float(np.linalg.norm(towards))
+            towards = towards / n if n > 1e-6 else np.array([0.0, -1.0])
+            return target + normal * 0.8 * dist + np.array([*(0.55 * dist * towards), 0.0])
+        return target + normal * dist + np.array([0.0, 0.0, 0.25 * dist])
 
     # -- labels: the selection and what is near the camera ------------------------------
     def wanted_labels(self) -> list[str]:
@@ -893,12 +1168,8 @@ class ReviewSession:
             if node is not None:
                 node.text = text
                 continue
-            f = sc.frames.get(det.get("wall"))
-            lift = np.array([0.0, 0.0, sc.s.label_lift_m])
-            if f is not None:
-                lift = lift + f.normal * sc.s.spot_radius_m
             self.labels[did] = self.client.scene.add_label(
-                f"/tab_labels/{did}", text, position=np.asarray(spot.position, float) + lift,
+                f"/tab_labels/{did}", text, position=np.asarray(spot.position, float) + sc.label_lift(det),
                 anchor="bottom-center", font_screen_scale=0.9, depth_test=False)
 
     # -- adding a missed object ------------------------------------------------------------
@@ -908,11 +1179,13 @@ class ReviewSession:
         self.add_at_ray(np.asarray(event.ray_origin, float), np.asarray(event.ray_direction, float))
 
     def add_at_ray(self, origin: np.ndarray, direction: np.ndarray) -> dict | None:
-        """Add an object of the chosen class where a ray (scene coordinates) meets a wall."""
+        """Add an object of the chosen class where a ray (scene coordinates) meets a wall, a
+        ceiling (from below) or a column."""
         sc = self.scene
-        hit = wall_hit(sc.frames, origin + sc.centre, direction)
+        hit = sc.hit(origin + sc.centre, direction)
         if hit is None:
-            self.notify("Not on a wall", "Shift-click on a wall to add an object there.", "yellow")
+            self.notify("Not on a wall", "Shift-click on a wall, a ceiling or a column to add an "
+                        "object there.", "yellow")
             return None
         wid, u, v = hit
         return self.add_object(wid, u, v, self.ui_add_class.value)
@@ -1012,7 +1285,8 @@ class ReviewSession:
         r = det["review"]
         who = f" by {r['by']} at {r['at']}" if r.get("by") else ""
         storey = self.scene.storey_of.get(det.get("wall"))
-        lines = [f"**{det.get('ref') or det['id']} · {det['class']}** on wall {det.get('wall')}"
+        where = surface_text(det.get("wall"), self.scene.surfaces.get(det.get("wall")))
+        lines = [f"**{det.get('ref') or det['id']} · {det['class']}** on {where}"
                  + (f", storey {storey}" if storey else ""),
                  f"u {_fmt(det.get('u'), 3)} m, v {_fmt(det.get('v'), 3)} m, "
                  f"{_fmt(det.get('width_m'), 3)} × {_fmt(det.get('height_m'), 3)} m",
@@ -1025,7 +1299,7 @@ class ReviewSession:
 
     def _crop(self, det: dict, kind: str) -> np.ndarray | None:
         sc = self.scene
-        f = sc.frames.get(det.get("wall"))
+        f = sc.frame_of(det.get("wall"))
         if f is None or sc.images is None:
             return None
         s = sc.s

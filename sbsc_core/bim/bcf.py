@@ -5,6 +5,10 @@ BIM tools facility managers already use. Each topic references the as-designed I
 file, selects the designed element (by IFC GUID) where there is one, has a viewpoint with
 a camera in front of the object, looking at the wall, and a snapshot: the wall's
 orthoimage crop with the designed and found positions marked (see :mod:`.report`).
+
+An object on a ceiling is seen from below (the camera under it, looking up, the image's up
+along the ceiling's ``axis_v``), one on a column from the side of its face (a round column:
+along the radius through the object).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from xsdata.models.datatype import XmlDateTime
 
 from .compare import Comparison, ComparisonItem
 from .report import finding_snapshot, wall_picture
+from .surfaces import surface_normal
 
 AUTHOR = "sbsc"
 CAMERA_DISTANCE_M = 1.5
@@ -36,9 +41,22 @@ def _fmt(p: np.ndarray | None) -> str:
 def _normal(comparison: Comparison, item: ComparisonItem) -> np.ndarray | None:
     if item.designed is not None and item.designed.normal is not None:
         return item.designed.normal
+    if item.wall in comparison.surfaces:
+        p = item.detected_position if item.detection is not None else item.designed_position
+        return surface_normal(comparison.surfaces[item.wall], p)
     if item.wall in comparison.walls:
         return comparison.walls[item.wall].normal
     return None
+
+
+def _up(comparison: Comparison, item: ComparisonItem, direction: np.ndarray) -> np.ndarray:
+    """The camera's up: +Z, or looking up or down at a ceiling, the ceiling's ``axis_v``."""
+    up = np.array([0.0, 0.0, 1.0])
+    if abs(float(np.dot(up, direction))) > 0.95:
+        sf = comparison.surfaces.get(item.wall) if item.wall else None
+        up = np.asarray(sf.frame.axis_v, float) if sf is not None and sf.kind == "ceiling" else np.array([0.0, 1.0, 0.0])
+    up = up - np.dot(up, direction) * direction
+    return up / np.linalg.norm(up)
 
 
 def topic_text(comparison: Comparison, item: ComparisonItem) -> tuple[str, str]:
@@ -73,9 +91,7 @@ def _viewpoint(comparison: Comparison, item: ComparisonItem) -> mdl.Visualizatio
     else:
         eye = p + CAMERA_DISTANCE_M * np.asarray(n, float)
     direction = (p - eye) / np.linalg.norm(p - eye)
-    up = np.array([0.0, 0.0, 1.0])
-    up = up - np.dot(up, direction) * direction
-    up /= np.linalg.norm(up)
+    up = _up(comparison, item, direction)
     if item.designed is not None:
         components = build_components(item.designed.guid)
     else:  # an unexpected object is not in the design: nothing to select (BCF 2.1 forbids an empty Selection)

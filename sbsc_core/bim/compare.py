@@ -12,6 +12,11 @@ within ``max_displacement_m`` (**displaced**). A designed object left unpaired i
 (the design's host face and the scanned wall), so objects back to back on the two faces
 of a partition are not confused. Designed objects on no scanned wall are **not_scanned**
 (the scan cannot tell) and are no finding. Rejected detections are ignored.
+
+Objects on ceilings and columns (issue 11) are compared the same way: a designed object on
+a ceiling or column lies on a scanned surface of the document's ``surfaces`` (a round
+column's: on its cylinder), a pair faces the same way (the surface's normal at the object),
+and :meth:`Comparison.summary_by_surface` counts the verdicts per kind of surface.
 """
 
 from __future__ import annotations
@@ -24,14 +29,23 @@ from scipy.optimize import linear_sum_assignment
 
 from ..errors import InputError
 from ..io.atomic import atomic_output_dir, write_json_atomic
-from ..types import ModelLibrary, WallFrame
-from .design import AsDesigned, DesignedObject, locate_on_walls, read_as_designed
+from ..types import ModelLibrary, Surface, WallFrame
+from .design import (
+    SCAN_WALL_MARGIN_M,
+    SCAN_WALL_PLANE_TOL_M,
+    AsDesigned,
+    DesignedObject,
+    locate_on_walls,
+    read_as_designed,
+)
 from .export import load_json, parse_detections_document, selected_detections
+from .surfaces import surface_coords, surface_normal
 
 MAX_DISPLACEMENT_M = 1.0  # a designed object and a detection farther apart are two findings
 FACING_MIN_COS = 0.5  # a pair's normals must agree at least this much
 FINDING_KINDS = ("missing", "displaced", "unexpected")
 STATUSES = ("found", "displaced", "missing", "unexpected", "not_scanned")
+SURFACE_KINDS = ("wall", "ceiling", "column")
 
 
 @dataclass
@@ -51,6 +65,14 @@ class ComparisonItem:
         return self.design_wall or self.detection_wall
 
     @property
+    def surface(self) -> str:
+        """The kind of surface the object is on: wall, ceiling or column."""
+        if self.designed is not None:
+            return self.designed.surface
+        kind = (self.detection or {}).get("surface")
+        return str(kind) if kind else "wall"
+
+    @property
     def deviation_m(self) -> float | None:
         return None if self.deviation is None else float(np.linalg.norm(self.deviation))
 
@@ -62,19 +84,23 @@ class ComparisonItem:
     def detected_position(self) -> np.ndarray | None:
         return None if self.detection is None else np.asarray(self.detection["position"], float)
 
-    def to_dict(self, walls: dict[str, WallFrame]) -> dict:
+    def to_dict(self, walls: dict[str, WallFrame], surfaces: dict[str, Surface] | None = None) -> dict:
+        surfaces = surfaces or {}
+
         def r(x: np.ndarray | None, n: int = 5) -> list[float] | None:
             return None if x is None else [round(float(c), n) for c in x]
 
         def uv(wid: str | None, p: np.ndarray | None) -> list[float] | None:
-            if wid is None or p is None or wid not in walls:
+            if wid is None or p is None:
                 return None
-            return r(walls[wid].to_uvd(p[None])[0][:2], 4)
+            if wid in surfaces:
+                return r(surface_coords(surfaces[wid], p[None])[0][:2], 4)
+            return r(walls[wid].to_uvd(p[None])[0][:2], 4) if wid in walls else None
 
         d = self.designed
         det = self.detection
         return {
-            "status": self.status, "class": self.class_id, "wall": self.wall,
+            "status": self.status, "class": self.class_id, "wall": self.wall, "surface": self.surface,
             "designed": None if d is None else {
                 "guid": d.guid, "name": d.name, "position": r(d.position), "design_wall": d.wall_name,
                 "design_wall_guid": d.wall_guid, "scan_wall": self.design_wall,
@@ -100,6 +126,7 @@ class Comparison:
     max_displacement_m: float
     detections_path: str | None = None
     extra: dict = field(default_factory=dict)
+    surfaces: dict[str, Surface] = field(default_factory=dict)  # the scan's ceilings and column faces
 
     @property
     def findings(self) -> list[ComparisonItem]:
@@ -109,18 +136,42 @@ class Comparison:
     def summary(self) -> dict[str, int]:
         return {s: sum(it.status == s for it in self.items) for s in STATUSES}
 
+    def summary_by_surface(self) -> dict[str, dict[str, int]]:
+        """The verdicts per kind of surface (wall, ceiling, column) that has any item."""
+        kinds = [k for k in SURFACE_KINDS if any(it.surface == k for it in self.items)]
+        kinds += sorted({it.surface for it in self.items} - set(SURFACE_KINDS))
+        return {k: {s: sum(it.status == s and it.surface == k for it in self.items) for s in STATUSES} for k in kinds}
+
     def to_dict(self) -> dict:
         return {
             "schema": "sbsc.comparison/1",
             "as_designed": self.design.path, "detections": self.detections_path,
             "tolerance_m": self.tolerance_m, "max_displacement_m": self.max_displacement_m,
-            "summary": self.summary(),
+            "summary": self.summary(), "summary_by_surface": self.summary_by_surface(),
             "expected_counts": self.design.expected_counts(),
             "expected_by_wall": self.design.expected_by_wall(self.walls),
             "wall_matches": self.design.wall_matches(self.walls),
-            "items": [it.to_dict(self.walls) for it in self.items],
+            "items": [it.to_dict(self.walls, self.surfaces) for it in self.items],
             "unmapped_design_elements": self.design.unmapped,
         }
+
+
+def locate_on_surfaces(position: np.ndarray, normal: np.ndarray | None, surfaces: dict[str, Surface],
+                       plane_tol: float = SCAN_WALL_PLANE_TOL_M, margin: float = SCAN_WALL_MARGIN_M) -> str | None:
+    """The scanned ceiling or column face ``position`` lies on (as :func:`~.design.locate_on_walls`;
+    a round face: within ``plane_tol`` of its cylinder)."""
+    best, best_d = None, np.inf
+    p = np.asarray(position, float)
+    for sid, sf in surfaces.items():
+        if normal is not None and float(np.dot(normal, surface_normal(sf, p))) < 0.5:
+            continue
+        u, v, d = surface_coords(sf, p[None])[0]
+        width = np.inf if sf.round else sf.frame.width_m
+        if abs(d) > plane_tol or not (-margin <= u <= width + margin and -margin <= v <= sf.frame.height_m + margin):
+            continue
+        if abs(d) < best_d:
+            best, best_d = sid, abs(d)
+    return best
 
 
 def _assign(dist: np.ndarray, feasible: np.ndarray) -> list[tuple[int, int]]:
@@ -142,18 +193,23 @@ def compare(design: AsDesigned, document: dict, tolerance_m: float = 0.10, *,
     max_displacement_m = max(max_displacement_m, tolerance_m)
     doc = parse_detections_document(document, detections_path or "detections")
     walls = doc.walls
+    surfaces = doc.surfaces
     dets = selected_detections(doc.detections, accepted_only)
-    det_walls = [d.get("wall") if d.get("wall") in walls else None for d in dets]
+    det_walls = [d.get("wall") if d.get("wall") in walls or d.get("wall") in surfaces else None for d in dets]
     det_pos = np.array([d["position"] for d in dets], dtype=np.float64).reshape(-1, 3)
-    det_normal = [walls[w].normal if w else None for w in det_walls]
+    det_normal = [None if w is None else walls[w].normal if w in walls else surface_normal(surfaces[w], p)
+                  for w, p in zip(det_walls, det_pos, strict=True)]
 
     items: list[ComparisonItem] = []
     scanned: list[int] = []
     design_walls: list[str | None] = []
     for k, o in enumerate(design.objects):
-        wid = locate_on_walls(o.position, o.normal, walls) if walls else None
+        if o.surface == "wall":
+            wid = locate_on_walls(o.position, o.normal, walls) if walls else None
+        else:
+            wid = locate_on_surfaces(o.position, o.normal, {i: s for i, s in surfaces.items() if s.kind == o.surface})
         design_walls.append(wid)
-        if walls and wid is None:
+        if (walls or surfaces) and wid is None:
             items.append(ComparisonItem("not_scanned", o.class_id, designed=o))
         else:
             scanned.append(k)
@@ -200,8 +256,11 @@ def compare(design: AsDesigned, document: dict, tolerance_m: float = 0.10, *,
             items.append(ComparisonItem("unexpected", d["class"], detection=d, detection_wall=det_walls[j]))
     order = {s: i for i, s in enumerate(("missing", "displaced", "unexpected", "found", "not_scanned"))}
     items.sort(key=lambda it: (order[it.status], it.wall or "~", it.class_id))
-    return Comparison(design=design, walls=walls, openings=doc.openings, items=items, tolerance_m=float(tolerance_m),
-                      max_displacement_m=float(max_displacement_m), detections_path=detections_path)
+    # the report draws planar surfaces like walls (a round column's unrolled image is not a plane)
+    frames = {**walls, **{i: s.frame for i, s in surfaces.items() if not s.round}}
+    return Comparison(design=design, walls=frames, openings=doc.openings, items=items, tolerance_m=float(tolerance_m),
+                      max_displacement_m=float(max_displacement_m), detections_path=detections_path,
+                      surfaces=surfaces)
 
 
 def compare_to_dir(as_designed: Path, detections: Path, out: Path, tolerance_m: float = 0.10,

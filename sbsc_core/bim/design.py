@@ -13,6 +13,12 @@ the type's or element's name/tag naming the class, then the footprint size close
 model's. Each object's position is the centre of its body's footprint projected onto the
 face of its host wall (the wall it is connected to, else the nearest wall face in front of
 which it stands), as in contract 4.
+
+Beyond walls (issue 11): an IfcCovering is a ceiling (seen from below: the plane of its
+body's underside) and an IfcColumn a free-standing column (four faces when its body is a
+rectangle, a cylinder when it is round). An object connected to one, or else standing
+close under a ceiling or beside a column, has its position on that surface (a round
+column: on the cylinder) and ``surface`` ``ceiling`` or ``column``.
 """
 
 from __future__ import annotations
@@ -33,15 +39,15 @@ import ifcopenshell.util.unit
 import numpy as np
 
 from ..errors import InputError
-from ..types import ModelLibrary, WallFrame
+from ..types import ModelLibrary, Surface, WallFrame
 from . import PSET_DESIGN, PSET_RECOGNITION, ClassTyping, class_typings
 from .export import (
     IfcModelBuilder,
-    add_walls_and_openings,
     parse_detections_document,
     storey_elevation,
     write_ifc_atomic,
 )
+from .surfaces import surface_coords, surface_normal, tangent_frame
 
 READABLE_SCHEMAS = ("IFC2X3", "IFC4", "IFC4X3")
 HOST_MAX_DISTANCE_M = 0.60  # an object's centre may stand this far in front of its wall face
@@ -87,6 +93,7 @@ class DesignedObject:
     width_m: float | None
     height_m: float | None
     matched_by: str  # pset | typing | name | size | ambiguous
+    surface: str = "wall"  # the kind of its host: wall, ceiling or column (issue 11)
 
     def to_dict(self) -> dict:
         return {
@@ -98,8 +105,19 @@ class DesignedObject:
             "u": None if self.u is None else round(self.u, 5), "v": None if self.v is None else round(self.v, 5),
             "width_m": None if self.width_m is None else round(self.width_m, 4),
             "height_m": None if self.height_m is None else round(self.height_m, 4),
-            "matched_by": self.matched_by,
+            "matched_by": self.matched_by, "surface": self.surface,
         }
+
+
+@dataclass
+class DesignHost:
+    """A ceiling (IfcCovering) or column (IfcColumn) of the design with its surfaces: a
+    ceiling's underside, a rectangular column's four faces or a round column's cylinder."""
+
+    guid: str
+    name: str
+    kind: str  # "ceiling" | "column"
+    surfaces: list[Surface]
 
 
 @dataclass
@@ -112,6 +130,7 @@ class AsDesigned:
     walls: list[DesignWall]
     objects: list[DesignedObject]
     unmapped: list[dict] = field(default_factory=list)  # {ifc_class, predefined_type, object_type, count}
+    hosts: list[DesignHost] = field(default_factory=list)  # ceilings and columns (issue 11)
 
     def expected_counts(self) -> dict[str, int]:
         return dict(sorted(Counter(o.class_id for o in self.objects).items()))
@@ -200,6 +219,53 @@ def _wall_faces(matrix: np.ndarray, verts_world: np.ndarray) -> tuple[WallFrame,
     front = WallFrame(front_o, x, z, -y, width, height)
     back = WallFrame(back_o, -x, z, y, width, height)
     return front, back, float(b1 - b0)
+
+
+def _ceiling_surface(guid: str, matrix: np.ndarray, verts: np.ndarray) -> Surface:
+    """The underside of a covering as a ceiling surface (contract 4: normal down, ``axis_u``
+    along the placement's X, origin where u and v are smallest)."""
+    x = _horizontal(matrix[:3, 0])
+    if x is None:
+        x = np.array([1.0, 0.0, 0.0])
+    n = np.array([0.0, 0.0, -1.0])
+    v_axis = np.cross(n, x)
+    a, b = verts @ x, verts @ v_axis
+    z = float(verts[:, 2].min())
+    origin = a.min() * x + b.min() * v_axis
+    origin[2] = z
+    return Surface(guid, "ceiling", WallFrame(origin, x, v_axis, n, float(np.ptp(a)), float(np.ptp(b))))
+
+
+def _column_surfaces(el: Any, matrix: np.ndarray, verts: np.ndarray) -> list[Surface]:
+    """A column's faces: four (framed like walls seen from outside) or one round surface."""
+    guid = el.GlobalId
+    z0, z1 = float(verts[:, 2].min()), float(verts[:, 2].max())
+    circle = any(it.is_a("IfcExtrudedAreaSolid") and it.SweptArea.is_a("IfcCircleProfileDef")
+                 for rep in (el.Representation.Representations if el.Representation else ())
+                 for it in rep.Items)
+    xy = verts[:, :2]
+    if circle:
+        centre = (xy.min(axis=0) + xy.max(axis=0)) / 2
+        r = float(np.linalg.norm(xy - centre, axis=1).max())
+        frame = WallFrame(np.array([centre[0] + r, centre[1], z0]), np.array([0.0, 1.0, 0.0]),
+                          np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), 2 * np.pi * r, z1 - z0)
+        return [Surface(guid, "column", frame, column=guid, radius_m=r,
+                        centre=(float(centre[0]), float(centre[1])))]
+    x = _horizontal(matrix[:3, 0])
+    if x is None:
+        x = np.array([1.0, 0.0, 0.0])
+    y = np.cross([0.0, 0.0, 1.0], x)
+    a, b = verts @ x, verts @ y
+    lo_a, hi_a, lo_b, hi_b = a.min(), a.max(), b.min(), b.max()
+    out = []
+    for side, n, (ua, ub), width in (("a+", x, (hi_a, lo_b), hi_b - lo_b), ("b+", y, (hi_a, hi_b), hi_a - lo_a),
+                                     ("a-", -x, (lo_a, hi_b), hi_b - lo_b), ("b-", -y, (lo_a, lo_b), hi_a - lo_a)):
+        u_axis = np.cross([0.0, 0.0, 1.0], n)
+        origin = ua * x + ub * y
+        origin[2] = z0
+        frame = WallFrame(origin, u_axis, np.array([0.0, 0.0, 1.0]), n, float(width), z1 - z0)
+        out.append(Surface(f"{guid}:{side}", "column", frame, column=guid))
+    return out
 
 
 def _norm_text(s: Any) -> str:
@@ -339,13 +405,41 @@ def _world_vertices(settings: ifcopenshell.geom.settings, el: Any) -> tuple[np.n
     return m, v @ m[:3, :3].T + m[:3, 3]
 
 
-def _host_walls(el: Any) -> list[Any]:
+def _host_walls(el: Any, classes: tuple[str, ...] = ("IfcWall",)) -> list[Any]:
     hosts = []
     for rel in list(getattr(el, "ConnectedFrom", None) or []) + list(getattr(el, "ConnectedTo", None) or []):
         for other in (rel.RelatingElement, rel.RelatedElement):
-            if other is not None and other != el and other.is_a("IfcWall"):
+            if other is not None and other != el and any(other.is_a(c) for c in classes):
                 hosts.append(other)
     return hosts
+
+
+def _on_host(centre: np.ndarray, verts: np.ndarray | None, host: DesignHost,
+             strict: bool) -> tuple[float, Surface, np.ndarray, float | None, float | None] | None:
+    """(score, surface, position on it, width, height) of a body centre on a ceiling or
+    column, None when (``strict``) it does not stand close to it."""
+
+    best = None
+    for sf in host.surfaces:
+        u, v, d = surface_coords(sf, centre[None])[0]
+        if d < -0.02:
+            continue
+        m = HOST_MARGIN_M
+        width = sf.frame.width_m if not sf.round else np.inf
+        inside = -m <= u <= width + m and -m <= v <= sf.frame.height_m + m
+        if strict and (d > HOST_MAX_DISTANCE_M or not inside):
+            continue
+        score = d + (0.0 if inside else 10.0)
+        if best is None or score < best[0]:
+            plane = tangent_frame(sf, centre)
+            pu, pv, _ = plane.to_uvd(centre[None])[0]
+            position = plane.to_world(pu, pv, 0.0)
+            w = h = None
+            if verts is not None:
+                fv = plane.to_uvd(verts)
+                w, h = float(np.ptp(fv[:, 0])), float(np.ptp(fv[:, 1]))
+            best = (score, sf, position, w, h)
+    return best
 
 
 def _pick_face(centre: np.ndarray, faces: list[tuple[DesignWall, WallFrame]], strict: bool) -> tuple[DesignWall, WallFrame] | None:
@@ -386,6 +480,22 @@ def read_as_designed(path: Path, library: ModelLibrary | None = None, *,
         walls.append(dw)
         wall_by_id[w.id()] = dw
     all_faces = [(dw, face) for dw in walls for face in dw.faces]
+    hosts: list[DesignHost] = []
+    host_by_id: dict[int, DesignHost] = {}
+    for el in [*f.by_type("IfcCovering"), *f.by_type("IfcColumn")]:
+        if el.is_a("IfcCovering") and ifcopenshell.util.element.get_predefined_type(el) not in (
+                None, "CEILING", "NOTDEFINED"):
+            continue  # flooring, cladding, ...
+        geo = _world_vertices(settings, el)
+        if geo is None:
+            continue
+        name = el.Name or el.GlobalId
+        if el.is_a("IfcCovering"):
+            host = DesignHost(el.GlobalId, name, "ceiling", [_ceiling_surface(el.GlobalId, *geo)])
+        else:
+            host = DesignHost(el.GlobalId, name, "column", _column_surfaces(el, *geo))
+        hosts.append(host)
+        host_by_id[el.id()] = host
 
     typer = _Typer(typings, f)
     objects: list[DesignedObject] = []
@@ -416,12 +526,31 @@ def read_as_designed(path: Path, library: ModelLibrary | None = None, *,
         else:
             m = ifcopenshell.util.placement.get_local_placement(el.ObjectPlacement) if el.ObjectPlacement else np.eye(4)
             verts, centre = None, m[:3, 3] * scale
-        hosts = [wall_by_id[h.id()] for h in _host_walls(el) if h.id() in wall_by_id]
-        faces = [(dw, face) for dw in hosts for face in dw.faces]
-        picked = _pick_face(centre, faces, strict=False) if faces else _pick_face(centre, all_faces, strict=True)
+        connected = [wall_by_id[h.id()] for h in _host_walls(el) if h.id() in wall_by_id]
+        faces = [(dw, face) for dw in connected for face in dw.faces]
+        on_hosts = [host_by_id[h.id()] for h in _host_walls(el, ("IfcCovering", "IfcColumn")) if h.id() in host_by_id]
+        on = None
+        if on_hosts:  # connected to a ceiling or a column
+            on = min((r for h in on_hosts if (r := _on_host(centre, verts, h, False)) is not None),
+                     key=lambda r: r[0], default=None)
+            on = None if on is None else (on, next(h for h in on_hosts if on[1] in h.surfaces))
+        picked = None
+        if on is None:
+            picked = _pick_face(centre, faces, strict=False) if faces else _pick_face(centre, all_faces, strict=True)
+        if on is None and not faces and hosts:  # close under a ceiling or beside a column, nearer than a wall
+            cands = [(r, h) for h in hosts if (r := _on_host(centre, verts, h, True)) is not None]
+            on = min(cands, key=lambda c: c[0][0], default=None)
+            if on is not None and picked is not None and picked[1].to_uvd(centre[None])[0][2] <= on[0][0]:
+                on = None
         position, normal, u, v, width, height = centre, None, None, None, None, None
         wall_guid = wall_name = None
-        if picked is not None:
+        surface = "wall"
+        if on is not None:
+            (_, sf, position, width, height), host = on
+            normal = surface_normal(sf, position)
+            u, v = (float(x) for x in surface_coords(sf, position[None])[0][:2])
+            wall_guid, wall_name, surface = host.guid, host.name, host.kind
+        elif picked is not None:
             dw, face = picked
             uvd = face.to_uvd(centre[None])[0]
             position, normal = face.to_world(uvd[0], uvd[1], 0.0), face.normal
@@ -442,12 +571,12 @@ def read_as_designed(path: Path, library: ModelLibrary | None = None, *,
             guid=el.GlobalId, name=el.Name or "", class_id=cid, ifc_class=ifc_class, predefined_type=pre,
             object_type=obj, position=np.asarray(position, float),
             normal=None if normal is None else np.asarray(normal, float), wall_guid=wall_guid,
-            wall_name=wall_name, u=u, v=v, width_m=width, height_m=height, matched_by=how))
+            wall_name=wall_name, u=u, v=v, width_m=width, height_m=height, matched_by=how, surface=surface))
     unmapped = [{"ifc_class": c, "predefined_type": p, "object_type": o, "count": n}
                 for (c, p, o), n in sorted(unmapped_counts.items(), key=lambda kv: (-kv[1], str(kv[0])))]
     project = f.by_type("IfcProject")
     return AsDesigned(path=str(path), schema=f.schema, project_guid=project[0].GlobalId if project else None,
-                      walls=walls, objects=objects, unmapped=unmapped)
+                      walls=walls, objects=objects, unmapped=unmapped, hosts=hosts)
 
 
 # --------------------------------------------------------------------------- writing a design
@@ -463,9 +592,14 @@ class _Placed:
     height: float
     position: np.ndarray
     normal: np.ndarray | None
+    surface: str = "wall"  # kind of surface: wall, ceiling or column
+    surface_id: str | None = None  # the ceiling or column face it is on
+    rotation_deg: float = 0.0  # in-plane turn seen from the room (objects on ceilings and columns)
 
 
-def _truth_objects(truth: dict, walls: dict[str, WallFrame], where: str) -> list[_Placed]:
+def _truth_objects(truth: dict, walls: dict[str, WallFrame], where: str,
+                   surfaces: Mapping[str, Surface] | None = None) -> list[_Placed]:
+    surfaces = surfaces or {}
     objs = truth.get("objects")
     if not isinstance(objs, list):
         raise InputError(where, "'objects' must be a list")
@@ -481,14 +615,19 @@ def _truth_objects(truth: dict, walls: dict[str, WallFrame], where: str) -> list
         if pos.shape != (3,) or not np.isfinite(pos).all():
             raise InputError(at, "'position' must be 3 finite numbers")
         wid = o.get("wall") if o.get("wall") in walls else None
+        sid = o.get("wall") if wid is None and o.get("wall") in surfaces else None
         if wid is not None:
             u, v, _ = walls[wid].to_uvd(pos[None])[0]
+        elif sid is not None:
+            u, v, _ = surface_coords(surfaces[sid], pos[None])[0]
         else:
             u = v = 0.0
         n = o.get("normal")
         out.append(_Placed(o["class"], wid, float(u), float(v), float(o.get("width_m") or 0.1),
                            float(o.get("height_m") or 0.1), pos,
-                           None if n is None else np.asarray(n, dtype=np.float64)))
+                           None if n is None else np.asarray(n, dtype=np.float64),
+                           surfaces[sid].kind if sid is not None else "wall", sid,
+                           float(o.get("rotation_deg") or 0.0) if sid is not None else 0.0))
     return out
 
 
@@ -500,11 +639,114 @@ def _rect(u: float, v: float, w: float, h: float) -> tuple[float, float, float, 
     return (u - w / 2, u + w / 2, v - h / 2, v + h / 2)
 
 
+def _surface_point(sf: Surface, u: float, v: float) -> np.ndarray:
+    """The point (u, v) of a surface: on its plane, or on the cylinder of a round column."""
+    if not sf.round:
+        return sf.frame.to_world(u, v)
+    a = u / float(sf.radius_m)
+    return np.array([sf.centre[0] + sf.radius_m * np.cos(a), sf.centre[1] + sf.radius_m * np.sin(a),
+                     sf.frame.origin[2] + v])
+
+
+SURFACE_MARGIN_M = 0.6  # a moved or added ceiling object keeps this far from its ceiling's edges
+ADDED_CEILING_OFFSET_M = (1.5, 3.0)  # an added ceiling object stands this far from a built one of its class
+
+
+def _surface_differences(built: list[_Placed], surfaces: Mapping[str, Surface], rng: np.random.Generator, *,
+                         changes: int, shift_m: tuple[float, float], separation_m: float,
+                         size: Any) -> tuple[set[int], dict[int, _Placed], list[_Placed]]:
+    """``changes`` removed, moved and added objects per surface kind (ceiling, column).
+
+    A moved ceiling object shifts ``shift_m`` in a random direction in the ceiling's plane, a
+    moved column object ``shift_m`` up or down its face. An added object is of a class built
+    on that kind of surface: on a ceiling 1.5-3 m from a built one of its class, on a column
+    at the middle of a face (round: anywhere around) at its class's median height there.
+    Each keeps ``separation_m`` from every other object of its class.
+    """
+    removed: set[int] = set()
+    moved: dict[int, _Placed] = {}
+    added: list[_Placed] = []
+    occupied: dict[str, list] = {sid: [_rect(o.u, o.v, o.width, o.height) for o in built if o.surface_id == sid]
+                                 for sid in surfaces}
+
+    def far_from_class(pos: np.ndarray, cid: str, skip: _Placed | None) -> bool:
+        others = [o.position for o in built if o.class_id == cid and o is not skip]
+        others += [a.position for a in added if a.class_id == cid]
+        others += [m.position for m in moved.values() if m.class_id == cid]
+        return all(np.linalg.norm(p - pos) >= separation_m for p in others)
+
+    def fits(sf: Surface, rect: tuple, skip_rect: tuple | None = None) -> bool:
+        f = sf.frame
+        m = SURFACE_MARGIN_M if sf.kind == "ceiling" else 0.05
+        if sf.round:
+            if rect[2] < m or rect[3] > f.height_m - m:
+                return False
+        elif rect[0] < m or rect[1] > f.width_m - m or rect[2] < m or rect[3] > f.height_m - m:
+            return False
+        return not any(_overlaps(rect, r, 0.05) for r in occupied[sf.id] if r != skip_rect)
+
+    def placed(o_cls: str, sf: Surface, u: float, v: float, w: float, h: float, turn: float = 0.0) -> _Placed:
+        pos = _surface_point(sf, u, v)
+        return _Placed(o_cls, None, u, v, w, h, pos, surface_normal(sf, pos), sf.kind, sf.id, turn)
+
+    for kind in ("ceiling", "column"):
+        idx = [i for i in (int(k) for k in rng.permutation(len(built))) if built[i].surface == kind]
+        kind_surfaces = [sf for sf in surfaces.values() if sf.kind == kind]
+        if not idx or not kind_surfaces:
+            continue
+        isolated = [i for i in idx if far_from_class(built[i].position, built[i].class_id, built[i])]
+        removed |= set((isolated + [i for i in idx if i not in isolated])[:changes])
+        n_moved = 0
+        for i in idx:
+            if n_moved >= changes:
+                break
+            if i in removed:
+                continue
+            o = built[i]
+            sf = surfaces[o.surface_id]
+            for _ in range(20):
+                dist = float(rng.uniform(*shift_m))
+                if kind == "ceiling":
+                    a = float(rng.uniform(0, 2 * np.pi))
+                    u, v = o.u + dist * np.cos(a), o.v + dist * np.sin(a)
+                else:
+                    u, v = o.u, o.v + dist * (1 if rng.random() < 0.5 else -1)
+                rect = _rect(u, v, o.width, o.height)
+                cand = placed(o.class_id, sf, u, v, o.width, o.height, o.rotation_deg)
+                if fits(sf, rect, _rect(o.u, o.v, o.width, o.height)) and far_from_class(cand.position, o.class_id, o):
+                    moved[i] = cand
+                    occupied[sf.id].append(rect)
+                    n_moved += 1
+                    break
+        classes = sorted({built[i].class_id for i in idx})
+        for _ in range(500):
+            if sum(a.surface == kind for a in added) >= changes:
+                break
+            cid = classes[int(rng.integers(len(classes)))]
+            same = [o for o in built if o.surface == kind and o.class_id == cid]
+            w, h = size(cid, same[0])
+            if kind == "ceiling":
+                ref = same[int(rng.integers(len(same)))]
+                sf = surfaces[ref.surface_id]
+                a, dist = float(rng.uniform(0, 2 * np.pi)), float(rng.uniform(*ADDED_CEILING_OFFSET_M))
+                u, v = ref.u + dist * np.cos(a), ref.v + dist * np.sin(a)
+            else:
+                sf = kind_surfaces[int(rng.integers(len(kind_surfaces)))]
+                u = float(rng.uniform(0, sf.frame.width_m)) if sf.round else sf.frame.width_m / 2
+                v = float(np.median([o.v for o in same]))
+            rect = _rect(u, v, w, h)
+            cand = placed(cid, sf, u, v, w, h)
+            if fits(sf, rect) and far_from_class(cand.position, cid, None):
+                added.append(cand)
+                occupied[sf.id].append(rect)
+    return removed, moved, added
+
+
 def write_as_designed_ifc(truth_doc: dict, out: Path, *, seed: int = 0, n_moved: int = 3, n_removed: int = 2,
                           n_added: int = 2, library: ModelLibrary | None = None, schema: str = "IFC4",
                           shift_m: tuple[float, float] = (0.4, 0.8), separation_m: float = 1.2,
                           typings: dict[str, ClassTyping] | None = None,
-                          mount_heights: Mapping[str, float] | None = None) -> dict:
+                          mount_heights: Mapping[str, float] | None = None, surface_changes: int = 1) -> dict:
     """Write an as-designed IFC of a simulated scene with deliberate differences.
 
     Starting from what is built (the ground truth, contract 5 with ``walls`` and per-object
@@ -516,19 +758,31 @@ def write_as_designed_ifc(truth_doc: dict, out: Path, *, seed: int = 0, n_moved:
     ``mount_heights`` entry (the simulator passes its catalogue's), else at
     :data:`DEFAULT_MOUNT_HEIGHT_M`.
 
+    With ceilings and columns in the truth (its ``surfaces``, issue 11) the design holds them
+    too (IfcCovering, IfcColumn, :mod:`.export`) with their objects, and ``surface_changes``
+    objects are removed, moved and added on each kind of surface
+    (:func:`_surface_differences`); the walls' differences are drawn among wall objects only.
+    With ``storeys`` in the truth, one IfcBuildingStorey each.
+
     Returns ``{"as_designed": out.name, "design_differences": [...]}``, each difference
     ``{"kind": "moved"|"removed"|"added", "class", "wall", "designed_position",
-    "built_position"}`` (null where it does not exist), to be stored in the ground truth.
+    "built_position"}`` (null where it does not exist; with surfaces also ``"surface"``: wall,
+    ceiling or column, and ``wall`` names the surface), to be stored in the ground truth.
     """
+    from .export import add_storeys_and_surfaces
+
     out = Path(out)
     mount_heights = dict(mount_heights or {})
     where = "ground truth"
     if not isinstance(truth_doc, dict):
         raise InputError(where, "expected a JSON object")
+    extra = {k: truth_doc[k] for k in ("surfaces", "storeys") if truth_doc.get(k)}
     parsed = parse_detections_document({"schema": "sbsc.detections/1", "walls": truth_doc.get("walls") or [],
-                                        "openings": truth_doc.get("openings") or [], "detections": []}, where)
+                                        "openings": truth_doc.get("openings") or [], "detections": [], **extra},
+                                       where)
     walls = parsed.walls
-    built = _truth_objects(truth_doc, walls, where)
+    surfaces = parsed.surfaces
+    built = _truth_objects(truth_doc, walls, where, surfaces)
     typings = typings if typings is not None else class_typings(library)
     rng = np.random.default_rng(seed)
 
@@ -553,7 +807,8 @@ def write_as_designed_ifc(truth_doc: dict, out: Path, *, seed: int = 0, n_moved:
             return False
         return not any(_overlaps(rect, r, 0.05) for r in occupied[wid] if r != skip_rect)
 
-    order = [int(i) for i in rng.permutation(len(built))]
+    # the walls' differences among the objects on walls (all of them without surfaces: as before)
+    order = [i for i in (int(k) for k in rng.permutation(len(built))) if built[i].surface_id is None]
     # a removed object has no other built object of its class near it, so that its
     # detection cannot pair with a designed neighbour that happens not to be recognized
     isolated = [i for i in order if far_from_class(built[i].position, built[i].class_id, built[i])]
@@ -578,14 +833,17 @@ def write_as_designed_ifc(truth_doc: dict, out: Path, *, seed: int = 0, n_moved:
                 occupied[o.wall].append(rect)
                 break
     added: list[_Placed] = []
+    on_walls = [o for o in built if o.surface_id is None]
     classes = sorted(typings) or sorted({o.class_id for o in built})
+    if surfaces:  # only classes seen on walls are added to walls
+        classes = sorted({o.class_id for o in on_walls}) or classes
     attempts = 0
     while len(added) < n_added and attempts < 500 and walls:
         attempts += 1
         cid = classes[int(rng.integers(len(classes)))]
         wid = sorted(walls)[int(rng.integers(len(walls)))]
         w, h = size(cid)
-        same = [o.v for o in built if o.class_id == cid]
+        same = [o.v for o in on_walls if o.class_id == cid]
         v = float(np.median(same)) if same else float(mount_heights.get(cid, DEFAULT_MOUNT_HEIGHT_M))
         f = walls[wid]
         if f.width_m < w + 0.2:
@@ -597,27 +855,37 @@ def write_as_designed_ifc(truth_doc: dict, out: Path, *, seed: int = 0, n_moved:
                 np.linalg.norm(a.position - pos) >= separation_m for a in added if a.class_id == cid):
             added.append(_Placed(cid, wid, u, v, w, h, pos, f.normal))
             occupied[wid].append(rect)
+    if surfaces and surface_changes > 0:
+        s_removed, s_moved, s_added = _surface_differences(
+            built, surfaces, np.random.default_rng([seed, 11]), changes=surface_changes, shift_m=shift_m,
+            separation_m=separation_m, size=size)
+        removed |= s_removed
+        moved.update(s_moved)
+        added += s_added
 
     builder = IfcModelBuilder(schema, project_name="sbsc as-designed model (simulated)", typings=typings,
                               storey_elevation=storey_elevation(walls),
                               description="as-designed model written from a simulated scene, with deliberate differences")
-    add_walls_and_openings(builder, walls, parsed.openings)
+    add_storeys_and_surfaces(builder, parsed)
     designed = [moved.get(i, o) for i, o in enumerate(built) if i not in removed] + added
     for k, o in enumerate(designed):
         typing = builder.typing_of(o.class_id, o.width, o.height)
-        builder.add_component(o.class_id, o.position, wall_id=o.wall, normal=o.normal,
-                              name=f"{typing.name} {k + 1:03d}", tag=f"E{k + 1:03d}")
+        builder.add_component(o.class_id, o.position, wall_id=o.wall or o.surface_id, normal=o.normal,
+                              name=f"{typing.name} {k + 1:03d}", tag=f"E{k + 1:03d}", rotation_deg=o.rotation_deg)
     write_ifc_atomic(builder.finish(), out)
 
     def p(x: np.ndarray | None) -> list[float] | None:
         return None if x is None else [round(float(c), 5) for c in x]
 
-    diffs = [{"kind": "removed", "class": built[i].class_id, "wall": built[i].wall,
+    def where_of(o: _Placed) -> dict:
+        return {"wall": o.wall or o.surface_id, **({"surface": o.surface} if surfaces else {})}
+
+    diffs = [{"kind": "removed", "class": built[i].class_id, **where_of(built[i]),
               "designed_position": None, "built_position": p(built[i].position)} for i in sorted(removed)]
-    diffs += [{"kind": "moved", "class": built[i].class_id, "wall": built[i].wall,
+    diffs += [{"kind": "moved", "class": built[i].class_id, **where_of(built[i]),
                "designed_position": p(m.position), "built_position": p(built[i].position),
                "shift_m": round(float(np.linalg.norm(m.position - built[i].position)), 4)}
               for i, m in sorted(moved.items())]
-    diffs += [{"kind": "added", "class": a.class_id, "wall": a.wall, "designed_position": p(a.position),
+    diffs += [{"kind": "added", "class": a.class_id, **where_of(a), "designed_position": p(a.position),
                "built_position": None} for a in added]
     return {"as_designed": out.name, "design_differences": diffs}

@@ -169,6 +169,12 @@ def wall_thicknesses(walls: dict[str, WallFrame], default: float = WALL_THICKNES
     return out
 
 
+def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """3x3 rotation by ``angle`` (radians) about the unit vector ``axis`` (Rodrigues)."""
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * (k @ k)
+
+
 # --------------------------------------------------------------------------- builder
 
 
@@ -472,9 +478,13 @@ class IfcModelBuilder:
     def add_component(self, class_id: str, position: np.ndarray, *, wall_id: str | None = None,
                       normal: np.ndarray | None = None, name: str | None = None, tag: str | None = None,
                       width_m: float | None = None, height_m: float | None = None,
-                      psets: dict[str, dict[str, Any]] | None = None) -> Any:
+                      psets: dict[str, dict[str, Any]] | None = None, rotation_deg: float = 0.0) -> Any:
         """One secondary component, its local origin at ``position`` (footprint centre on the
-        wall plane), its body a box footprint x depth standing out into the room."""
+        wall plane), its body a box footprint x depth standing out into the room.
+
+        On a ceiling or a column (``wall_id`` names a surface added by :meth:`add_surfaces`)
+        it is placed relative to its IfcCovering / IfcColumn, turned by ``rotation_deg``
+        counter-clockwise seen from the room (contract 4 ``rotation_deg``)."""
         f = self.file
         typing = self.typing_of(class_id, width_m or 0.1, height_m or 0.1)
         cls, pre, obj = self.resolve_typing(typing)
@@ -488,6 +498,9 @@ class IfcModelBuilder:
         if host is not None:  # on a ceiling or a column: relative to its IfcCovering / IfcColumn
             host_element, host_matrix, surface = host
             m = object_matrix(surface, position)
+            if rotation_deg:  # about the normal, towards the room: local +Z on a ceiling, -Y on a column
+                axis = np.array([0.0, 0.0, 1.0]) if surface.kind == "ceiling" else np.array([0.0, -1.0, 0.0])
+                m[:3, :3] = m[:3, :3] @ _axis_rotation(axis, math.radians(float(rotation_deg)))
             element.ObjectPlacement = self._placement(host_element.ObjectPlacement, np.linalg.inv(host_matrix) @ m)
             if surface.kind == "ceiling":  # local Z points down into the room: the body hangs below
                 self._assign_body(element, self._box_representation(w, h, d, (-w / 2, -h / 2, 0.0)))
@@ -643,6 +656,11 @@ def _recognition_pset(det: dict) -> dict[str, Any]:
     }
 
 
+def _rotation(obj: dict) -> float:
+    r = obj.get("rotation_deg")
+    return float(r) if isinstance(r, int | float) and not isinstance(r, bool) and math.isfinite(r) else 0.0
+
+
 def selected_detections(detections: list[dict], accepted_only: bool) -> list[dict]:
     """Accepted only, or everything not rejected (pending ones included)."""
     keep = ("accepted",) if accepted_only else ("accepted", "pending")
@@ -678,7 +696,7 @@ def export_ifc(document: dict, *, library: ModelLibrary | None = None, schema: s
             det["class"], np.asarray(det["position"], float), wall_id=wall_id,
             name=f"{typing.name} {label}".strip(), tag=label or None,
             width_m=det.get("width_m"), height_m=det.get("height_m"),
-            psets={PSET_RECOGNITION: _recognition_pset(det)}))
+            psets={PSET_RECOGNITION: _recognition_pset(det)}, rotation_deg=_rotation(det)))
     signoff = signoff if signoff is not None else doc.signoff
     if signoff:
         builder.add_approval(signoff, elements)
