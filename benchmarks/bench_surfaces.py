@@ -120,6 +120,9 @@ def main(argv: list[str] | None = None) -> int:
     if a.scenario == "building" and (a.realistic or a.survey_frame):
         p.error("--realistic and --survey-frame are not available for --scenario building")
     scene = a.scenario or ("I" if a.full else (a.scene or "one_room"))
+    import sbsc_core
+
+    print(f"sbsc_core from {Path(sbsc_core.__file__).parent}", flush=True)  # the tree measured (PYTHONPATH)
     out = [run(scene, d, a.seed, not a.no_columns, a.run_dir, a.redo, storeys=a.storeys, realistic=a.realistic,
                survey_frame=a.survey_frame, simulate_only=a.simulate_only) for d in a.designs]
     if a.json and not a.simulate_only:

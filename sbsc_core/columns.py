@@ -178,7 +178,21 @@ def find_columns(cloud: PointCloud, seg: Segmentation, s: ColumnSettings) -> lis
 
 
 def _fit(pts: np.ndarray, s: ColumnSettings) -> tuple | None:
-    """("round", centre, (d, d), 0) or ("rect", centre, (a, b), angle) for a column's plan points."""
+    """("round", centre, (d, d), 0) or ("rect", centre, (a, b), angle) for a column's plan points.
+
+    The fits run on the points relative to their mean: at survey coordinates (5.6e6 m) the
+    circle's normal equations lose every digit and float32 (the rectangle's) has 0.5 m steps.
+    """
+    c0 = pts.mean(axis=0)
+    fit = _fit_local(pts - c0, s)
+    if fit is None:
+        return None
+    shape, centre, size, angle = fit
+    return shape, (float(centre[0] + c0[0]), float(centre[1] + c0[1])), size, angle
+
+
+def _fit_local(pts: np.ndarray, s: ColumnSettings) -> tuple | None:
+    """:func:`_fit` on points near the origin."""
     import cv2
 
     a = np.column_stack([pts[:, 0], pts[:, 1], np.ones(len(pts))])

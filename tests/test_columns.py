@@ -205,3 +205,28 @@ def test_objects_on_a_round_columns_seam_are_found_once(tmp_path, monkeypatch):
         (d,) = [d for d in on_column if d["class"] == o["class"]]
         assert np.linalg.norm(np.subtract(d["position"], o["position"])) < 0.015
         assert 0.0 <= d["u"] < circ
+
+
+def test_find_columns_at_survey_coordinates():
+    """The same columns in a frame at UTM-like coordinates, turned 23.5 degrees in plan."""
+    cloud, seg = _scene(np.random.default_rng(1))
+    a = math.radians(23.5)
+    rot = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    offset = np.array([412000.0, 5612000.0, 100.0])
+    world = cloud.xyz.astype(np.float64) @ rot.T + offset
+    origin = world.mean(axis=0)
+    turned = PointCloud((world - origin).astype(np.float32), cloud.rgb, origin)
+    walls = []
+    for w in seg.walls:
+        f = w.frame
+        frame = type(f)(f.origin @ rot.T + offset, f.axis_u @ rot.T, f.axis_v @ rot.T, f.normal @ rot.T,
+                        f.width_m, f.height_m)
+        walls.append(type(w)(w.id, frame, w.point_index, w.storey))
+    seg_t = Segmentation(100.0, 103.0, walls, [Storey("S1", 100.0, 103.0)])
+    rect, rnd = find_columns(turned, seg_t, ColumnSettings(enabled=True))
+    assert (rect.shape, rnd.shape) == ("rect", "round")
+    assert rect.centre == pytest.approx(tuple((np.array([3.0, 4.0, 0.0]) @ rot.T + offset)[:2]), abs=0.01)
+    assert rect.size_m == pytest.approx((0.45, 0.45), abs=0.01)
+    assert (rect.angle_deg - 43.5 + 45.0) % 90.0 - 45.0 == pytest.approx(0.0, abs=0.5)
+    assert rnd.centre == pytest.approx(tuple((np.array([7.0, 4.0, 0.0]) @ rot.T + offset)[:2]), abs=0.005)
+    assert rnd.size_m[0] == pytest.approx(0.5, abs=0.01)
