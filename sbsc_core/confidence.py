@@ -228,7 +228,10 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
     (of any class) whose footprint overlaps it by more than ``suppress_overlap`` is taken
     out, and the consensus runs again, so that such a place neither uses up its class's
     expected count (a room controller taken for a switch, while a real switch waits) nor
-    passes to its next-best class. At most ``max_rounds`` rounds. With expected counts,
+    passes to its next-best class. A candidate of another class that matched there better
+    than the refused hit stays (with expected counts, a smoke detector's place may have gone
+    to a weak fire-alarm switch while the smoke detectors' count was full of weak hits).
+    At most ``max_rounds`` rounds. With expected counts,
     the as-designed model vouches for the objects still missing at the end: the refused
     hits fill their class's count, best confidence first, where their place is free (a
     real object seen in colour only is then kept). The hits still refused come back as
@@ -277,10 +280,23 @@ def _overlaps(hit: ConsensusHit, hits: list[ConsensusHit], overlap: float) -> bo
                and box_overlap(k.box, hit.box) > overlap for k in hits)
 
 
+def _beats(c: Candidate, h: ConsensusHit) -> bool:
+    """Whether candidate ``c`` of another class matched better than the refused hit ``h``
+    in its own recognizer (rho_D higher; rho_C lower), or found depth where ``h`` had none."""
+    if c.class_id == h.class_id:
+        return False
+    if c.source == "depth":
+        return h.rho_depth is None or c.score > h.rho_depth
+    return h.rho_colour is not None and c.score < h.rho_colour
+
+
 def _clear_of(cands: list[Candidate], hits: list[ConsensusHit], overlap: float) -> list[Candidate]:
-    """The candidates whose footprint overlaps none of ``hits`` by more than ``overlap``."""
+    """The candidates whose footprint overlaps none of ``hits`` by more than ``overlap``,
+    except those of another class that matched there better than the hit (:func:`_beats`:
+    the refused hit had only taken the place of a better class whose count was full then)."""
     return [c for c in cands if not any(c.wall_id == h.wall_id and h.box is not None
-                                        and box_overlap(c.box, h.box) > overlap for h in hits)]
+                                        and box_overlap(c.box, h.box) > overlap and not _beats(c, h)
+                                        for h in hits)]
 
 
 def unexplained_regions(rois: dict[str, list[Box]], hits: list[ConsensusHit], templates: dict[str, ModelTemplate],

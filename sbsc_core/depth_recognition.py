@@ -213,6 +213,7 @@ def wall_level(jd: np.ndarray, known: np.ndarray, pixel_m: float, settings: Dept
     if has.any():
         level[has] = np.nanmedian(stack[:, has], axis=0)
     level = np.sign(level) * np.clip(np.abs(level) - settings.level_dead_m, 0.0, settings.level_max_m)
+    level = _long_only(level, max(1, int(round(settings.level_min_extent_m / settings.level_cell_m))))
     lab, _ = ndimage.label(level != 0, structure=np.ones((3, 3), bool))
     for i, sl in enumerate(ndimage.find_objects(lab), start=1):
         if max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start) * g * pixel_m < settings.level_min_extent_m:
@@ -221,6 +222,23 @@ def wall_level(jd: np.ndarray, known: np.ndarray, pixel_m: float, settings: Dept
         return np.zeros_like(jd)
     full = cv2.resize(level.astype(np.float32), (wb * g, hb * g), interpolation=cv2.INTER_LINEAR)
     return np.ascontiguousarray(full[:h, :w])
+
+
+def _long_only(level: np.ndarray, n: int) -> np.ndarray:
+    """The level where it is part of a raised (or sunk) stretch at least ``n`` cells long
+    across or down: the grey opening with an ``n``-cell line, the larger of the two
+    directions, of the level above and below the plane. A flat sign of a few mm, larger than
+    half the median window, raises the level in its middle; the steps of a misregistered
+    station are long. Without it, a sign on a wall with such a step loses half its relief."""
+    out = np.zeros_like(level, dtype=np.float32)
+    for sign in (1.0, -1.0):
+        part = np.ascontiguousarray(np.clip(sign * level, 0.0, None), np.float32)
+        if not part.any():
+            continue
+        across = cv2.morphologyEx(part, cv2.MORPH_OPEN, np.ones((1, n), np.uint8), borderType=cv2.BORDER_REPLICATE)
+        down = cv2.morphologyEx(part, cv2.MORPH_OPEN, np.ones((n, 1), np.uint8), borderType=cv2.BORDER_REPLICATE)
+        out += sign * np.maximum(across, down)
+    return out
 
 
 def _residual_plane(d: np.ndarray, use: np.ndarray, max_samples: int = 20000) -> np.ndarray | None:

@@ -244,6 +244,7 @@ class LookalikeSettings:
     min_print_ncc: float = 0.5  # ... and at least this much
     min_margin_relief: float = 0.0  # with the fine relief compared too (mean of print and relief): this margin
     min_evidence_relief: float = 0.3  # ... and this level
+    relief_decides: bool = True  # same size and colour with reliefs to compare: look-alikes whatever their depth NCC
     colour_confusable: bool = True  # same-size classes the colour classifier cannot tell apart on a wall too
 
 

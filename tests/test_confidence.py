@@ -169,3 +169,20 @@ def test_monotone_fit_never_rewards_worse_evidence() -> None:
     free = fit_logistic(np.column_stack([a, b]), y)
     bounded = fit_logistic(np.column_stack([a, b]), y, signs=[1, 1])
     assert free.coef[1] < 0 and bounded.coef[1] >= 0 and bounded.coef[0] > 0
+
+
+def test_a_refused_hit_does_not_take_a_better_class_out_of_its_place() -> None:
+    """A weak hit is refused and its place cleared, but a candidate of another class that
+    matched there better than the hit stays (its count may simply have been full then)."""
+    from sbsc_core.confidence import _clear_of
+    from sbsc_core.consensus import ConsensusHit
+    from sbsc_core.types import Box, Candidate
+
+    box = Box(10, 10, 30, 30)
+    weak = ConsensusHit("fire_alarm_switch", "W1", (20.0, 20.0), 0.5, 0.93, None, "depth", box=box)
+    better = Candidate("smoke_detector", "W1", "depth", box, (20.0, 20.0), 0.99)
+    worse = Candidate("switch", "W1", "depth", box, (20.0, 20.0), 0.9)
+    same = Candidate("fire_alarm_switch", "W1", "depth", box, (20.0, 20.0), 0.93)
+    elsewhere = Candidate("switch", "W1", "depth", Box(100, 100, 120, 120), (110.0, 110.0), 0.9)
+    kept = _clear_of([better, worse, same, elsewhere], [weak], 0.25)
+    assert kept == [better, elsewhere]

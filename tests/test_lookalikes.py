@@ -197,3 +197,25 @@ def test_white_plates_are_told_apart_by_their_fine_relief(white_plates, seed: in
     hits = consensus_all(d2, c2, None, s.consensus, sorted(templates))
     found = {h.class_id for v in hits.values() for h in v}
     assert found == set(places)
+
+
+def test_white_plates_without_print_are_told_apart_by_relief_alone(white_plates) -> None:
+    """On a wall of their own colour the plates show no print at all (no colour views, no
+    colour candidates): the relief alone decides between the depth candidates."""
+    from sbsc_core.depth_recognition import depth_images
+
+    s = DetectionSettings()
+    templates = make_templates(white_plates, 0.005)
+    ortho, area = make_wall(seed=5, holes=0, colour=(245, 245, 240))
+    places = {"socket": (100.0, 120.0), "switch": (180.0, 330.0)}
+    for cid, c in places.items():
+        paste(ortho, area, templates[cid], c, 0, seed=5)
+    protos = learn_prototypes(templates, s.colour)
+    d = match_depth(ortho, area, depth_rois(ortho, area, s.depth, templates), templates, s.depth)
+    img = colour_image(ortho, area, s.colour)
+    assert not {"socket", "switch"} & set(protos.for_wall(img.wall_rgb, img.threshold, img.noise_rgb))
+    relief = depth_images(ortho, area, s.depth).levelled
+    d2, _ = resolve_on_wall(d, [], img, protos, s.lookalikes, relief=relief)
+    near = lambda cands, p: {x.class_id for x in cands if np.hypot(x.centre[0] - p[0], x.centre[1] - p[1]) < 3}  # noqa: E731
+    for cid, p in places.items():
+        assert near(d2, p) == {cid}, (cid, near(d, p))
