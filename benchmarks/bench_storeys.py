@@ -18,7 +18,8 @@ Both are evaluated per storey against the building's ground truth (objects of th
 a detection of the whole run counts for the storey of its wall), with
 :func:`sbsc_core.evaluate.evaluate` at its 10 cm radius. The acceptance is that every storey
 is found (same count, floor and ceiling within 2 cm of the truth) and that TP and FP per
-storey of the whole run are within 1 of the storey alone. Prints one table and a verdict;
+storey of the whole run are within 1 of the storey alone (counts; the table gives the
+percentages of the storey's instances too). Prints one table and a verdict;
 ``--json`` writes the figures. Each ``sbsc detect`` runs as its own process and its wall
 time and peak RSS (with the worker processes) are reported.
 """
@@ -104,17 +105,23 @@ def bench(n: int, scene: str, step: float, run_dir: Path, redo: bool, mode: str 
                                        run_dir / f"{sim.name}_{sid}_alone{'_noexp' if mode == 'none' else ''}",
                                        redo)
         walls = {w["id"] for w in whole["walls"] if w.get("storey") == sid}
+        # surfaces beyond walls (ceilings, columns: ``--ceilings`` / ``--columns``) carry the storey in their id
+        surfaces = {x["id"] for x in whole.get("surfaces", []) if str(x["id"]).startswith(f"{sid}-")}
         got = found.get(sid)
         rows.append({
             "storey": sid, "truth_floor_z": st["floor_z"], "truth_ceiling_z": st["ceiling_z"],
             "found_floor_z": got and got["floor_z"], "found_ceiling_z": got and got["ceiling_z"],
             "walls_whole": len(walls), "walls_alone": len(alone["walls"]),
-            "whole": _storey_table(whole, truth, sid, walls), "alone": _storey_table(alone, truth, sid, None),
+            "whole": _storey_table(whole, truth, sid, walls | surfaces), "alone": _storey_table(alone, truth, sid, None),
             "alone_seconds": a_secs, "alone_rss_gib": a_rss,
         })
     return {"storeys": n, "scene": scene, "step": step, "expected": mode, "whole_seconds": w_secs,
             "whole_rss_gib": w_rss,
             "storeys_found": len(found), "rows": rows}
+
+
+def _pct(n: int, of: int) -> str:
+    return f"{100.0 * n / of:.1f}" if of else "-"
 
 
 def verdict(res: dict) -> bool:
@@ -146,13 +153,16 @@ def main() -> None:
               f"{res['storeys_found']} found; whole building "
               f"{res['whole_seconds']:.0f} s, peak {res['whole_rss_gib']:.2f} GiB")
         print(f"{'storey':6} {'floor z truth/found':>20} {'ceiling z truth/found':>22} {'walls w/a':>9} "
-              f"{'inst':>4} {'TP whole/alone':>14} {'FP whole/alone':>14}")
+              f"{'inst':>4} {'TP whole/alone':>14} {'FP whole/alone':>14} {'TP % whole/alone':>16} "
+              f"{'FP % whole/alone':>16}")
         for r in res["rows"]:
             ff = "-" if r["found_floor_z"] is None else f"{r['found_floor_z']:.3f}"
             fc = "-" if r["found_ceiling_z"] is None else f"{r['found_ceiling_z']:.3f}"
             print(f"{r['storey']:6} {r['truth_floor_z']:>9.3f}/{ff:<10} {r['truth_ceiling_z']:>10.3f}/{fc:<11} "
                   f"{r['walls_whole']:>4}/{r['walls_alone']:<4} {r['whole'][0]:>4} "
-                  f"{r['whole'][1]:>7}/{r['alone'][1]:<6} {r['whole'][3]:>7}/{r['alone'][3]:<6}")
+                  f"{r['whole'][1]:>7}/{r['alone'][1]:<6} {r['whole'][3]:>7}/{r['alone'][3]:<6} "
+                  f"{_pct(r['whole'][1], r['whole'][0]):>8}/{_pct(r['alone'][1], r['alone'][0]):<7} "
+                  f"{_pct(r['whole'][3], r['whole'][0]):>8}/{_pct(r['alone'][3], r['alone'][0]):<7}")
         print("verdict:", "PASS" if verdict(res) else "FAIL")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
