@@ -40,7 +40,7 @@ from .ceilings import MemoryPart, part_chunks
 from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
 from .partition import ScanPart, append_records, folder_records
 from .settings import ColumnSettings, OrthoimageSettings
-from .types import Orthoimage, PointCloud, Segmentation, WallFrame
+from .types import CylinderFrame, Orthoimage, PointCloud, Segmentation, WallFrame
 
 _UP = np.array([0.0, 0.0, 1.0])
 _COMPASS = (("E", 0.0), ("N", 90.0), ("W", 180.0), ("S", 270.0))
@@ -98,10 +98,10 @@ class ColumnFace:
         if self.radius_m is None:
             return wall_coordinates(xyz, self.frame, origin)
         rel = xyz.astype(np.float64) + np.asarray(origin, np.float64)
-        dx, dy = rel[:, 0] - self.centre[0], rel[:, 1] - self.centre[1]
-        theta = np.mod(np.arctan2(dy, dx), 2 * math.pi)
-        return np.column_stack([theta * self.radius_m, rel[:, 2] - self.frame.origin[2],
-                                np.hypot(dx, dy) - self.radius_m]).astype(np.float32)
+        f = self.frame
+        cylinder = CylinderFrame(f.origin, f.axis_u, f.axis_v, f.normal, f.width_m, f.height_m,
+                                 centre=self.centre, radius_m=self.radius_m)
+        return cylinder.to_uvd(rel).astype(np.float32)
 
     def to_world(self, u: float, v: float) -> np.ndarray:
         """The point (u, v) of the face, on its plane or on the cylinder."""

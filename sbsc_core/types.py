@@ -9,6 +9,7 @@ pixel (r, c) has its centre at u = (c + 0.5) * pixel_m, v = height_m - (r + 0.5)
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -91,6 +92,28 @@ class WallFrame:
 
 
 @dataclass(frozen=True)
+class CylinderFrame(WallFrame):
+    """The unrolled frame of a round column face, usable where a wall's frame is: ``to_uvd``
+    and ``to_world`` go around the cylinder (``u`` the arc length counter-clockwise from +x,
+    ``v`` the height above ``origin``, ``d`` the distance out of the cylinder)."""
+
+    centre: tuple[float, float] = (0.0, 0.0)
+    radius_m: float = 1.0
+
+    def to_uvd(self, points: np.ndarray) -> np.ndarray:
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        dx, dy = p[:, 0] - self.centre[0], p[:, 1] - self.centre[1]
+        theta = np.mod(np.arctan2(dy, dx), 2 * math.pi)
+        return np.column_stack([theta * self.radius_m, p[:, 2] - self.origin[2], np.hypot(dx, dy) - self.radius_m])
+
+    def to_world(self, u: np.ndarray | float, v: np.ndarray | float, d: np.ndarray | float = 0.0) -> np.ndarray:
+        u_, v_, d_ = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float), np.asarray(d, float))
+        a = u_ / self.radius_m
+        r = self.radius_m + d_
+        return np.stack([self.centre[0] + r * np.cos(a), self.centre[1] + r * np.sin(a), self.origin[2] + v_], axis=-1)
+
+
+@dataclass(frozen=True)
 class Surface:
     """A surface beyond walls (contract 4 ``surfaces``): a ceiling or a column face.
 
@@ -113,6 +136,14 @@ class Surface:
     @property
     def round(self) -> bool:
         return self.radius_m is not None and self.centre is not None
+
+    def drawing_frame(self) -> WallFrame:
+        """The frame the surface is drawn in like a wall: its own, or a :class:`CylinderFrame`."""
+        if not self.round:
+            return self.frame
+        f = self.frame
+        return CylinderFrame(f.origin, f.axis_u, f.axis_v, f.normal, f.width_m, f.height_m,
+                             centre=(float(self.centre[0]), float(self.centre[1])), radius_m=float(self.radius_m))
 
     def to_dict(self, *, digits: int | None = None) -> dict:
         """The contract-4 ``surfaces`` entry; ``digits``: round the frame to that many decimals."""

@@ -148,13 +148,7 @@ def column_bodies(surfaces: Iterable[Surface]) -> list[ColumnBody]:
 def surface_coords(surface: Surface, points: np.ndarray) -> np.ndarray:
     """(N, 3) u, v, d of world points on ``surface`` (d along its normal; round faces: the
     arc length, the height and the distance out of the cylinder)."""
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if not surface.round:
-        return surface.frame.to_uvd(p)
-    r = float(surface.radius_m)
-    dx, dy = p[:, 0] - surface.centre[0], p[:, 1] - surface.centre[1]
-    theta = np.mod(np.arctan2(dy, dx), 2 * math.pi)
-    return np.column_stack([theta * r, p[:, 2] - surface.frame.origin[2], np.hypot(dx, dy) - r])
+    return surface.drawing_frame().to_uvd(np.asarray(points, dtype=np.float64).reshape(-1, 3))
 
 
 def surface_normal(surface: Surface, point: np.ndarray) -> np.ndarray:
@@ -179,35 +173,9 @@ def tangent_frame(surface: Surface, point: np.ndarray) -> WallFrame:
     return WallFrame(on - uvd[0] * u_axis, u_axis, _UP.copy(), n, surface.frame.width_m, surface.frame.height_m)
 
 
-@dataclass(frozen=True)
-class CylinderFrame(WallFrame):
-    """The unrolled frame of a round column face, usable where a wall's frame is: ``to_uvd``
-    and ``to_world`` go around the cylinder (``u`` the arc length counter-clockwise from +x,
-    ``v`` the height above ``origin``, ``d`` the distance out of the cylinder)."""
-
-    centre: tuple[float, float] = (0.0, 0.0)
-    radius_m: float = 1.0
-
-    def to_uvd(self, points: np.ndarray) -> np.ndarray:
-        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        dx, dy = p[:, 0] - self.centre[0], p[:, 1] - self.centre[1]
-        theta = np.mod(np.arctan2(dy, dx), 2 * math.pi)
-        return np.column_stack([theta * self.radius_m, p[:, 2] - self.origin[2], np.hypot(dx, dy) - self.radius_m])
-
-    def to_world(self, u: np.ndarray | float, v: np.ndarray | float, d: np.ndarray | float = 0.0) -> np.ndarray:
-        u_, v_, d_ = np.broadcast_arrays(np.asarray(u, float), np.asarray(v, float), np.asarray(d, float))
-        a = u_ / self.radius_m
-        r = self.radius_m + d_
-        return np.stack([self.centre[0] + r * np.cos(a), self.centre[1] + r * np.sin(a), self.origin[2] + v_], axis=-1)
-
-
 def drawing_frame(surface: Surface) -> WallFrame:
-    """The frame a surface is drawn in like a wall: its own, or a :class:`CylinderFrame`."""
-    if not surface.round:
-        return surface.frame
-    f = surface.frame
-    return CylinderFrame(f.origin, f.axis_u, f.axis_v, f.normal, f.width_m, f.height_m,
-                         centre=(float(surface.centre[0]), float(surface.centre[1])), radius_m=float(surface.radius_m))
+    """The frame a surface is drawn in like a wall (:meth:`sbsc_core.types.Surface.drawing_frame`)."""
+    return surface.drawing_frame()
 
 
 def object_matrix(surface: Surface, position: np.ndarray) -> np.ndarray:
