@@ -21,7 +21,7 @@ from app.viewer.scene import wall_label
 from sbsc_core.types import WallFrame
 
 from .test_app_browser import browser  # noqa: F401 - the fixture (Debian chromium + Playwright)
-from .test_app_support import ServerProcess, _fake_output, auth, write_small_ply
+from .test_app_support import ServerProcess, _fake_output, auth, served_fake_sample, write_small_ply
 
 STOREYS = [{"id": "S1", "floor_z": 0.0, "ceiling_z": 2.5}, {"id": "S2", "floor_z": 2.8, "ceiling_z": 5.3}]
 
@@ -65,16 +65,7 @@ def test_documents_carry_the_storeys(project) -> None:
 
 
 def test_one_storey_documents_stay_as_they_were(tmp_path) -> None:
-    settings = AppSettings(data_dir=tmp_path / "data", viewer=False)
-    _fake_output(tmp_path / "out", 4, lambda stage, f: None, 0.0)
-    pid = ensure_sample_project(write_small_ply(tmp_path / "scan.ply", n=200), tmp_path / "out",
-                                settings=settings, points=200)
-    db = Database(settings.db_url)
-    try:
-        with db.read() as s:
-            served = project_document(s, s.get(Project, pid))
-    finally:
-        db.dispose()
+    served = served_fake_sample(tmp_path, 200)
     assert "storeys" not in served and all("storey" not in w for w in served["walls"])
 
 

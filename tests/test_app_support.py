@@ -97,6 +97,27 @@ def _fake_output(out: Path, n: int, progress: Callable[[str, float], None], dela
     return {"detections": n}
 
 
+def served_fake_sample(tmp_path: Path, points: int, **sample) -> dict:
+    """The detections document the app serves for a sample project made from a fake 4-wall
+    detect output (``tmp_path/out``) and a small scan of ``points`` points."""
+    from app.config import AppSettings
+    from app.db import Database
+    from app.models import Project
+    from app.results import project_document
+    from app.sample import ensure_sample_project
+
+    settings = AppSettings(data_dir=tmp_path / "data", viewer=False)
+    _fake_output(tmp_path / "out", 4, lambda stage, f: None, 0.0)
+    pid = ensure_sample_project(write_small_ply(tmp_path / "scan.ply", n=points), tmp_path / "out",
+                                settings=settings, points=points, **sample)
+    db = Database(settings.db_url)
+    try:
+        with db.read() as s:
+            return project_document(s, s.get(Project, pid))
+    finally:
+        db.dispose()
+
+
 def fake_control(data_dir: Path, **control) -> None:
     """Tell the fake runner of a server with this data dir how to behave for the next jobs."""
     (data_dir / "fake_control.json").write_text(json.dumps(control))

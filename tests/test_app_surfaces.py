@@ -13,15 +13,13 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.config import AppSettings
-from app.models import Project
-from app.results import project_document
 from app.sample import ensure_sample_project
 from app.server import create_app
 from app.surfaces import point_on
 from app.users import create_user
 
 from .surfaces_output import CEILING, SURFACE_OBJECTS, surfaces, write_surfaces_output
-from .test_app_support import auth, write_small_ply
+from .test_app_support import auth, served_fake_sample, write_small_ply
 
 
 @pytest.fixture(scope="module")
@@ -66,19 +64,7 @@ def test_surfaces_are_imported_and_served(project, client) -> None:
 
 
 def test_a_walls_only_run_has_no_surfaces(tmp_path) -> None:
-    from .test_app_support import _fake_output
-
-    settings = AppSettings(data_dir=tmp_path / "data", viewer=False)
-    _fake_output(tmp_path / "out", 4, lambda s, f: None, 0.0)
-    pid = ensure_sample_project(write_small_ply(tmp_path / "scan.ply", n=100), tmp_path / "out",
-                                settings=settings, points=100, name="walls")
-    from app.db import Database
-    db = Database(settings.db_url)
-    try:
-        with db.read() as s:
-            served = project_document(s, s.get(Project, pid))
-    finally:
-        db.dispose()
+    served = served_fake_sample(tmp_path, 100, name="walls")
     assert "surfaces" not in served and all("kind" not in w for w in served["walls"])
 
 
