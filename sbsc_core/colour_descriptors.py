@@ -54,6 +54,12 @@ def rgb_to_hsv_lab(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return cv2.cvtColor(f, cv2.COLOR_RGB2HSV), cv2.cvtColor(f, cv2.COLOR_RGB2Lab)
 
 
+def rgb_to_hsv(rgb: np.ndarray) -> np.ndarray:
+    """The HSV image of :func:`rgb_to_hsv_lab` alone."""
+    f = np.ascontiguousarray(np.asarray(rgb)[..., :3], dtype=np.float32) / 255.0
+    return cv2.cvtColor(f, cv2.COLOR_RGB2HSV)
+
+
 def _nearest(x: np.ndarray, sorted_centres: np.ndarray) -> np.ndarray:
     """Index of the nearest of ascending ``sorted_centres`` for each value of ``x``."""
     bounds = 0.5 * (sorted_centres[1:] + sorted_centres[:-1])
@@ -69,22 +75,60 @@ def kmeans_1d(values: np.ndarray, k: int = 3, merge_tol: float = 0.0, bins: int 
     component is one class, not three classes of noise, so the ranking of the classes
     (and with it the descriptors) does not flip on noise.
     """
+    centres, labels, _ = _kmeans_1d(values, k, merge_tol, bins, iterations)
+    return centres, labels
+
+
+def _kmeans_1d(values: np.ndarray, k: int, merge_tol: float, bins: int = 256,
+               iterations: int = 50) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`kmeans_1d` and the number of values in each class (it runs tens of
+    thousands of times a run on small components: few numpy calls, plain floats)."""
     x = np.asarray(values, np.float64).ravel()
     if x.size == 0:
-        return np.zeros(1), np.zeros(0, int)
+        return np.zeros(1), np.zeros(0, int), np.zeros(1, np.int64)
     lo, hi = float(x.min()), float(x.max())
     if hi - lo <= max(merge_tol, 1e-9):
-        return np.array([x.mean()]), np.zeros(x.size, int)
+        return np.array([x.mean()]), np.zeros(x.size, int), np.array([x.size], np.int64)
     hist, mids = _histogram(x, lo, hi, bins)
-    cdf = np.cumsum(hist) / hist.sum()
-    centres = np.interp((np.arange(k) + 0.5) / k, cdf, mids)
+    cw = np.cumsum(hist)  # whole counts: exact, its last value is the total
+    centres = np.interp((np.arange(k) + 0.5) / k, cw / cw[-1], mids)
     # Lloyd on the histogram: a class takes the bins whose centres lie between the midpoints
     # to its neighbours' centres, so its weight and weighted sum are differences of
     # cumulative sums (plain floats: k is tiny and this loop runs thousands of times a wall)
-    cum_w = np.concatenate(([0.0], np.cumsum(hist))).tolist()
-    cum_s = np.concatenate(([0.0], np.cumsum(hist * mids))).tolist()
+    cum_w = [0.0] + cw.tolist()
+    cum_s = [0.0] + np.cumsum(hist * mids).tolist()
     width, tol = (hi - lo) / bins, 1e-9 * (hi - lo)
-    c = centres.tolist()
+    c = _lloyd3(centres.tolist(), cum_w, cum_s, lo, width, tol, bins, iterations) if k == 3 else \
+        _lloyd(centres.tolist(), cum_w, cum_s, lo, width, tol, bins, iterations)
+    # the classes that hold any bin (a bin goes to the nearest centre, ties to the lower)
+    bounds = [0.5 * (q + p) for p, q in zip(c, c[1:], strict=False)]
+    ends = [0] + np.searchsorted(mids, bounds, side="right").tolist() + [bins]
+    centres = np.asarray([v for v, i, j in zip(c, ends, ends[1:], strict=False) if cum_w[j] > cum_w[i]])
+    if merge_tol > 0 and centres.size > 1:
+        groups = [[centres[0]]]
+        for v in centres[1:]:
+            if v - groups[-1][-1] < merge_tol:
+                groups[-1].append(v)
+            else:
+                groups.append([v])
+        if len(groups) < centres.size:
+            centres = np.array([np.mean(g) for g in groups])
+    # labels: the nearest centre (ties to the lower), as _nearest gives them, by comparisons
+    labels = np.zeros(x.size, np.intp)
+    above = [x.size]
+    for v in (0.5 * (centres[1:] + centres[:-1])).tolist():
+        gt = x > v
+        labels += gt
+        above.append(int(np.count_nonzero(gt)))
+    counts = np.asarray([p - q for p, q in zip(above, above[1:] + [0], strict=True)], np.int64)
+    sums = np.bincount(labels, weights=x, minlength=centres.size)
+    centres = np.where(counts > 0, sums / np.maximum(counts, 1), centres)
+    return centres, labels, counts
+
+
+def _lloyd(c: list[float], cum_w: list[float], cum_s: list[float], lo: float, width: float, tol: float,
+           bins: int, iterations: int) -> list[float]:
+    """Lloyd's iterations on a histogram given by its cumulative weights and weighted sums."""
     for _ in range(iterations):
         cut = [0] + [min(bins, max(0, math.floor((0.5 * (p + q) - lo) / width - 0.5) + 1))
                      for p, q in zip(c, c[1:], strict=False)] + [bins]
@@ -94,30 +138,38 @@ def kmeans_1d(values: np.ndarray, k: int = 3, merge_tol: float = 0.0, bins: int 
         c = new
         if done:
             break
-    centres = np.asarray(c)
-    w = np.bincount(_nearest(mids, centres), weights=hist, minlength=k)
-    centres = centres[w > 0]
-    if merge_tol > 0 and centres.size > 1:
-        groups = [[centres[0]]]
-        for c in centres[1:]:
-            if c - groups[-1][-1] < merge_tol:
-                groups[-1].append(c)
-            else:
-                groups.append([c])
-        if len(groups) < centres.size:
-            centres = np.array([np.mean(g) for g in groups])
-    labels = _nearest(x, centres)
-    counts = np.bincount(labels, minlength=centres.size)
-    sums = np.bincount(labels, weights=x, minlength=centres.size)
-    centres = np.where(counts > 0, sums / np.maximum(counts, 1), centres)
-    return centres, labels
+    return c
+
+
+def _lloyd3(c: list[float], cum_w: list[float], cum_s: list[float], lo: float, width: float, tol: float,
+            bins: int, iterations: int) -> list[float]:
+    """:func:`_lloyd` for three classes, written out (the same arithmetic, the same result)."""
+    a, b, d = c
+    w0, s0, wn, sn = cum_w[0], cum_s[0], cum_w[bins], cum_s[bins]
+    floor = math.floor
+    for _ in range(iterations):
+        i = min(bins, max(0, floor((0.5 * (a + b) - lo) / width - 0.5) + 1))
+        j = min(bins, max(0, floor((0.5 * (b + d) - lo) / width - 0.5) + 1))
+        wi, wj = cum_w[i], cum_w[j]
+        na = (cum_s[i] - s0) / (wi - w0) if wi > w0 else a
+        nb = (cum_s[j] - cum_s[i]) / (wj - wi) if wj > wi else b
+        nd = (sn - cum_s[j]) / (wn - wj) if wn > wj else d
+        na, nb, nd = sorted((na, nb, nd))
+        done = max(abs(na - a), abs(nb - b), abs(nd - d)) <= tol
+        a, b, d = na, nb, nd
+        if done:
+            break
+    return [a, b, d]
 
 
 def _histogram(x: np.ndarray, lo: float, hi: float, bins: int) -> tuple[np.ndarray, np.ndarray]:
     """(counts, bin centres) of ``bins`` equal bins over [lo, hi] (the last bin closed)."""
-    idx = ((x - lo) * (bins / (hi - lo))).astype(np.int64)
-    np.clip(idx, 0, bins - 1, out=idx)
-    hist = np.bincount(idx, minlength=bins).astype(np.float64)
+    idx = ((x - lo) * (bins / (hi - lo))).astype(np.int64)  # >= 0 (x >= lo); bins at most (x = hi)
+    if not math.isfinite(hi - lo):
+        np.clip(idx, 0, bins - 1, out=idx)
+    hist = np.bincount(idx, minlength=bins + 1).astype(np.float64)
+    hist[bins - 1] += hist[bins]  # the last bin closed
+    hist = hist[:bins]
     mids = lo + (np.arange(bins) + 0.5) * ((hi - lo) / bins)
     return hist, mids
 
@@ -147,24 +199,22 @@ def prototype_descriptors(channel: np.ndarray, mask: np.ndarray, with_segments: 
     n = vals.size
     if n == 0:
         return [0.0] * (5 if with_segments else 4)
-    centres, labels = kmeans_1d(vals, 3, merge_tol)
-    counts = np.bincount(labels, minlength=centres.size)
-    order = np.lexsort((centres, -counts))  # most populous first, ties by value
-    first = int(order[0])
-    if centres.size < 2:
-        return [float(centres[first]), float(centres[first]), 1.0, 0.0] + ([0.0] if with_segments else [])
-    second = int(order[1])
-    lab_img = np.full(mask.shape, -1, int)
+    centres, labels, counts = _kmeans_1d(vals, 3, merge_tol)
+    cs, ns = centres.tolist(), counts.tolist()
+    if len(cs) < 2:
+        return [cs[0], cs[0], 1.0, 0.0] + ([0.0] if with_segments else [])
+    first, second = sorted(range(len(cs)), key=lambda i: (-ns[i], cs[i]))[:2]  # most populous first, ties by value
+    lab_img = np.full(mask.shape, -1, np.int8)
     lab_img[mask] = labels
     m1 = lab_img == first
-    n1 = int(m1.sum())
+    n1 = ns[first]
     m2 = lab_img == second
     regions1 = hull_regions(m1)
     inside = m2 & regions1
-    v1 = float(centres[first])
-    v2 = float(centres[second]) if counts[second] > 0 else v1
+    v1 = cs[first]
+    v2 = cs[second] if ns[second] > 0 else v1
     v3 = n1 / n
-    v4 = float(inside.sum()) / n1 if n1 else 0.0
+    v4 = float(np.count_nonzero(inside)) / n1 if n1 else 0.0
     out = [v1, v2, v3, v4]
     if with_segments:
         _, nseg = ndimage.label(inside, structure=_EIGHT)
@@ -188,16 +238,17 @@ def glcm_energy(lightness: np.ndarray, mask: np.ndarray, levels: int) -> float:
 
     ``lightness`` is Lab L in [0, 100]; only pairs of two foreground pixels count.
     """
-    q = np.clip((lightness / 100.0 * levels).astype(int), 0, levels - 1)
+    q = (lightness / 100.0 * levels).astype(np.int32)
+    np.minimum(q, levels - 1, out=q)  # np.clip, without its Python wrapper
+    np.maximum(q, 0, out=q)
+    code = q * np.int32(levels)
     h, w = q.shape
     pairs = []
     for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
         r0, r1 = 0, h - dr
         c0, c1 = max(0, -dc), w - max(0, dc)
-        a = q[r0:r1, c0:c1]
-        b = q[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
         ok = mask[r0:r1, c0:c1] & mask[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
-        pairs.append(a[ok] * levels + b[ok])
+        pairs.append((code[r0:r1, c0:c1] + q[r0 + dr:r1 + dr, c0 + dc:c1 + dc])[ok])
     one_way = np.bincount(np.concatenate(pairs), minlength=levels * levels).reshape(levels, levels)
     counts = (one_way + one_way.T).ravel().astype(np.float64)  # symmetric: each pair both ways (exact counts)
     total = counts.sum()
@@ -210,11 +261,19 @@ def glcm_energy(lightness: np.ndarray, mask: np.ndarray, levels: int) -> float:
 def global_descriptors(rgb: np.ndarray, mask: np.ndarray,
                        settings: ColourRecognitionSettings | None = None) -> np.ndarray:
     """The pattern V = (v1, ..., v15) of the foreground ``mask`` of ``rgb`` (equations 1-14)."""
-    s = settings or ColourRecognitionSettings()
     mask = np.asarray(mask, bool)
     if mask.shape != rgb.shape[:2]:
         raise ValueError(f"mask {mask.shape} does not match image {rgb.shape[:2]}")
     hsv, lab = rgb_to_hsv_lab(rgb)
+    return descriptors_of(hsv, lab, mask, settings)
+
+
+def descriptors_of(hsv: np.ndarray, lab: np.ndarray, mask: np.ndarray,
+                   settings: ColourRecognitionSettings | None = None) -> np.ndarray:
+    """:func:`global_descriptors` of an image already converted by :func:`rgb_to_hsv_lab`
+    (several masks of one image convert it once)."""
+    s = settings or ColourRecognitionSettings()
+    mask = np.asarray(mask, bool)
     v = prototype_descriptors(hsv[..., 1], mask, True, s.cluster_merge_s)
     v += prototype_descriptors(lab[..., 1], mask, False, s.cluster_merge_ab)
     v += prototype_descriptors(lab[..., 2], mask, False, s.cluster_merge_ab)

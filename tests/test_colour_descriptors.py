@@ -1,14 +1,19 @@
 """The 15 global descriptors (colour_descriptors.py, paper equations 1-14)."""
 
+import math
+
 import cv2
 import numpy as np
 
 from sbsc_core.colour_descriptors import (
     descriptor_distance,
+    descriptors_of,
     glcm_energy,
     global_descriptors,
     kmeans_1d,
     normalise_descriptors,
+    rgb_to_hsv,
+    rgb_to_hsv_lab,
     roundness,
 )
 from tests.recognition_synth import knob_like, panel_like, sign_like, socket_like
@@ -102,3 +107,71 @@ def test_distance_is_rms_of_normalised_patterns() -> None:
     raw[4], raw[5] = 30, 50  # segment count capped, a scaled by ab_scale
     n = normalise_descriptors(raw)
     assert n[4] == 1.0 and abs(n[5] - 0.5) < 1e-12
+
+
+def _kmeans_reference(values, k=3, merge_tol=0.0, bins=256, iterations=50):
+    """kmeans_1d as first written (numpy histogram, generic Lloyd loop, searchsorted labels)."""
+    x = np.asarray(values, np.float64).ravel()
+    lo, hi = float(x.min()), float(x.max())
+    if hi - lo <= max(merge_tol, 1e-9):
+        return np.array([x.mean()]), np.zeros(x.size, int)
+    idx = np.clip(((x - lo) * (bins / (hi - lo))).astype(np.int64), 0, bins - 1)
+    hist = np.bincount(idx, minlength=bins).astype(np.float64)
+    mids = lo + (np.arange(bins) + 0.5) * ((hi - lo) / bins)
+    cdf = np.cumsum(hist) / hist.sum()
+    cum_w = np.concatenate(([0.0], np.cumsum(hist))).tolist()
+    cum_s = np.concatenate(([0.0], np.cumsum(hist * mids))).tolist()
+    width, tol = (hi - lo) / bins, 1e-9 * (hi - lo)
+    c = np.interp((np.arange(k) + 0.5) / k, cdf, mids).tolist()
+    for _ in range(iterations):
+        cut = [0] + [min(bins, max(0, math.floor((0.5 * (p + q) - lo) / width - 0.5) + 1))
+                     for p, q in zip(c, c[1:], strict=False)] + [bins]
+        new = sorted((cum_s[j] - cum_s[i]) / (cum_w[j] - cum_w[i]) if cum_w[j] > cum_w[i] else old
+                     for i, j, old in zip(cut, cut[1:], c, strict=False))
+        done = max(abs(p - q) for p, q in zip(new, c, strict=True)) <= tol
+        c = new
+        if done:
+            break
+
+    def nearest(v, centres):
+        return np.searchsorted(0.5 * (centres[1:] + centres[:-1]), v)
+
+    centres = np.asarray(c)
+    centres = centres[np.bincount(nearest(mids, centres), weights=hist, minlength=k) > 0]
+    if merge_tol > 0 and centres.size > 1:
+        groups = [[centres[0]]]
+        for v in centres[1:]:
+            if v - groups[-1][-1] < merge_tol:
+                groups[-1].append(v)
+            else:
+                groups.append([v])
+        if len(groups) < centres.size:
+            centres = np.array([np.mean(g) for g in groups])
+    labels = nearest(x, centres)
+    counts = np.bincount(labels, minlength=centres.size)
+    sums = np.bincount(labels, weights=x, minlength=centres.size)
+    return np.where(counts > 0, sums / np.maximum(counts, 1), centres), labels
+
+
+def test_kmeans_gives_exactly_what_the_first_version_gave() -> None:
+    """The fast kmeans_1d (three classes written out, labels by comparisons) changes no bit."""
+    rng = np.random.default_rng(5)
+    cases = [rng.normal(0, 1, 50), rng.uniform(0, 1, 3000).astype(np.float32), np.round(rng.normal(5, 3, 999)),
+             np.r_[np.zeros(100), np.ones(3)], np.r_[rng.normal(0, 0.1, 400), rng.normal(9, 0.1, 10)],
+             rng.integers(0, 4, 700).astype(float), np.linspace(-2, 2, 257)]
+    for k in (2, 3, 4):
+        for merge in (0.0, 0.05, 4.0):
+            for x in cases:
+                c, lab = kmeans_1d(x, k, merge)
+                rc, rlab = _kmeans_reference(x, k, merge)
+                assert c.tobytes() == rc.tobytes() and np.array_equal(lab, rlab)
+
+
+def test_descriptors_of_converted_images_equal_global_descriptors() -> None:
+    rng = np.random.default_rng(2)
+    rgb = rng.integers(0, 256, (30, 40, 3)).astype(np.uint8)
+    mask = np.zeros((30, 40), bool)
+    mask[5:25, 8:30] = True
+    hsv, lab = rgb_to_hsv_lab(rgb)
+    assert np.array_equal(rgb_to_hsv(rgb), hsv)
+    assert global_descriptors(rgb, mask).tobytes() == descriptors_of(hsv, lab, mask).tobytes()
