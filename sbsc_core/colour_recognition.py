@@ -37,11 +37,18 @@ the wall is refused where the scan shows a flat wall or no data (``depth_agrees`
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import cv2
 import numpy as np
 
-from .colour_descriptors import descriptor_distance, global_descriptors, normalise_descriptors
+from .colour_descriptors import (
+    descriptor_distance,
+    descriptors_of,
+    global_descriptors,
+    normalise_descriptors,
+    rgb_to_hsv,
+)
 from .depth_recognition import fill_gaps
 from .matching import (
     box_at,
@@ -274,6 +281,15 @@ def composite(view: np.ndarray, wall_rgb: np.ndarray, pad: int, blur_px: float) 
     return np.clip(np.round(comp), 0, 255).astype(np.uint8)
 
 
+@lru_cache(maxsize=512)
+def _unit_noise(view: int, blur: int, sample: int, shape: tuple[int, ...]) -> np.ndarray:
+    """The standard normal noise of one training sample (seeded by its numbers: the same on
+    every wall, so a worker draws it once; read-only)."""
+    out = np.random.default_rng([view, blur, sample]).normal(0.0, 1.0, shape)
+    out.flags.writeable = False
+    return out
+
+
 def wall_prototype(t: ModelTemplate, wall_rgb: np.ndarray, threshold: float,
                    settings: ColourRecognitionSettings,
                    noise_rgb: np.ndarray | None = None) -> WallPrototype | None:
@@ -299,12 +315,12 @@ def wall_prototype(t: ModelTemplate, wall_rgb: np.ndarray, threshold: float,
             for k in range(n_noisy):
                 img = clean
                 if noise.max() > 0:
-                    rng = np.random.default_rng([vi, bi, k])
-                    img = np.clip(clean + rng.normal(0.0, 1.0, clean.shape) * noise, 0, 255)
+                    img = np.clip(clean + _unit_noise(vi, bi, k, clean.shape) * noise, 0, 255)
                 comp = _median(np.round(img).astype(np.uint8), settings.median_px)
                 lab = _to_lab(comp)
                 delta = np.linalg.norm(lab - wall_lab[None, None, :], axis=2)
                 described: dict[bytes, np.ndarray] = {}  # jittered thresholds often give the same foreground
+                hsv = None  # converted once for all the foregrounds of this image (lab is its Lab image)
                 for factor in jitter:
                     if factor != 1.0 and k > 0:
                         continue
@@ -317,7 +333,8 @@ def wall_prototype(t: ModelTemplate, wall_rgb: np.ndarray, threshold: float,
                         continue
                     key = np.packbits(fg).tobytes()
                     if key not in described:
-                        described[key] = normalise_descriptors(global_descriptors(comp, fg, settings), settings)
+                        hsv = rgb_to_hsv(comp) if hsv is None else hsv
+                        described[key] = normalise_descriptors(descriptors_of(hsv, lab, fg, settings), settings)
                     samples.append(described[key])
                     if factor == 1.0:
                         sizes.append((r1 - r0, c1 - c0))
