@@ -61,6 +61,7 @@ from .matching import (
     rotated_variants,
     turn_angles,
 )
+from .medians import median
 from .settings import ColourRecognitionSettings
 from .templates import ModelTemplate
 from .types import Box, Candidate, Orthoimage, WallArea
@@ -124,7 +125,7 @@ def colour_image(ortho: Orthoimage, area: WallArea, settings: ColourRecognitionS
     bg = np.where(ok[..., None], num / np.maximum(den, 1e-6)[..., None], wall_lab[None, None, :]).astype(np.float32)
     delta = np.sqrt(((lab - bg) ** 2).sum(axis=2)).astype(np.float32)
     delta[~usable] = 0.0
-    noise = float(np.median(_sample(delta[vis]))) if vis.any() else 0.0
+    noise = float(median(_sample(delta[vis]))) if vis.any() else 0.0
     thr = max(settings.threshold_offset, settings.noise_k * noise)
     fg = _close((delta > thr) & usable) & usable
     fg &= ~opening_frames(fg, area, ortho, settings)
@@ -199,7 +200,7 @@ def colour_noise(rgb: np.ndarray, where: np.ndarray) -> np.ndarray:
     if inner.sum() < 50:
         return np.zeros(3)
     vals = _sample(res[inner])
-    mad = np.median(np.abs(vals - np.median(vals, axis=0)), axis=0)
+    mad = median(np.abs(vals - median(vals, axis=0)), axis=0)  # medians.median: np.median's values, faster
     return (1.4826 * mad * np.sqrt(9.0 / 8.0)).astype(float)
 
 
