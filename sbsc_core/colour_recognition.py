@@ -107,7 +107,7 @@ def colour_image(ortho: Orthoimage, area: WallArea, settings: ColourRecognitionS
     usable &= ~opening
     raw = np.clip(np.round(np.where(usable[..., None], raw, 0)), 0, 255).astype(np.uint8)
     vis = area.visible & usable if area.visible.shape == usable.shape else np.zeros_like(usable)
-    if vis.sum() < 0.01 * max(1, usable.sum()):  # no usable wall area: the flat part of the wall
+    if np.count_nonzero(vis) < 0.01 * max(1, np.count_nonzero(usable)):  # no usable wall area: the flat part of the wall
         d = np.asarray(ortho.depth, np.float32)
         vis = usable & (np.abs(np.nan_to_num(d, nan=1.0)) < settings.flat_wall_m)
     rgb = _median(raw, settings.median_px)
@@ -125,7 +125,7 @@ def colour_image(ortho: Orthoimage, area: WallArea, settings: ColourRecognitionS
     bg = np.where(ok[..., None], num / np.maximum(den, 1e-6)[..., None], wall_lab[None, None, :]).astype(np.float32)
     delta = np.sqrt(((lab - bg) ** 2).sum(axis=2)).astype(np.float32)
     delta[~usable] = 0.0
-    noise = float(median(_sample(delta[vis]))) if vis.any() else 0.0
+    noise = float(median(_sample_at(delta, vis))) if vis.any() else 0.0
     thr = max(settings.threshold_offset, settings.noise_k * noise)
     fg = _close((delta > thr) & usable) & usable
     fg &= ~opening_frames(fg, area, ortho, settings)
@@ -190,16 +190,21 @@ def _sample(values: np.ndarray, n: int = 100_000) -> np.ndarray:
     return values[::step]
 
 
+def _sample_at(image: np.ndarray, where: np.ndarray, n: int = 100_000) -> np.ndarray:
+    """``_sample(image[where], n)`` without gathering every selected pixel first."""
+    idx = np.flatnonzero(where)
+    return image.reshape(where.size, *image.shape[where.ndim:])[_sample(idx, n)]
+
+
 def colour_noise(rgb: np.ndarray, where: np.ndarray) -> np.ndarray:
     """Robust per-channel sigma of pixel noise: MAD of the residual to the 3x3 mean, on ``where``."""
-    if where.sum() < 50:
+    if np.count_nonzero(where) < 50:
         return np.zeros(3)
     f = np.asarray(rgb, np.float32)
-    res = f - cv2.blur(f, (3, 3))
     inner = cv2.erode(where.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    if inner.sum() < 50:
+    if np.count_nonzero(inner) < 50:
         return np.zeros(3)
-    vals = _sample(res[inner])
+    vals = _sample_at(f, inner) - _sample_at(cv2.blur(f, (3, 3)), inner)  # the residual where it is sampled
     mad = median(np.abs(vals - median(vals, axis=0)), axis=0)  # medians.median: np.median's values, faster
     return (1.4826 * mad * np.sqrt(9.0 / 8.0)).astype(float)
 
@@ -319,7 +324,8 @@ def wall_prototype(t: ModelTemplate, wall_rgb: np.ndarray, threshold: float,
                     img = np.clip(clean + _unit_noise(vi, bi, k, clean.shape) * noise, 0, 255)
                 comp = _median(np.round(img).astype(np.uint8), settings.median_px)
                 lab = _to_lab(comp)
-                delta = np.linalg.norm(lab - wall_lab[None, None, :], axis=2)
+                dl = lab - wall_lab[None, None, :]  # its norm, as np.linalg.norm sums the squares
+                delta = np.sqrt(dl[..., 0] * dl[..., 0] + dl[..., 1] * dl[..., 1] + dl[..., 2] * dl[..., 2])
                 described: dict[bytes, np.ndarray] = {}  # jittered thresholds often give the same foreground
                 hsv = None  # converted once for all the foregrounds of this image (lab is its Lab image)
                 for factor in jitter:
