@@ -106,7 +106,8 @@ def _median_valid(values: np.ndarray, count: np.ndarray) -> np.ndarray:
 
 def _chroma(rgb: np.ndarray) -> np.ndarray:
     """rg-chromaticity (r, g) / (r + g + b) of (..., 3) colours: independent of the illumination's gain."""
-    return (rgb / np.maximum(rgb.sum(axis=-1, keepdims=True), 1.0))[..., :2]
+    total = rgb[..., 0] + rgb[..., 1] + rgb[..., 2]  # as rgb.sum(axis=-1) adds them, without its slow reduction
+    return (rgb / np.maximum(total[..., None], 1.0))[..., :2]
 
 
 def _mixed_fraction(col_b: np.ndarray, dep_b: np.ndarray, cell_col: np.ndarray, cell_dep: np.ndarray,
