@@ -123,7 +123,9 @@ def colour_image(ortho: Orthoimage, area: WallArea, settings: ColourRecognitionS
     num = cv2.boxFilter(lab * w[..., None], -1, (win, win), normalize=True, borderType=cv2.BORDER_CONSTANT)
     ok = den > 0.05
     bg = np.where(ok[..., None], num / np.maximum(den, 1e-6)[..., None], wall_lab[None, None, :]).astype(np.float32)
-    delta = np.sqrt(((lab - bg) ** 2).sum(axis=2)).astype(np.float32)
+    dl = lab - bg  # its norm, summed as .sum(axis=2) sums the squares
+    delta = np.sqrt(dl[..., 0] * dl[..., 0] + dl[..., 1] * dl[..., 1] + dl[..., 2] * dl[..., 2]).astype(np.float32)
+    del dl
     delta[~usable] = 0.0
     noise = float(median(_sample_at(delta, vis))) if vis.any() else 0.0
     thr = max(settings.threshold_offset, settings.noise_k * noise)
@@ -536,7 +538,8 @@ def match_colour(
     if not protos:
         return []
     diff = np.ascontiguousarray(img.lab - img.background, dtype=np.float32)
-    diff[~img.foreground] *= 0.0  # the wall (and what cannot be seen) is the zero background
+    # the wall (and what cannot be seen) is the zero background (in place, not gathered: the most of the image)
+    np.multiply(diff, 0.0, out=diff, where=~img.foreground[..., None])
     relief = np.asarray(ortho.depth, np.float32)
     max_side = settings.max_roi_factor * prototypes.largest_footprint_px
     any_rot = any(r % 180 for r in settings.rotations)

@@ -393,7 +393,7 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
         prototypes._cache[mkey] = relief_models(prototypes.templates)  # type: ignore[assignment]
     models, model_offsets = prototypes._cache[mkey]  # type: ignore[misc]
     diff = np.ascontiguousarray(image.lab - image.background, dtype=np.float32)
-    diff[~image.foreground] = 0.0
+    np.copyto(diff, 0.0, where=~image.foreground[..., None])  # in place: most of the image
     kw = {"offsets": offsets, "relief": relief, "models": models, "model_offsets": model_offsets}
     return (resolve_lookalikes(depth, diff, views, groups, settings, **kw),
             resolve_lookalikes(colour, diff, views, groups, settings, **kw))
