@@ -107,7 +107,7 @@ def _median_valid(values: np.ndarray, count: np.ndarray) -> np.ndarray:
 def _chroma(rgb: np.ndarray) -> np.ndarray:
     """rg-chromaticity (r, g) / (r + g + b) of (..., 3) colours: independent of the illumination's gain."""
     total = rgb[..., 0] + rgb[..., 1] + rgb[..., 2]  # as rgb.sum(axis=-1) adds them, without its slow reduction
-    return (rgb / np.maximum(total[..., None], 1.0))[..., :2]
+    return rgb[..., :2] / np.maximum(total[..., None], 1.0)
 
 
 def _mixed_fraction(col_b: np.ndarray, dep_b: np.ndarray, cell_col: np.ndarray, cell_dep: np.ndarray,
@@ -125,10 +125,11 @@ def _mixed_fraction(col_b: np.ndarray, dep_b: np.ndarray, cell_col: np.ndarray, 
         return out
     pix = col_b[valid]  # (k, n, 3), NaN where no data
     ok = np.isfinite(pix[..., 0])
-    dc = np.linalg.norm(_chroma(np.nan_to_num(pix)) - _chroma(cell_col[valid])[:, None, :], axis=-1)
+    dch = _chroma(np.nan_to_num(pix)) - _chroma(cell_col[valid])[:, None, :]
+    dc = np.sqrt(dch[..., 0] * dch[..., 0] + dch[..., 1] * dch[..., 1])  # np.linalg.norm's sum, without its reduction
     dd = np.abs(np.nan_to_num(dep_b[valid]) - cell_dep[valid][:, None])
     odd = ok & ((dc > s.chroma_tolerance) | (dd > s.wall_depth_tolerance_m))
-    out[valid] = odd.sum(axis=1) / np.maximum(ok.sum(axis=1), 1)
+    out[valid] = np.count_nonzero(odd, axis=1) / np.maximum(np.count_nonzero(ok, axis=1), 1)
     return out
 
 
