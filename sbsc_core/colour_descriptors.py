@@ -86,12 +86,12 @@ def _kmeans_1d(values: np.ndarray, k: int, merge_tol: float, bins: int = 256,
     x = np.asarray(values, np.float64).ravel()
     if x.size == 0:
         return np.zeros(1), np.zeros(0, int), np.zeros(1, np.int64)
-    lo, hi = float(x.min()), float(x.max())
+    lo, hi = float(np.minimum.reduce(x)), float(np.maximum.reduce(x))  # x.min(), x.max() without their wrappers
     if hi - lo <= max(merge_tol, 1e-9):
         return np.array([x.mean()]), np.zeros(x.size, int), np.array([x.size], np.int64)
     hist, mids = _histogram(x, lo, hi, bins)
     cw = np.cumsum(hist)  # whole counts: exact, its last value is the total
-    centres = np.interp((np.arange(k) + 0.5) / k, cw / cw[-1], mids)
+    centres = np.interp(_QUANTILES3 if k == 3 else (np.arange(k) + 0.5) / k, cw / cw[-1], mids)
     # Lloyd on the histogram: a class takes the bins whose centres lie between the midpoints
     # to its neighbours' centres, so its weight and weighted sum are differences of
     # cumulative sums (plain floats: k is tiny and this loop runs thousands of times a wall)
@@ -167,11 +167,17 @@ def _histogram(x: np.ndarray, lo: float, hi: float, bins: int) -> tuple[np.ndarr
     idx = ((x - lo) * (bins / (hi - lo))).astype(np.int64)  # >= 0 (x >= lo); bins at most (x = hi)
     if not math.isfinite(hi - lo):
         np.clip(idx, 0, bins - 1, out=idx)
-    hist = np.bincount(idx, minlength=bins + 1).astype(np.float64)
-    hist[bins - 1] += hist[bins]  # the last bin closed
-    hist = hist[:bins]
-    mids = lo + (np.arange(bins) + 0.5) * ((hi - lo) / bins)
+    counts = np.bincount(idx, minlength=bins + 1)
+    counts[bins - 1] += counts[bins]  # the last bin closed
+    hist = counts[:bins].astype(np.float64)
+    mids = lo + (_HALVES256 if bins == 256 else np.arange(bins) + 0.5) * ((hi - lo) / bins)
     return hist, mids
+
+
+_HALVES256 = np.arange(256) + 0.5  # bin centres of the usual histogram, in bin widths
+_HALVES256.flags.writeable = False
+_QUANTILES3 = (np.arange(3) + 0.5) / 3
+_QUANTILES3.flags.writeable = False
 
 
 def hull_regions(mask: np.ndarray) -> np.ndarray:
