@@ -334,10 +334,10 @@ def wall_prototype(t: ModelTemplate, wall_rgb: np.ndarray, threshold: float,
                     if factor != 1.0 and k > 0:
                         continue
                     fg = _close(delta > threshold * factor)
-                    if fg.sum() < settings.roi_min_area_px:
+                    if np.count_nonzero(fg) < settings.roi_min_area_px:
                         continue
-                    rr, cc = np.nonzero(fg)
-                    r0, r1, c0, c1 = rr.min(), rr.max() + 1, cc.min(), cc.max() + 1
+                    rr, cc = np.flatnonzero(fg.any(axis=1)), np.flatnonzero(fg.any(axis=0))  # the bounding box
+                    r0, r1, c0, c1 = rr[0], rr[-1] + 1, cc[0], cc[-1] + 1
                     if max(r1 - r0, c1 - c0) < settings.roi_min_px:
                         continue
                     key = np.packbits(fg).tobytes()
