@@ -51,7 +51,7 @@ from .types import Orthoimage, PointCloud, Wall, WallFrame
 
 __all__ = ["ScanPart", "WallIndex", "plan_parts", "sample_part", "partition_part", "assign_chunk",
            "band_rows", "wall_records", "wall_orthoimage", "drop_wall_partition", "scratch_dir", "worker_ready",
-           "RECORD"]
+           "RECORD", "SampleBuffer"]
 
 BAND_PIXELS = 1 << 19  # orthoimage pixels of one band of a wall's partition (bounds the points binned at once)
 PART_POINTS = 1 << 22  # points of a seekable (binary PLY / PCD) file read by one task (small: balanced workers)
@@ -484,6 +484,52 @@ def worker_ready() -> bool:
 def sample_step(total_points: int, s: DetectionSettings) -> int:
     """Stride of the regular sample: at most twice the points segmentation fits walls on."""
     return max(1, math.ceil(total_points / (2 * s.segmentation.fit_max_points)))
+
+
+class SampleBuffer:
+    """The parts' samples gathered into one cloud while the other parts are still read.
+
+    When every part is a range of a seekable file, the size of its sample is known in
+    advance (the points whose index over all files is a multiple of ``step``): each sample
+    is copied to its place as it arrives (:meth:`add`) and :meth:`cloud` is
+    :func:`sample_cloud` of them without the final concatenation. Otherwise (or when a
+    sample has another size) the samples are concatenated at the end.
+    """
+
+    def __init__(self, parts: Sequence[ScanPart], step: int) -> None:
+        sizes = [None if p.stop is None else len(range((-p.first) % step, p.stop - p.start, step)) for p in parts]
+        self.sizes = sizes
+        self.copied: set[int] = set()
+        self.xyz = self.rgb = None
+        self.at: list[int] = []
+        if sizes and all(n is not None for n in sizes):
+            self.at = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64).tolist()
+            self.xyz = np.empty((self.at[-1], 3), np.float32)
+            self.rgb = np.empty((self.at[-1], 3), np.uint8)
+
+    def add(self, k: int, smp: PartSample) -> PartSample:
+        """Take part ``k``'s sample; returns it, without its points when they were copied."""
+        if self.xyz is None or len(smp.xyz) != self.sizes[k] or len(smp.rgb) != self.sizes[k]:
+            return smp  # not the expected size: kept whole
+        a, b = self.at[k], self.at[k + 1]
+        self.xyz[a:b] = smp.xyz
+        self.rgb[a:b] = smp.rgb
+        self.copied.add(k)
+        return PartSample(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8), smp.points, smp.spilled)
+
+    def cloud(self, samples: Sequence[PartSample], origin: np.ndarray, sources: Sequence[str], limit: int
+              ) -> PointCloud:
+        """:func:`sample_cloud` of the samples (``samples``: what :meth:`add` returned, in order)."""
+        xyz, rgb = self.xyz, self.rgb
+        self.xyz = self.rgb = None
+        if xyz is None or len(self.copied) < len(samples):  # some kept whole: put the copied ones back
+            whole = [PartSample(xyz[self.at[k]:self.at[k + 1]], rgb[self.at[k]:self.at[k + 1]], smp.points,
+                                smp.spilled) if k in self.copied else smp for k, smp in enumerate(samples)]
+            return sample_cloud(whole, origin, sources, limit)
+        if len(xyz) > limit:
+            k = math.ceil(len(xyz) / limit)
+            xyz, rgb = xyz[::k].copy(), rgb[::k].copy()
+        return PointCloud(xyz=xyz, rgb=rgb, origin=np.asarray(origin, np.float64), sources=tuple(sources))
 
 
 def sample_cloud(samples: Sequence[PartSample], origin: np.ndarray, sources: Sequence[str], limit: int

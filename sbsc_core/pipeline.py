@@ -65,11 +65,11 @@ from .io.crs import georeference_fields, scan_crs
 from .lookalikes import resolve_on_wall
 from .orthoimage import build_orthoimage
 from .partition import (
+    SampleBuffer,
     WallIndex,
     drop_wall_partition,
     partition_part,
     plan_parts,
-    sample_cloud,
     sample_part,
     sample_step,
     scan_origin,
@@ -682,11 +682,12 @@ def detect_scans(
     samples: list = [None] * len(parts)
     if workers > 1:  # this process waits while the workers read: it imports what segmentation needs meanwhile
         threading.Thread(target=importlib.import_module, args=("scipy.signal",), daemon=True).start()
+    gathered = SampleBuffer(parts, step)  # each sample copied into the cloud while the others are read
     for i, (k, smp) in enumerate(_as_done(executor, sample_jobs, sample_part, 2 * workers)):
-        samples[k] = smp
+        samples[k] = gathered.add(k, smp)
         progress("reading", (i + 1) / len(parts))
     points = sum(smp.points for smp in samples)
-    cloud = sample_cloud(samples, origin, [str(p) for p in scans], 2 * s.segmentation.fit_max_points)
+    cloud = gathered.cloud(samples, origin, [str(p) for p in scans], 2 * s.segmentation.fit_max_points)
     sample_meta = [(smp.points, smp.spilled) for smp in samples]
     samples.clear()
     timings["reading"] = time.perf_counter() - t0

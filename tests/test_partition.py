@@ -13,10 +13,12 @@ from sbsc_core import partition
 from sbsc_core.io.ply import write_ply
 from sbsc_core.orthoimage import build_orthoimage
 from sbsc_core.partition import (
+    SampleBuffer,
     WallIndex,
     assign_chunk,
     partition_part,
     plan_parts,
+    sample_cloud,
     sample_part,
     sample_step,
     scan_origin,
@@ -162,3 +164,31 @@ def test_numpy_environment_only_on_amd_zen4(monkeypatch):
     assert not cpu_features.prefer_fast_sort()  # numpy is imported here: too late, nothing set
     monkeypatch.setenv("NPY_DISABLE_CPU_FEATURES", "")  # the user's own choice wins
     assert cpu_features.numpy_environment() == {}
+
+
+@pytest.mark.parametrize("step", [1, 3, 7])
+def test_sample_buffer_gathers_what_sample_cloud_concatenates(scene, tmp_path, step):
+    """Samples copied into place as they arrive (in any order) give sample_cloud's cloud; a
+    sample of another size falls back to the concatenation."""
+    cloud, _ = scene
+    path = tmp_path / "room.ply"
+    write_ply(path, cloud.world(), cloud.rgb, double=True)
+    parts, _ = plan_parts([path], part_points=50_000)
+    origin = scan_origin(path)
+    samples = [sample_part(p, origin, step, str(tmp_path)) for p in parts]
+    for limit in (10**9, len(cloud) // (2 * step)):  # without and with the final thinning
+        want = sample_cloud(samples, origin, ["room"], limit)
+        buf = SampleBuffer(parts, step)
+        got = [None] * len(parts)
+        for k in reversed(range(len(parts))):
+            got[k] = buf.add(k, samples[k])
+        assert not any(len(g.xyz) for g in got)
+        c = buf.cloud(got, origin, ["room"], limit)
+        assert c.xyz.tobytes() == want.xyz.tobytes() and c.rgb.tobytes() == want.rgb.tobytes()
+    short = list(samples)
+    short[1] = partition.PartSample(samples[1].xyz[:-1], samples[1].rgb[:-1], samples[1].points, False)
+    buf = SampleBuffer(parts, step)
+    got = [buf.add(k, smp) for k, smp in enumerate(short)]
+    c = buf.cloud(got, origin, ["room"], 10**9)
+    want = sample_cloud(short, origin, ["room"], 10**9)
+    assert c.xyz.tobytes() == want.xyz.tobytes() and c.rgb.tobytes() == want.rgb.tobytes()
