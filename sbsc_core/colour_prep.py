@@ -45,12 +45,17 @@ def prepare_colour(ortho: Orthoimage, settings: ColourPrepSettings | None = None
     """A new orthoimage whose colour is equalised (depth and mask are shared, unchanged)."""
     s = settings or ColourPrepSettings()
     field, ref = illumination_field(ortho, s)
-    colour = ortho.colour.copy()
-    if field is not None:
-        c = ortho.colour.astype(np.float32)
-        gain = np.clip(ref[None, None, :] / np.maximum(field, 1.0), 0.25, 4.0)
-        out = np.clip(np.rint(c * gain), 0, 255).astype(np.uint8)
-        colour = np.where(ortho.mask[..., None], out, 0).astype(np.uint8)
+    if field is None:
+        colour = ortho.colour.copy()
+    else:  # in place: the gain, then the equalised colour, then no data at 0
+        gain = np.maximum(field, 1.0)
+        np.divide(ref[None, None, :], gain, out=gain)
+        np.clip(gain, 0.25, 4.0, out=gain)
+        gain *= ortho.colour
+        np.rint(gain, out=gain)
+        np.clip(gain, 0, 255, out=gain)
+        colour = gain.astype(np.uint8)
+        colour *= ortho.mask[..., None]
     return Orthoimage(wall_id=ortho.wall_id, frame=ortho.frame, pixel_m=ortho.pixel_m, colour=colour,
                       depth=ortho.depth, mask=ortho.mask)
 

@@ -129,8 +129,13 @@ def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shap
         q *= np.float32(1.0 / quantum)
         np.rint(q, out=q)
         np.clip(q, 0, nq - 1, out=q)
-        key = pixel * nq
-        key += q.astype(np.int64)
+        if npx * nq < (1 << 32):  # the key fits 32 bits: half the bytes to sort, the same order
+            key = pixel.astype(np.uint32)
+            key *= np.uint32(nq)
+            key += q.astype(np.uint32)
+        else:
+            key = pixel * nq
+            key += q.astype(np.int64)
         del q
         key.sort()
         med = 0.5 * ((key[lo_i] % nq) + (key[hi_i] % nq))
