@@ -105,7 +105,11 @@ def colour_image(ortho: Orthoimage, area: WallArea, settings: ColourRecognitionS
     raw, usable = fill_gaps(ortho.colour, ortho.mask & ~opening, settings.gap_fill_sigma_px,
                             settings.gap_fill_min_weight)
     usable &= ~opening
-    raw = np.clip(np.round(np.where(usable[..., None], raw, 0)), 0, 255).astype(np.uint8)
+    if raw is ortho.colour:  # (float colours without gaps: not a copy)
+        raw = raw.copy()
+    np.copyto(raw, 0, where=~usable[..., None])  # in place
+    np.round(raw, out=raw)
+    raw = np.clip(raw, 0, 255, out=raw).astype(np.uint8)
     vis = area.visible & usable if area.visible.shape == usable.shape else np.zeros_like(usable)
     if np.count_nonzero(vis) < 0.01 * max(1, np.count_nonzero(usable)):  # no usable wall area: the flat part of the wall
         d = np.asarray(ortho.depth, np.float32)
@@ -122,7 +126,8 @@ def colour_image(ortho: Orthoimage, area: WallArea, settings: ColourRecognitionS
     den = cv2.boxFilter(w, -1, (win, win), normalize=True, borderType=cv2.BORDER_CONSTANT)
     num = cv2.boxFilter(lab * w[..., None], -1, (win, win), normalize=True, borderType=cv2.BORDER_CONSTANT)
     ok = den > 0.05
-    bg = np.where(ok[..., None], num / np.maximum(den, 1e-6)[..., None], wall_lab[None, None, :]).astype(np.float32)
+    bg = np.divide(num, np.maximum(den, 1e-6)[..., None], out=num)  # in place, then the wall colour where too few
+    np.copyto(bg, wall_lab[None, None, :], where=~ok[..., None])
     dl = lab - bg  # its norm, summed as .sum(axis=2) sums the squares
     delta = np.sqrt(dl[..., 0] * dl[..., 0] + dl[..., 1] * dl[..., 1] + dl[..., 2] * dl[..., 2]).astype(np.float32)
     del dl
