@@ -215,7 +215,10 @@ def ncc_map(image: np.ndarray, template: np.ndarray) -> np.ndarray:
     Undefined values (flat windows) are -1.
     """
     res = cv2.matchTemplate(image, template, cv2.TM_CCOEFF_NORMED)
-    return np.nan_to_num(res, nan=-1.0, posinf=-1.0, neginf=-1.0)
+    bad = ~np.isfinite(res)  # what np.nan_to_num(res, nan=-1, posinf=-1, neginf=-1) sets, in place
+    if bad.any():
+        res[bad] = -1.0
+    return res
 
 
 def masked_ncc(region: np.ndarray, known: np.ndarray, template: np.ndarray, min_pixels: int = 16) -> np.ndarray:
