@@ -78,8 +78,9 @@ from .partition import (
     worker_ready,
 )
 from .placement import place_hits
-from .segmentation import segment_floor_ceiling_walls
+from .segmentation import StoreyPoints, segment_floor_ceiling_walls
 from .settings import DetectionSettings, load_settings
+from .storey_samples import storey_cloud, storey_part, storey_steps
 from .suggestions import suggestions_document
 from .templates import ModelTemplate, make_templates
 from .types import (
@@ -642,6 +643,31 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, levels
     return out
 
 
+def _storey_points(executor: Executor, parts: Sequence, sample_meta: list[tuple[int, bool]], cloud: PointCloud,
+                   points: int, s: DetectionSettings, *, scratch: Path, in_flight: int,
+                   log: Callable[[str], None]) -> StoreyPoints:
+    """The ``storey_points`` of :func:`segment_floor_ceiling_walls` for a scan read out of core:
+    one more pass over the parts (:func:`~sbsc_core.storey_samples.storey_part`) writes each
+    storey's points at its own sample density, then each storey's cloud is read back in turn."""
+    limit = 2 * s.segmentation.fit_max_points
+
+    def read(bounds: list[tuple[float, float]]) -> Iterator[PointCloud]:
+        t = time.perf_counter()
+        steps = storey_steps(cloud.xyz[:, 2], points, bounds, limit)
+        jobs = [(part, cloud.origin, bounds, steps, str(scratch), n, spilled)
+                for part, (n, spilled) in zip(parts, sample_meta, strict=True)]
+        written = np.zeros(len(bounds), np.int64)
+        for _, got in _as_done(executor, jobs, storey_part, in_flight):
+            written += np.asarray(got, np.int64)
+        log(f"{len(bounds)} storeys read again at their own density in {time.perf_counter() - t:.1f} s: "
+            + ", ".join(f"S{k + 1} {int(n):,} points (every {st})" for k, (n, st) in enumerate(zip(written, steps,
+                                                                                                 strict=True))))
+        for k in range(len(bounds)):
+            yield storey_cloud(scratch, parts, k, cloud.origin, cloud.sources, limit)
+
+    return read
+
+
 def detect_scans(
     scans: Sequence[Path],
     library: ModelLibrary,
@@ -699,7 +725,10 @@ def detect_scans(
     # make the templates now
     warm = [executor.submit(_ready) for _ in range(workers)] if workers > 1 else []
     made = executor.submit(_templates_job, library, s, classes) if workers > 1 else None
-    seg = segment_floor_ceiling_walls(cloud, s.segmentation)
+    # several storeys in a thinned sample: each is read again at the density it has when scanned alone
+    again = _storey_points(executor, parts, sample_meta, cloud, points, s, scratch=Path(scratch),
+                           in_flight=2 * workers, log=log) if len(cloud) < points else None
+    seg = segment_floor_ceiling_walls(cloud, s.segmentation, storey_points=again)
     if seg.stray_points:  # counted in the sample: scaled to the whole scan
         seg.stray_points = int(round(seg.stray_points * points / max(len(cloud), 1)))
     found_columns = []

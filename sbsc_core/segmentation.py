@@ -36,17 +36,18 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import NoWallsError
+from .errors import InputError, NoWallsError
 from .settings import SegmentationSettings
 from .stray_points import DenseBox, dense_box, inside_box
 from .types import PointCloud, Segmentation, Storey, Wall, WallFrame
 
-__all__ = ["segment_floor_ceiling_walls", "find_storeys", "find_floor_ceiling", "fit_line_2d",
+__all__ = ["segment_floor_ceiling_walls", "segment_storey", "storey_bounds", "StoreyPoints", "find_storeys", "find_floor_ceiling", "fit_line_2d",
            "assign_points_to_walls"]
 
 _DENSE_VOXELS = 1 << 24  # voxel grids up to this size are grouped with bincount, larger ones by sorting
@@ -89,24 +90,123 @@ class _Segment:
 # --------------------------------------------------------------------------- public
 
 
-def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSettings | None = None) -> Segmentation:
+StoreyPoints = Callable[[list[tuple[float, float]]], Iterator[PointCloud]]
+"""Given the Z range of each storey (relative to the cloud's origin, bottom up), yields each
+storey's cloud in turn, in the cloud's frame: see ``storey_points`` of
+:func:`segment_floor_ceiling_walls`."""
+
+
+def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSettings | None = None, *,
+                                storey_points: StoreyPoints | None = None) -> Segmentation:
     """Storeys, their floor and ceiling levels and the walls of ``cloud`` with frames and points.
 
     Stray points (outside the dense part, see :mod:`~sbsc_core.stray_points`) are ignored and
     counted. The storeys are the parts of the Z range between slabs (:func:`find_storeys`);
     the paper's method runs on each storey as on a floor. Walls get ids ``W01, W02, ...``
     ordered by their centre (north to south, then west to east, in plan) and their direction;
-    with several storeys the ids carry the storey (``S1-W01``). Raises
+    with several storeys the ids carry the storey (``S1-W01``).
+
+    With several storeys each storey is segmented on its own points as if it had been scanned
+    alone (:func:`segment_storey`: its own sample density, dense part and levels): a storey's
+    walls do not depend on how many storeys are above or below it. Its points are those
+    between the middles of the slabs below and above it (:func:`storey_bounds`), taken from
+    ``cloud``, or from ``storey_points`` when given (a scan read out of core gives each
+    storey's points at the density the storey alone would be sampled with; the walls'
+    ``point_index`` are then empty, they would index the storey's cloud). Raises
     :class:`~sbsc_core.errors.NoWallsError` when the cloud has no floor / ceiling pair or no
     wall, :class:`~sbsc_core.errors.InputError` when its dense part is not a building's.
     """
     s = settings or SegmentationSettings()
-    n = len(cloud)
-    if n == 0:
+    if len(cloud) == 0:
         raise NoWallsError("no walls found: the scan has no points")
+    box, stray, sample = _dense_sample(cloud, s)
+    levels = find_storeys(sample[:, 2], s, sample[:, :2])
+    z0 = float(cloud.origin[2])
+    if len(levels) == 1:
+        floor, ceiling = levels[0]
+        found = _storey_walls(cloud.xyz, sample, box, floor, ceiling, cloud.origin, s)
+        return Segmentation(floor_z=floor + z0, ceiling_z=ceiling + z0, storeys=[Storey("S1", floor + z0, ceiling + z0)],
+                            walls=[Wall(id=f"W{i + 1:02d}", frame=f, point_index=idx, storey="S1")
+                                   for i, (f, idx) in enumerate(found)], stray_points=int(stray))
+    del sample
+    bounds = storey_bounds(levels)
+    picked: list[np.ndarray] = []
+
+    def own_points(bounds: list[tuple[float, float]]) -> Iterator[PointCloud]:
+        for lo, hi in bounds:
+            sel = _z_index(cloud.xyz, lo, hi)
+            picked.append(sel)
+            yield PointCloud(xyz=cloud.xyz[sel], rgb=cloud.rgb[sel], origin=cloud.origin, sources=cloud.sources)
+
+    clouds = own_points(bounds) if storey_points is None else storey_points(bounds)
+    storeys: list[Storey] = []
+    walls: list[Wall] = []
+    for k, ((floor, ceiling), sub) in enumerate(zip(levels, clouds, strict=False)):
+        sid = f"S{k + 1}"
+        if not np.allclose(sub.origin, cloud.origin):
+            raise ValueError(f"storey {sid}: its cloud has another origin than the scan's")
+        one = segment_storey(sub, sid, (floor, ceiling), s, box)
+        del sub
+        for wall in one.walls:
+            wall.point_index = picked[k][wall.point_index] if storey_points is None else np.zeros(0, np.int64)
+        storeys += one.storeys
+        walls += one.walls
+    if len(storeys) != len(levels):
+        raise ValueError(f"storey points: {len(storeys)} storey clouds for {len(levels)} storeys")
+    return Segmentation(floor_z=storeys[0].floor_z, ceiling_z=storeys[-1].ceiling_z, walls=walls,
+                        storeys=storeys, stray_points=int(stray))
+
+
+def segment_storey(cloud: PointCloud, sid: str, levels: tuple[float, float],
+                   settings: SegmentationSettings | None = None, box: DenseBox | None = None) -> Segmentation:
+    """The walls of one storey's points ``cloud``, segmented as if the storey had been scanned alone.
+
+    Its dense part, sample and levels are its own (as :func:`segment_floor_ceiling_walls`
+    finds them on a one-storey scan), unless its points do not show one storey (then
+    ``levels``, its (floor, ceiling) in the cloud's frame, and ``box``, the building's dense
+    part, apply). Walls get ids ``{sid}-W01, ...`` and the storey ``sid``; their
+    ``point_index`` index ``cloud``.
+    """
+    s = settings or SegmentationSettings()
+    z0 = float(cloud.origin[2])
+    floor, ceiling = levels
+    if len(cloud) == 0:
+        raise NoWallsError(f"storey {sid} (z = {floor + z0:.2f} to {ceiling + z0:.2f} m): no walls found: no points")
+    try:
+        own_box, _, sample = _dense_sample(cloud, s)
+        own = find_storeys(sample[:, 2], s, sample[:, :2])
+    except (NoWallsError, InputError):
+        own = []
+    if len(own) == 1:
+        box = own_box
+        floor, ceiling = own[0]
+    else:  # not one storey on its own: the levels and the dense part found in the whole scan
+        sample = _dense_sample(cloud, s, box)[2]
+    try:
+        found = _storey_walls(cloud.xyz, sample, box, floor, ceiling, cloud.origin, s)
+    except NoWallsError as exc:
+        raise NoWallsError(f"storey {sid} (z = {floor + z0:.2f} to {ceiling + z0:.2f} m): {exc}") from None
+    return Segmentation(floor_z=floor + z0, ceiling_z=ceiling + z0, storeys=[Storey(sid, floor + z0, ceiling + z0)],
+                        walls=[Wall(id=f"{sid}-W{i + 1:02d}", frame=f, point_index=idx, storey=sid)
+                               for i, (f, idx) in enumerate(found)])
+
+
+def storey_bounds(levels: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """The Z range ``[lo, hi)`` of each storey's points, from its (floor, ceiling) levels
+    bottom up: from the middle of the slab below to the middle of the slab above (open at
+    the bottom of the lowest storey and the top of the highest)."""
+    mids = [0.5 * (levels[k][1] + levels[k + 1][0]) for k in range(len(levels) - 1)]
+    return list(zip([-math.inf, *mids], [*mids, math.inf], strict=True))
+
+
+def _dense_sample(cloud: PointCloud, s: SegmentationSettings, box: DenseBox | None = None
+                  ) -> tuple[DenseBox, int, np.ndarray]:
+    """The dense part of ``cloud`` (``box``, or found), the number of points outside it and a
+    regular subsample of the points inside (at most about ``2 * fit_max_points``)."""
     xyz = cloud.xyz
-    box = dense_box(xyz, s, where=", ".join(cloud.sources) or "scan")
-    # regular subsample of the dense part for the levels and for fitting
+    n = len(xyz)
+    if box is None:
+        box = dense_box(xyz, s, where=", ".join(cloud.sources) or "scan")
     step = max(1, math.ceil(n / (2 * s.fit_max_points)))
     if step == 1:  # the sample is the dense part itself: one test of the box
         inside = inside_box(xyz, box)
@@ -117,25 +217,14 @@ def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSetting
         stray = n - _count_inside(xyz, box)
         sample = xyz[::step]
         sample = sample[inside_box(sample, box)]
-    levels = find_storeys(sample[:, 2], s, sample[:, :2])
-    multi = len(levels) > 1
-    z0 = float(cloud.origin[2])
-    storeys: list[Storey] = []
-    walls: list[Wall] = []
-    for k, (floor, ceiling) in enumerate(levels):
-        sid = f"S{k + 1}"
-        storeys.append(Storey(sid, floor + z0, ceiling + z0))
-        try:
-            found = _storey_walls(xyz, sample, box, floor, ceiling, cloud.origin, s)
-        except NoWallsError as exc:
-            if not multi:
-                raise
-            raise NoWallsError(f"storey {sid} (z = {floor + z0:.2f} to {ceiling + z0:.2f} m): {exc}") from None
-        prefix = f"{sid}-" if multi else ""
-        walls += [Wall(id=f"{prefix}W{i + 1:02d}", frame=f, point_index=idx, storey=sid)
-                  for i, (f, idx) in enumerate(found)]
-    return Segmentation(floor_z=storeys[0].floor_z, ceiling_z=storeys[-1].ceiling_z, walls=walls,
-                        storeys=storeys, stray_points=int(stray))
+    return box, stray, sample
+
+
+def _z_index(xyz: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """Indices of the points with lo <= z < hi, chunk by chunk."""
+    parts = [np.flatnonzero((xyz[a: a + _CHUNK, 2] >= lo) & (xyz[a: a + _CHUNK, 2] < hi)) + a
+             for a in range(0, len(xyz), _CHUNK)]
+    return np.concatenate(parts) if parts else np.zeros(0, np.int64)
 
 
 def _storey_walls(xyz: np.ndarray, sample: np.ndarray, box: DenseBox, floor: float, ceiling: float,
