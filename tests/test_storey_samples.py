@@ -114,3 +114,33 @@ def test_storey_part_keeps_every_step_th_point_over_all_files(tmp_path, storeys)
     b = storey_cloud(tmp_path, parts, 1, cloud.origin, (), limit=10**9)
     np.testing.assert_array_equal(b.xyz, cloud.xyz[high])
     np.testing.assert_array_equal(b.rgb, cloud.rgb[high])
+
+
+def test_detect_scans_reads_each_storey_again_as_alone(tmp_path, storeys) -> None:
+    """The pipeline's storey pass (``pipeline._storey_points``: the parts read again by an
+    executor's tasks) gives each storey's walls as the storey's own files do."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from sbsc_core.pipeline import _storey_points
+    from sbsc_core.settings import DetectionSettings
+
+    s1, s2 = storeys
+    files = [tmp_path / "S1.ply", tmp_path / "S2.ply"]
+    for f, c in zip(files, (s1, s2), strict=True):
+        write_ply(f, c.world(), c.rgb)
+    building = read_scans(files)
+    parts, total = plan_parts(files, part_points=len(s1) // 3)
+    s = DetectionSettings(segmentation=SegmentationSettings(fit_max_points=len(s1) // 2 + 1))
+    sample = PointCloud(building.xyz[::4].copy(), building.rgb[::4].copy(), building.origin, building.sources)
+    said: list[str] = []
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    with ThreadPoolExecutor(2) as ex:
+        again = _storey_points(ex, parts, [(0, False)] * len(parts), sample, total, s, scratch=scratch, in_flight=4,
+                               log=said.append)
+        seg = segment_floor_ceiling_walls(sample, s.segmentation, storey_points=again)
+    assert said and "S1" in said[0] and "(every 1)" in said[0]
+    assert not list(scratch.iterdir())
+    for sid, f in (("S1", files[0]), ("S2", files[1])):
+        alone = read_scans([f], building.origin)
+        assert _frames(seg, sid) == _frames(segment_floor_ceiling_walls(alone, s.segmentation))
