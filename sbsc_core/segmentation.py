@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -43,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError, NoWallsError
+from .io.scans import _ORIGIN_SAMPLE, BLOCK_POINTS
 from .settings import SegmentationSettings
 from .stray_points import DenseBox, dense_box, inside_box
 from .types import PointCloud, Segmentation, Storey, Wall, WallFrame
@@ -53,6 +55,7 @@ __all__ = ["segment_floor_ceiling_walls", "segment_storey", "storey_bounds", "St
 _DENSE_VOXELS = 1 << 24  # voxel grids up to this size are grouped with bincount, larger ones by sorting
 _CHUNK = 1 << 22  # points handled at once where temporaries would otherwise grow with the wall
 _PLANE_BLOCK = 1 << 15  # voxels compared with every plane at once (bounds a (voxels, planes) array)
+_ORIGIN_POINTS = min(BLOCK_POINTS, _ORIGIN_SAMPLE)  # first points of a file that set its origin
 _ASSIGN_THREADS = 2  # threads assigning points to walls
 _THREAD_MIN_POINTS = 1 << 22  # clouds smaller than this are assigned in one thread
 
@@ -172,6 +175,13 @@ def segment_storey(cloud: PointCloud, sid: str, levels: tuple[float, float],
     floor, ceiling = levels
     if len(cloud) == 0:
         raise NoWallsError(f"storey {sid} (z = {floor + z0:.2f} to {ceiling + z0:.2f} m): no walls found: no points")
+    shift = cloud.origin - _own_origin(cloud)
+    if shift.any():  # in the storey's own frame, as a scan of it alone (the frames are world coordinates)
+        cloud = _shifted(cloud, shift)
+        floor, ceiling = floor + shift[2], ceiling + shift[2]
+        z0 -= shift[2]
+        if box is not None:
+            box = DenseBox(box.lo + shift, box.hi + shift)
     try:
         own_box, _, sample = _dense_sample(cloud, s)
         own = find_storeys(sample[:, 2], s, sample[:, :2])
@@ -189,6 +199,24 @@ def segment_storey(cloud: PointCloud, sid: str, levels: tuple[float, float],
     return Segmentation(floor_z=floor + z0, ceiling_z=ceiling + z0, storeys=[Storey(sid, floor + z0, ceiling + z0)],
                         walls=[Wall(id=f"{sid}-W{i + 1:02d}", frame=f, point_index=idx, storey=sid)
                                for i, (f, idx) in enumerate(found)])
+
+
+def _own_origin(cloud: PointCloud) -> np.ndarray:
+    """The recentring origin a scan of ``cloud``'s points alone would have: the rounded median
+    of its first points (as :func:`~sbsc_core.io.scans.iter_scan` sets a file's)."""
+    first = cloud.xyz[:_ORIGIN_POINTS].astype(np.float64) + cloud.origin
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns
+        med = np.nanmedian(first, axis=0)
+    return np.where(np.isfinite(med), np.round(med), 0.0) + 0.0
+
+
+def _shifted(cloud: PointCloud, shift: np.ndarray) -> PointCloud:
+    """``cloud`` recentred on ``origin - shift`` (float32 coordinates plus ``shift``, in float64)."""
+    xyz = np.empty_like(cloud.xyz)
+    for a in range(0, len(xyz), _CHUNK):
+        np.add(cloud.xyz[a: a + _CHUNK], shift, out=xyz[a: a + _CHUNK], casting="unsafe")
+    return PointCloud(xyz=xyz, rgb=cloud.rgb, origin=cloud.origin - shift, sources=cloud.sources)
 
 
 def storey_bounds(levels: list[tuple[float, float]]) -> list[tuple[float, float]]:

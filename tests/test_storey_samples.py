@@ -27,16 +27,32 @@ def storeys() -> tuple[PointCloud, PointCloud]:
     return _stack(*_two_rooms(0.0, (2.90, 2.65), 0)), _stack(*_two_rooms(3.15, (2.60, 2.60), 10))
 
 
+@pytest.fixture(scope="module")
+def storey_files(tmp_path_factory, storeys) -> list[list]:
+    """Each storey's points in two PLY files (as two stations): [[S1 files], [S2 files]]."""
+    root = tmp_path_factory.mktemp("storeys")
+    files = []
+    for k, c in enumerate(storeys):
+        half = len(c) // 2
+        files.append([])
+        for j, (a, b) in enumerate(((0, half), (half, len(c)))):
+            files[-1].append(root / f"S{k + 1}_{j}.ply")
+            write_ply(files[-1][-1], c.world()[a:b], c.rgb[a:b])
+    return files
+
+
 def test_storey_bounds_are_the_middles_of_the_slabs() -> None:
     assert storey_bounds([(0.0, 2.9), (3.15, 5.75), (6.0, 9.0)]) == [
         (-math.inf, 3.025), (3.025, 5.875), (5.875, math.inf)]
 
 
-def test_a_storey_of_a_building_is_segmented_as_alone(storeys) -> None:
-    """Its walls are those of the storey alone, bit for bit, even where the building's sample
-    would be thinned more than the storey's (``fit_max_points`` below the building's points)."""
-    s1, s2 = storeys
-    building = _stack(s1, s2)
+def test_a_storey_of_a_building_is_segmented_as_alone(storey_files) -> None:
+    """Its walls are those of the storey's own files read alone, bit for bit (each storey in
+    its own frame, as a scan of it alone), even where the building's sample would be thinned
+    more than the storey's (``fit_max_points`` below the building's points)."""
+    building = read_scans(storey_files[0] + storey_files[1])
+    s1, s2 = read_scans(storey_files[0]), read_scans(storey_files[1])
+    assert not np.array_equal(s1.origin, s2.origin)
     s = SegmentationSettings(fit_max_points=len(s1) // 3)
     assert math.ceil(len(building) / (2 * s.fit_max_points)) > math.ceil(len(s1) / (2 * s.fit_max_points))
     seg = segment_floor_ceiling_walls(building, s)
@@ -46,30 +62,22 @@ def test_a_storey_of_a_building_is_segmented_as_alone(storeys) -> None:
         assert _frames(seg, sid) == _frames(one)
         st = next(x for x in seg.storeys if x.id == sid)
         assert (st.floor_z, st.ceiling_z) == (one.storeys[0].floor_z, one.storeys[0].ceiling_z)
-    # the point indices are into the building's cloud
-    off = len(s1)
-    for w in seg.walls:
-        if w.storey == "S2":
-            alone = next(a for a in segment_floor_ceiling_walls(s2, s).walls if a.id == w.id.split("-")[1])
-            np.testing.assert_array_equal(w.point_index, alone.point_index + off)
+        # the point indices are into the building's cloud
+        off = 0 if sid == "S1" else len(s1)
+        for w, a in zip([w for w in seg.walls if w.storey == sid], one.walls, strict=True):
+            np.testing.assert_array_equal(w.point_index, a.point_index + off)
 
 
-def test_storeys_read_again_from_files_are_segmented_as_alone(tmp_path, storeys) -> None:
+def test_storeys_read_again_from_files_are_segmented_as_alone(tmp_path, storey_files) -> None:
     """Out of core: a thinned sample of the building finds the storeys, each storey's points
     are read again from the files at its own density (the same points as the storey's files
     when it would not be thinned alone) and give the walls of the storey alone."""
-    s1, s2 = storeys
-    files = []
-    for k, c in enumerate((s1, s2)):
-        half = len(c) // 2
-        for j, (a, b) in enumerate(((0, half), (half, len(c)))):
-            files.append(tmp_path / f"S{k + 1}_{j}.ply")
-            write_ply(files[-1], c.world()[a:b], c.rgb[a:b])
+    files = storey_files[0] + storey_files[1]
     building = read_scans(files)
     origin = building.origin
-    parts, total = plan_parts(files, part_points=len(s1) // 5)  # several parts per file
+    parts, total = plan_parts(files, part_points=len(building) // 11)  # several parts per file
     assert total == len(building) and len(parts) > len(files)
-    s = SegmentationSettings(fit_max_points=len(s1) // 2 + 1)  # the storey alone: every point
+    s = SegmentationSettings(fit_max_points=len(building) // 3)  # a storey alone: every point
     sample = PointCloud(building.xyz[::3].copy(), building.rgb[::3].copy(), origin, building.sources)
     limit = 2 * s.fit_max_points
     steps_seen = []
@@ -86,9 +94,8 @@ def test_storeys_read_again_from_files_are_segmented_as_alone(tmp_path, storeys)
     assert steps_seen == [[1, 1]]
     assert not list(tmp_path.glob("storey*"))  # read back and deleted
     assert all(len(w.point_index) == 0 for w in seg.walls)
-    for sid, k in (("S1", 0), ("S2", 2)):
-        alone = read_scans(files[k: k + 2], origin)
-        assert _frames(seg, sid) == _frames(segment_floor_ceiling_walls(alone, s))
+    for sid, own in (("S1", storey_files[0]), ("S2", storey_files[1])):
+        assert _frames(seg, sid) == _frames(segment_floor_ceiling_walls(read_scans(own), s))
     thin = segment_floor_ceiling_walls(sample, s)  # the building's sample alone gives other walls
     assert _frames(thin, "S1") != _frames(seg, "S1")
 
@@ -116,7 +123,7 @@ def test_storey_part_keeps_every_step_th_point_over_all_files(tmp_path, storeys)
     np.testing.assert_array_equal(b.rgb, cloud.rgb[high])
 
 
-def test_detect_scans_reads_each_storey_again_as_alone(tmp_path, storeys) -> None:
+def test_detect_scans_reads_each_storey_again_as_alone(tmp_path, storey_files) -> None:
     """The pipeline's storey pass (``pipeline._storey_points``: the parts read again by an
     executor's tasks) gives each storey's walls as the storey's own files do."""
     from concurrent.futures import ThreadPoolExecutor
@@ -124,13 +131,10 @@ def test_detect_scans_reads_each_storey_again_as_alone(tmp_path, storeys) -> Non
     from sbsc_core.pipeline import _storey_points
     from sbsc_core.settings import DetectionSettings
 
-    s1, s2 = storeys
-    files = [tmp_path / "S1.ply", tmp_path / "S2.ply"]
-    for f, c in zip(files, (s1, s2), strict=True):
-        write_ply(f, c.world(), c.rgb)
+    files = storey_files[0] + storey_files[1]
     building = read_scans(files)
-    parts, total = plan_parts(files, part_points=len(s1) // 3)
-    s = DetectionSettings(segmentation=SegmentationSettings(fit_max_points=len(s1) // 2 + 1))
+    parts, total = plan_parts(files, part_points=len(building) // 7)
+    s = DetectionSettings(segmentation=SegmentationSettings(fit_max_points=len(building) // 3))
     sample = PointCloud(building.xyz[::4].copy(), building.rgb[::4].copy(), building.origin, building.sources)
     said: list[str] = []
     scratch = tmp_path / "scratch"
@@ -141,6 +145,6 @@ def test_detect_scans_reads_each_storey_again_as_alone(tmp_path, storeys) -> Non
         seg = segment_floor_ceiling_walls(sample, s.segmentation, storey_points=again)
     assert said and "S1" in said[0] and "(every 1)" in said[0]
     assert not list(scratch.iterdir())
-    for sid, f in (("S1", files[0]), ("S2", files[1])):
-        alone = read_scans([f], building.origin)
+    for sid, own in (("S1", storey_files[0]), ("S2", storey_files[1])):
+        alone = read_scans(own)
         assert _frames(seg, sid) == _frames(segment_floor_ceiling_walls(alone, s.segmentation))
