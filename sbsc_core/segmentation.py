@@ -49,7 +49,8 @@ from .settings import SegmentationSettings
 from .stray_points import DenseBox, dense_box, inside_box
 from .types import PointCloud, Segmentation, Storey, Wall, WallFrame
 
-__all__ = ["segment_floor_ceiling_walls", "segment_storey", "storey_bounds", "StoreyPoints", "find_storeys", "find_floor_ceiling", "fit_line_2d",
+__all__ = ["segment_floor_ceiling_walls", "find_scan_storeys", "ScanStoreys", "segment_storeys",
+           "segment_storey", "storey_bounds", "StoreyPoints", "find_storeys", "find_floor_ceiling", "fit_line_2d",
            "assign_points_to_walls"]
 
 _DENSE_VOXELS = 1 << 24  # voxel grids up to this size are grouped with bincount, larger ones by sorting
@@ -93,14 +94,45 @@ class _Segment:
 # --------------------------------------------------------------------------- public
 
 
-StoreyPoints = Callable[[list[tuple[float, float]]], Iterator[PointCloud]]
-"""Given the Z range of each storey (relative to the cloud's origin, bottom up), yields each
-storey's cloud in turn, in the cloud's frame: see ``storey_points`` of
-:func:`segment_floor_ceiling_walls`."""
+StoreyPoints = Callable[[list[tuple[float, float]], list[float]], Iterator[PointCloud]]
+"""Given the Z range of each storey (relative to the scan's origin, bottom up) and the share
+of the scan's sample in each, yields each storey's cloud in turn, in the scan's frame (the
+callee may change it): see :func:`segment_storeys`."""
+
+
+@dataclass
+class ScanStoreys:
+    """What :func:`find_scan_storeys` finds in a cloud (or a regular sample of a scan)."""
+
+    levels: list[tuple[float, float]]  # (floor, ceiling) of each storey, bottom up, relative to ``origin``
+    origin: np.ndarray  # (3,) the cloud's origin
+    box: DenseBox  # its dense part
+    stray: int  # its points outside the dense part
+    shares: list[float]  # share of its points in each storey's Z range (:func:`storey_bounds`)
+    sample: np.ndarray | None = None  # one storey: the dense part's sample its walls are fitted on
+
+
+def find_scan_storeys(cloud: PointCloud, settings: SegmentationSettings | None = None) -> ScanStoreys:
+    """The dense part of ``cloud`` and the storeys in it (:func:`find_storeys`).
+
+    Raises :class:`~sbsc_core.errors.NoWallsError` when the cloud has no floor / ceiling pair,
+    :class:`~sbsc_core.errors.InputError` when its dense part is not a building's.
+    """
+    s = settings or SegmentationSettings()
+    if len(cloud) == 0:
+        raise NoWallsError("no walls found: the scan has no points")
+    box, stray, sample = _dense_sample(cloud, s)
+    levels = find_storeys(sample[:, 2], s, sample[:, :2])
+    shares = [1.0]
+    if len(levels) > 1:  # each storey is sampled again on its own: this sample is not needed
+        del sample
+        sample = None
+        shares = [len(_z_index(cloud.xyz, lo, hi)) / len(cloud) for lo, hi in storey_bounds(levels)]
+    return ScanStoreys(levels, np.asarray(cloud.origin, np.float64).copy(), box, int(stray), shares, sample)
 
 
 def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSettings | None = None, *,
-                                storey_points: StoreyPoints | None = None) -> Segmentation:
+                                storeys: ScanStoreys | None = None) -> Segmentation:
     """Storeys, their floor and ceiling levels and the walls of ``cloud`` with frames and points.
 
     Stray points (outside the dense part, see :mod:`~sbsc_core.stray_points`) are ignored and
@@ -110,54 +142,69 @@ def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSetting
     with several storeys the ids carry the storey (``S1-W01``).
 
     With several storeys each storey is segmented on its own points as if it had been scanned
-    alone (:func:`segment_storey`: its own sample density, dense part and levels): a storey's
-    walls do not depend on how many storeys are above or below it. Its points are those
-    between the middles of the slabs below and above it (:func:`storey_bounds`), taken from
-    ``cloud``, or from ``storey_points`` when given (a scan read out of core gives each
-    storey's points at the density the storey alone would be sampled with; the walls'
-    ``point_index`` are then empty, they would index the storey's cloud). Raises
-    :class:`~sbsc_core.errors.NoWallsError` when the cloud has no floor / ceiling pair or no
-    wall, :class:`~sbsc_core.errors.InputError` when its dense part is not a building's.
+    alone (:func:`segment_storeys`): a storey's walls do not depend on how many storeys are
+    above or below it. ``storeys``: what :func:`find_scan_storeys` found in ``cloud``
+    (found here without it). Raises :class:`~sbsc_core.errors.NoWallsError` when the cloud
+    has no floor / ceiling pair or no wall, :class:`~sbsc_core.errors.InputError` when its
+    dense part is not a building's.
     """
     s = settings or SegmentationSettings()
-    if len(cloud) == 0:
-        raise NoWallsError("no walls found: the scan has no points")
-    box, stray, sample = _dense_sample(cloud, s)
-    levels = find_storeys(sample[:, 2], s, sample[:, :2])
+    found = storeys or find_scan_storeys(cloud, s)
+    if len(found.levels) > 1:
+        picked: list[np.ndarray] = []
+
+        def own_points(bounds: list[tuple[float, float]], shares: list[float]) -> Iterator[PointCloud]:
+            for lo, hi in bounds:
+                sel = _z_index(cloud.xyz, lo, hi)
+                picked.append(sel)
+                yield PointCloud(xyz=cloud.xyz[sel], rgb=cloud.rgb[sel], origin=cloud.origin, sources=cloud.sources)
+
+        seg = segment_storeys(found, own_points, s)
+        for wall, sel in zip(seg.walls, [picked[int(w.storey[1:]) - 1] for w in seg.walls], strict=True):
+            wall.point_index = sel[wall.point_index]
+        return seg
     z0 = float(cloud.origin[2])
-    if len(levels) == 1:
-        floor, ceiling = levels[0]
-        found = _storey_walls(cloud.xyz, sample, box, floor, ceiling, cloud.origin, s)
-        return Segmentation(floor_z=floor + z0, ceiling_z=ceiling + z0, storeys=[Storey("S1", floor + z0, ceiling + z0)],
-                            walls=[Wall(id=f"W{i + 1:02d}", frame=f, point_index=idx, storey="S1")
-                                   for i, (f, idx) in enumerate(found)], stray_points=int(stray))
-    del sample
-    bounds = storey_bounds(levels)
-    picked: list[np.ndarray] = []
+    floor, ceiling = found.levels[0]
+    sample = found.sample if found.sample is not None else _dense_sample(cloud, s, found.box)[2]
+    found.sample = None  # not kept beyond the walls' fit
+    walls = _storey_walls(cloud.xyz, sample, found.box, floor, ceiling, cloud.origin, s)
+    return Segmentation(floor_z=floor + z0, ceiling_z=ceiling + z0, storeys=[Storey("S1", floor + z0, ceiling + z0)],
+                        walls=[Wall(id=f"W{i + 1:02d}", frame=f, point_index=idx, storey="S1")
+                               for i, (f, idx) in enumerate(walls)], stray_points=found.stray)
 
-    def own_points(bounds: list[tuple[float, float]]) -> Iterator[PointCloud]:
-        for lo, hi in bounds:
-            sel = _z_index(cloud.xyz, lo, hi)
-            picked.append(sel)
-            yield PointCloud(xyz=cloud.xyz[sel], rgb=cloud.rgb[sel], origin=cloud.origin, sources=cloud.sources)
 
-    clouds = own_points(bounds) if storey_points is None else storey_points(bounds)
-    storeys: list[Storey] = []
+def segment_storeys(storeys: ScanStoreys, storey_points: StoreyPoints,
+                    settings: SegmentationSettings | None = None) -> Segmentation:
+    """The walls of each of several storeys, each segmented as if it had been scanned alone.
+
+    Each storey's points are those between the middles of the slabs below and above it
+    (:func:`storey_bounds`); ``storey_points`` gives them, storey by storey (a scan read out
+    of core gives them at the density the storey alone would be sampled with). Each is
+    recentred on its own origin and segmented by :func:`segment_storey`: its own sample
+    density, dense part and levels, so that its walls are those of its points scanned alone.
+    The walls' ``point_index`` index their storey's cloud.
+    """
+    s = settings or SegmentationSettings()
+    levels = storeys.levels
+    out: list[Storey] = []
     walls: list[Wall] = []
+    clouds = storey_points(storey_bounds(levels), list(storeys.shares))
     for k, ((floor, ceiling), sub) in enumerate(zip(levels, clouds, strict=False)):
         sid = f"S{k + 1}"
-        if not np.allclose(sub.origin, cloud.origin):
+        if not np.allclose(sub.origin, storeys.origin):
             raise ValueError(f"storey {sid}: its cloud has another origin than the scan's")
-        one = segment_storey(sub, sid, (floor, ceiling), s, box)
+        shift = sub.origin - _own_origin(sub)
+        if shift.any():  # the storey's cloud is ours: recentred in place
+            sub = PointCloud(xyz=_shift_in_place(sub.xyz, shift), rgb=sub.rgb, origin=sub.origin - shift, sources=sub.sources)
+        box = DenseBox(storeys.box.lo + shift, storeys.box.hi + shift)
+        one = segment_storey(sub, sid, (floor + shift[2], ceiling + shift[2]), s, box)
         del sub
-        for wall in one.walls:
-            wall.point_index = picked[k][wall.point_index] if storey_points is None else np.zeros(0, np.int64)
-        storeys += one.storeys
+        out += one.storeys
         walls += one.walls
-    if len(storeys) != len(levels):
-        raise ValueError(f"storey points: {len(storeys)} storey clouds for {len(levels)} storeys")
-    return Segmentation(floor_z=storeys[0].floor_z, ceiling_z=storeys[-1].ceiling_z, walls=walls,
-                        storeys=storeys, stray_points=int(stray))
+    if len(out) != len(levels):
+        raise ValueError(f"storey points: {len(out)} storey clouds for {len(levels)} storeys")
+    return Segmentation(floor_z=out[0].floor_z, ceiling_z=out[-1].ceiling_z, walls=walls, storeys=out,
+                        stray_points=storeys.stray)
 
 
 def segment_storey(cloud: PointCloud, sid: str, levels: tuple[float, float],
@@ -209,6 +256,13 @@ def _own_origin(cloud: PointCloud) -> np.ndarray:
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns
         med = np.nanmedian(first, axis=0)
     return np.where(np.isfinite(med), np.round(med), 0.0) + 0.0
+
+
+def _shift_in_place(xyz: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    """``xyz += shift`` computed in float64, chunk by chunk (no full-size temporary)."""
+    for a in range(0, len(xyz), _CHUNK):
+        np.add(xyz[a: a + _CHUNK], shift, out=xyz[a: a + _CHUNK], casting="unsafe")
+    return xyz
 
 
 def _shifted(cloud: PointCloud, shift: np.ndarray) -> PointCloud:

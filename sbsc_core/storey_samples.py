@@ -26,15 +26,10 @@ from .types import PointCloud
 __all__ = ["storey_steps", "storey_part", "storey_cloud"]
 
 
-def storey_steps(z: np.ndarray, total_points: int, bounds: Sequence[tuple[float, float]], limit: int) -> list[int]:
-    """Sample stride of each storey: its point count over the scan, estimated from the
-    regular sample's Z values ``z`` (``total_points`` in the scan), over ``limit``."""
-    scale = total_points / max(len(z), 1)
-    out = []
-    for lo, hi in bounds:
-        points = int(np.count_nonzero((z >= lo) & (z < hi))) * scale
-        out.append(max(1, math.ceil(points / limit)))
-    return out
+def storey_steps(shares: Sequence[float], total_points: int, limit: int) -> list[int]:
+    """Sample stride of each storey: its point count over the scan (its ``share`` of a regular
+    sample of the scan's ``total_points``) over ``limit``, as a scan of its points alone."""
+    return [max(1, math.ceil(share * total_points / limit)) for share in shares]
 
 
 def _paths(scratch: Path, k: int, part: ScanPart) -> tuple[Path, Path]:

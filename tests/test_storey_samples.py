@@ -10,7 +10,12 @@ import pytest
 from sbsc_core.io.ply import write_ply
 from sbsc_core.io.scans import read_scans
 from sbsc_core.partition import plan_parts
-from sbsc_core.segmentation import segment_floor_ceiling_walls, storey_bounds
+from sbsc_core.segmentation import (
+    find_scan_storeys,
+    segment_floor_ceiling_walls,
+    segment_storeys,
+    storey_bounds,
+)
 from sbsc_core.settings import SegmentationSettings
 from sbsc_core.storey_samples import storey_cloud, storey_part, storey_steps
 from sbsc_core.types import PointCloud
@@ -82,18 +87,19 @@ def test_storeys_read_again_from_files_are_segmented_as_alone(tmp_path, storey_f
     limit = 2 * s.fit_max_points
     steps_seen = []
 
-    def again(bounds):
-        steps = storey_steps(sample.xyz[:, 2], total, bounds, limit)
+    def again(bounds, shares):
+        steps = storey_steps(shares, total, limit)
         steps_seen.append(steps)
         for part in parts:
             storey_part(part, origin, bounds, steps, str(tmp_path), 0, False)
         for k in range(len(bounds)):
             yield storey_cloud(tmp_path, parts, k, origin, sample.sources, limit)
 
-    seg = segment_floor_ceiling_walls(sample, s, storey_points=again)
+    found = find_scan_storeys(sample, s)
+    assert found.sample is None and sum(found.shares) == pytest.approx(1.0)
+    seg = segment_storeys(found, again, s)
     assert steps_seen == [[1, 1]]
     assert not list(tmp_path.glob("storey*"))  # read back and deleted
-    assert all(len(w.point_index) == 0 for w in seg.walls)
     for sid, own in (("S1", storey_files[0]), ("S2", storey_files[1])):
         assert _frames(seg, sid) == _frames(segment_floor_ceiling_walls(read_scans(own), s))
     thin = segment_floor_ceiling_walls(sample, s)  # the building's sample alone gives other walls
@@ -140,9 +146,9 @@ def test_detect_scans_reads_each_storey_again_as_alone(tmp_path, storey_files) -
     scratch = tmp_path / "scratch"
     scratch.mkdir()
     with ThreadPoolExecutor(2) as ex:
-        again = _storey_points(ex, parts, [(0, False)] * len(parts), sample, total, s, scratch=scratch, in_flight=4,
-                               log=said.append)
-        seg = segment_floor_ceiling_walls(sample, s.segmentation, storey_points=again)
+        again = _storey_points(ex, parts, [(0, False)] * len(parts), sample.origin, sample.sources, total, s,
+                               scratch=scratch, in_flight=4, log=said.append)
+        seg = segment_storeys(find_scan_storeys(sample, s.segmentation), again, s.segmentation)
     assert said and "S1" in said[0] and "(every 1)" in said[0]
     assert not list(scratch.iterdir())
     for sid, own in (("S1", storey_files[0]), ("S2", storey_files[1])):
