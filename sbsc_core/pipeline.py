@@ -741,7 +741,7 @@ def detect_scans(
             del cloud
         seg = segment_storeys(found, _storey_points(executor, parts, sample_meta, found.origin, sources, points, s,
                                                     scratch=Path(scratch), in_flight=2 * workers, log=log),
-                              s.segmentation)
+                              s.segmentation, point_index=False)
     else:
         seg = segment_floor_ceiling_walls(cloud, s.segmentation, storeys=found)
     if seg.stray_points:  # counted in the sample: scaled to the whole scan

@@ -174,7 +174,7 @@ def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSetting
 
 
 def segment_storeys(storeys: ScanStoreys, storey_points: StoreyPoints,
-                    settings: SegmentationSettings | None = None) -> Segmentation:
+                    settings: SegmentationSettings | None = None, *, point_index: bool = True) -> Segmentation:
     """The walls of each of several storeys, each segmented as if it had been scanned alone.
 
     Each storey's points are those between the middles of the slabs below and above it
@@ -182,7 +182,8 @@ def segment_storeys(storeys: ScanStoreys, storey_points: StoreyPoints,
     of core gives them at the density the storey alone would be sampled with). Each is
     recentred on its own origin and segmented by :func:`segment_storey`: its own sample
     density, dense part and levels, so that its walls are those of its points scanned alone.
-    The walls' ``point_index`` index their storey's cloud.
+    The walls' ``point_index`` index their storey's cloud (empty without ``point_index``: not
+    kept from one storey to the next).
     """
     s = settings or SegmentationSettings()
     levels = storeys.levels
@@ -199,6 +200,9 @@ def segment_storeys(storeys: ScanStoreys, storey_points: StoreyPoints,
         box = DenseBox(storeys.box.lo + shift, storeys.box.hi + shift)
         one = segment_storey(sub, sid, (floor + shift[2], ceiling + shift[2]), s, box)
         del sub
+        if not point_index:
+            for wall in one.walls:
+                wall.point_index = np.zeros(0, np.int64)
         out += one.storeys
         walls += one.walls
     if len(out) != len(levels):
