@@ -34,6 +34,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from sbsc_core.evaluate import evaluate
 from sbsc_core.io.documents import read_truth
 
@@ -69,6 +71,19 @@ def _storey_table(doc: dict, truth: dict, sid: str, walls_of: set[str] | None) -
         (Path(tmp) / "truth.json").write_text(json.dumps(t))
         total = evaluate(d, read_truth(Path(tmp) / "truth.json")).total
     return total.instances, total.tp, total.fn, total.fp
+
+
+def _frame_difference(whole: dict, alone: dict, sid: str) -> tuple[int, float]:
+    """(walls of the storey with the same id and frame whole and alone, the largest difference
+    of a frame's origin, normal, width or height over the walls of the same id, metres)."""
+    w = {x["id"].split("-")[-1]: x for x in whole["walls"] if x.get("storey") == sid}
+    a = {x["id"]: x for x in alone["walls"]}
+    same, worst = 0, 0.0
+    for k in sorted(set(w) & set(a)):
+        d = max(float(np.abs(np.subtract(w[k][f], a[k][f])).max()) for f in ("origin", "normal", "width_m", "height_m"))
+        same += d == 0.0
+        worst = max(worst, d)
+    return same, worst
 
 
 def bench(n: int, scene: str, step: float, run_dir: Path, redo: bool, mode: str = "storeys") -> dict:
@@ -112,6 +127,8 @@ def bench(n: int, scene: str, step: float, run_dir: Path, redo: bool, mode: str 
             "storey": sid, "truth_floor_z": st["floor_z"], "truth_ceiling_z": st["ceiling_z"],
             "found_floor_z": got and got["floor_z"], "found_ceiling_z": got and got["ceiling_z"],
             "walls_whole": len(walls), "walls_alone": len(alone["walls"]),
+            "walls_same": _frame_difference(whole, alone, sid)[0],
+            "frame_difference_m": _frame_difference(whole, alone, sid)[1],
             "whole": _storey_table(whole, truth, sid, walls | surfaces), "alone": _storey_table(alone, truth, sid, None),
             "alone_seconds": a_secs, "alone_rss_gib": a_rss,
         })
@@ -152,17 +169,19 @@ def main() -> None:
         print(f"\n{n} storeys ({args.scene}, {args.step:g} deg, expected: {args.expected}): "
               f"{res['storeys_found']} found; whole building "
               f"{res['whole_seconds']:.0f} s, peak {res['whole_rss_gib']:.2f} GiB")
-        print(f"{'storey':6} {'floor z truth/found':>20} {'ceiling z truth/found':>22} {'walls w/a':>9} "
+        print(f"{'storey':6} {'floor z truth/found':>20} {'ceiling z truth/found':>22} {'walls w/a':>9} {'same':>4} "
               f"{'inst':>4} {'TP whole/alone':>14} {'FP whole/alone':>14} {'TP % whole/alone':>16} "
               f"{'FP % whole/alone':>16}")
         for r in res["rows"]:
             ff = "-" if r["found_floor_z"] is None else f"{r['found_floor_z']:.3f}"
             fc = "-" if r["found_ceiling_z"] is None else f"{r['found_ceiling_z']:.3f}"
             print(f"{r['storey']:6} {r['truth_floor_z']:>9.3f}/{ff:<10} {r['truth_ceiling_z']:>10.3f}/{fc:<11} "
-                  f"{r['walls_whole']:>4}/{r['walls_alone']:<4} {r['whole'][0]:>4} "
+                  f"{r['walls_whole']:>4}/{r['walls_alone']:<4} {r.get('walls_same', '-'):>4} {r['whole'][0]:>4} "
                   f"{r['whole'][1]:>7}/{r['alone'][1]:<6} {r['whole'][3]:>7}/{r['alone'][3]:<6} "
                   f"{_pct(r['whole'][1], r['whole'][0]):>8}/{_pct(r['alone'][1], r['alone'][0]):<7} "
                   f"{_pct(r['whole'][3], r['whole'][0]):>8}/{_pct(r['alone'][3], r['alone'][0]):<7}")
+        print("largest wall frame difference whole / alone: "
+              + ", ".join(f"{r['storey']} {1000 * r['frame_difference_m']:.3g} mm" for r in res["rows"]))
         print("verdict:", "PASS" if verdict(res) else "FAIL")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))

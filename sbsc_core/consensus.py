@@ -116,7 +116,8 @@ def coherence_matrix(depth: list[Candidate], colour: list[Candidate],
 
 
 def weighted_centre(d: Candidate | None, c: Candidate | None,
-                    max_disagreement_px: float | None = None) -> tuple[float, float]:
+                    max_disagreement_px: float | None = None,
+                    sharpness_power: float = 0.0) -> tuple[float, float]:
     """Equation 16: (w_D c_D + w_C c_C) / (w_D + w_C); the plain mean if both weights are 0.
 
     When the two centres lie more than ``max_disagreement_px`` apart (along rows or
@@ -124,6 +125,12 @@ def weighted_centre(d: Candidate | None, c: Candidate | None,
     that differs from the model's (another product's label, only the visible part of a
     sign), while the depth match is metric. The depth centre alone is then the position;
     averaging would put the object between the two, off both.
+
+    With ``sharpness_power`` p > 0 and both candidates' correlation peaks known, each axis
+    (rows, columns) has its own weights w * s**p, s the peak's curvature along that axis
+    (:func:`~sbsc_core.matching.subpixel_peak`): a recognizer whose correlation barely
+    falls off along an axis (a relief without edges across it, a faint print) places the
+    object less precisely there than one with a sharp peak.
     """
     pts = [x for x in (d, c) if x is not None]
     if not pts:
@@ -138,8 +145,16 @@ def weighted_centre(d: Candidate | None, c: Candidate | None,
     if w.sum() <= 0:
         m = np.mean([np.asarray(x.centre, float) for x in pts], axis=0)
         return float(m[0]), float(m[1])
-    m = (w[0] * cd + w[1] * cc) / w.sum()
-    return float(m[0]), float(m[1])
+    wa = np.stack([w, w])  # (axis, recognizer)
+    if sharpness_power > 0 and d.sharpness is not None and c.sharpness is not None:
+        s = np.array([d.sharpness, c.sharpness], float).T  # (axis, recognizer)
+        if np.all(s > 0):
+            wa = wa * s ** sharpness_power
+    out = []
+    for k in range(2):
+        tot = wa[k].sum()
+        out.append(float((wa[k, 0] * cd[k] + wa[k, 1] * cc[k]) / tot) if tot > 0 else float(0.5 * (cd[k] + cc[k])))
+    return out[0], out[1]
 
 
 def make_hit(d: Candidate | None, c: Candidate | None, alpha: float,
@@ -147,7 +162,8 @@ def make_hit(d: Candidate | None, c: Candidate | None, alpha: float,
     """A ConsensusHit from a selected cell of Psi."""
     ref = d if d is not None else c
     assert ref is not None
-    centre = weighted_centre(d, c, (settings or ConsensusSettings()).max_disagreement_px)
+    settings = settings or ConsensusSettings()
+    centre = weighted_centre(d, c, settings.max_disagreement_px, settings.sharpness_power)
     source = "both" if d is not None and c is not None else ("depth" if d is not None else "colour")
     return ConsensusHit(
         class_id=ref.class_id, wall_id=ref.wall_id, centre=centre, alpha=float(alpha),

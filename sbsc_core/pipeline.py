@@ -78,8 +78,14 @@ from .partition import (
     worker_ready,
 )
 from .placement import place_hits
-from .segmentation import segment_floor_ceiling_walls
+from .segmentation import (
+    StoreyPoints,
+    find_scan_storeys,
+    segment_floor_ceiling_walls,
+    segment_storeys,
+)
 from .settings import DetectionSettings, load_settings
+from .storey_samples import storey_cloud, storey_part, storey_steps
 from .suggestions import suggestions_document
 from .templates import ModelTemplate, make_templates
 from .types import (
@@ -642,6 +648,32 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, levels
     return out
 
 
+def _storey_points(executor: Executor, parts: Sequence, sample_meta: list[tuple[int, bool]], origin: np.ndarray,
+                   sources: Sequence[str], points: int, s: DetectionSettings, *, scratch: Path, in_flight: int,
+                   log: Callable[[str], None]) -> StoreyPoints:
+    """The ``storey_points`` of :func:`segment_storeys` for a scan of ``points`` points read out
+    of core: one more pass over the parts (:func:`~sbsc_core.storey_samples.storey_part`)
+    writes each storey's points at its own sample density (from its share of the sample),
+    then each storey's cloud is read back in turn."""
+    limit = 2 * s.segmentation.fit_max_points
+
+    def read(bounds: list[tuple[float, float]], shares: list[float]) -> Iterator[PointCloud]:
+        t = time.perf_counter()
+        steps = storey_steps(shares, points, limit)
+        jobs = [(part, origin, bounds, steps, str(scratch), n, spilled)
+                for part, (n, spilled) in zip(parts, sample_meta, strict=True)]
+        written = np.zeros(len(bounds), np.int64)
+        for _, got in _as_done(executor, jobs, storey_part, in_flight):
+            written += np.asarray(got, np.int64)
+        log(f"{len(bounds)} storeys read again at their own density in {time.perf_counter() - t:.1f} s: "
+            + ", ".join(f"S{k + 1} {int(n):,} points (every {st})"
+                        for k, (n, st) in enumerate(zip(written, steps, strict=True))))
+        for k in range(len(bounds)):
+            yield storey_cloud(scratch, parts, k, origin, sources, limit)
+
+    return read
+
+
 def detect_scans(
     scans: Sequence[Path],
     library: ModelLibrary,
@@ -687,7 +719,8 @@ def detect_scans(
         samples[k] = gathered.add(k, smp)
         progress("reading", (i + 1) / len(parts))
     points = sum(smp.points for smp in samples)
-    cloud = gathered.cloud(samples, origin, [str(p) for p in scans], 2 * s.segmentation.fit_max_points)
+    sources = [str(p) for p in scans]
+    cloud = gathered.cloud(samples, origin, sources, 2 * s.segmentation.fit_max_points)
     sample_meta = [(smp.points, smp.spilled) for smp in samples]
     samples.clear()
     timings["reading"] = time.perf_counter() - t0
@@ -700,9 +733,20 @@ def detect_scans(
     # make the templates now
     warm = [executor.submit(_ready) for _ in range(workers)] if workers > 1 else []
     made = executor.submit(_templates_job, library, s, classes) if workers > 1 else None
-    seg = segment_floor_ceiling_walls(cloud, s.segmentation)
+    found = find_scan_storeys(cloud, s.segmentation)
+    sampled = len(cloud)
+    if len(found.levels) > 1 and sampled < points:
+        # several storeys in a thinned sample: each is read again at the density it has when
+        # scanned alone (the sample is let go first unless the ceilings or columns need it)
+        if not (s.columns.enabled or s.ceilings.enabled):
+            del cloud
+        seg = segment_storeys(found, _storey_points(executor, parts, sample_meta, found.origin, sources, points, s,
+                                                    scratch=Path(scratch), in_flight=2 * workers, log=log),
+                              s.segmentation, point_index=False)
+    else:
+        seg = segment_floor_ceiling_walls(cloud, s.segmentation, storeys=found)
     if seg.stray_points:  # counted in the sample: scaled to the whole scan
-        seg.stray_points = int(round(seg.stray_points * points / max(len(cloud), 1)))
+        seg.stray_points = int(round(seg.stray_points * points / max(sampled, 1)))
     found_columns = []
     if s.columns.enabled:  # free-standing columns (issue 11), found in the sample
         from .columns import find_columns
@@ -713,7 +757,7 @@ def detect_scans(
         from .ceilings import ceiling_levels
 
         levels = ceiling_levels(cloud, seg, s.ceilings)
-    del cloud
+    cloud = None
     for wall in seg.walls:  # indices into the sample: the walls' points come from their partitions
         wall.point_index = np.zeros(0, np.int64)
     for f in warm:

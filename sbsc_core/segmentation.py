@@ -36,22 +36,27 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import NoWallsError
+from .errors import InputError, NoWallsError
+from .io.scans import _ORIGIN_SAMPLE, BLOCK_POINTS
 from .settings import SegmentationSettings
 from .stray_points import DenseBox, dense_box, inside_box
 from .types import PointCloud, Segmentation, Storey, Wall, WallFrame
 
-__all__ = ["segment_floor_ceiling_walls", "find_storeys", "find_floor_ceiling", "fit_line_2d",
+__all__ = ["segment_floor_ceiling_walls", "find_scan_storeys", "ScanStoreys", "segment_storeys",
+           "segment_storey", "storey_bounds", "StoreyPoints", "find_storeys", "find_floor_ceiling", "fit_line_2d",
            "assign_points_to_walls"]
 
 _DENSE_VOXELS = 1 << 24  # voxel grids up to this size are grouped with bincount, larger ones by sorting
 _CHUNK = 1 << 22  # points handled at once where temporaries would otherwise grow with the wall
 _PLANE_BLOCK = 1 << 15  # voxels compared with every plane at once (bounds a (voxels, planes) array)
+_ORIGIN_POINTS = min(BLOCK_POINTS, _ORIGIN_SAMPLE)  # first points of a file that set its origin
 _ASSIGN_THREADS = 2  # threads assigning points to walls
 _THREAD_MIN_POINTS = 1 << 22  # clouds smaller than this are assigned in one thread
 
@@ -89,24 +94,205 @@ class _Segment:
 # --------------------------------------------------------------------------- public
 
 
-def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSettings | None = None) -> Segmentation:
+StoreyPoints = Callable[[list[tuple[float, float]], list[float]], Iterator[PointCloud]]
+"""Given the Z range of each storey (relative to the scan's origin, bottom up) and the share
+of the scan's sample in each, yields each storey's cloud in turn, in the scan's frame (the
+callee may change it): see :func:`segment_storeys`."""
+
+
+@dataclass
+class ScanStoreys:
+    """What :func:`find_scan_storeys` finds in a cloud (or a regular sample of a scan)."""
+
+    levels: list[tuple[float, float]]  # (floor, ceiling) of each storey, bottom up, relative to ``origin``
+    origin: np.ndarray  # (3,) the cloud's origin
+    box: DenseBox  # its dense part
+    stray: int  # its points outside the dense part
+    shares: list[float]  # share of its points in each storey's Z range (:func:`storey_bounds`)
+    sample: np.ndarray | None = None  # one storey: the dense part's sample its walls are fitted on
+
+
+def find_scan_storeys(cloud: PointCloud, settings: SegmentationSettings | None = None) -> ScanStoreys:
+    """The dense part of ``cloud`` and the storeys in it (:func:`find_storeys`).
+
+    Raises :class:`~sbsc_core.errors.NoWallsError` when the cloud has no floor / ceiling pair,
+    :class:`~sbsc_core.errors.InputError` when its dense part is not a building's.
+    """
+    s = settings or SegmentationSettings()
+    if len(cloud) == 0:
+        raise NoWallsError("no walls found: the scan has no points")
+    box, stray, sample = _dense_sample(cloud, s)
+    levels = find_storeys(sample[:, 2], s, sample[:, :2])
+    shares = [1.0]
+    if len(levels) > 1:  # each storey is sampled again on its own: this sample is not needed
+        del sample
+        sample = None
+        shares = [len(_z_index(cloud.xyz, lo, hi)) / len(cloud) for lo, hi in storey_bounds(levels)]
+    return ScanStoreys(levels, np.asarray(cloud.origin, np.float64).copy(), box, int(stray), shares, sample)
+
+
+def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSettings | None = None, *,
+                                storeys: ScanStoreys | None = None) -> Segmentation:
     """Storeys, their floor and ceiling levels and the walls of ``cloud`` with frames and points.
 
     Stray points (outside the dense part, see :mod:`~sbsc_core.stray_points`) are ignored and
     counted. The storeys are the parts of the Z range between slabs (:func:`find_storeys`);
     the paper's method runs on each storey as on a floor. Walls get ids ``W01, W02, ...``
     ordered by their centre (north to south, then west to east, in plan) and their direction;
-    with several storeys the ids carry the storey (``S1-W01``). Raises
-    :class:`~sbsc_core.errors.NoWallsError` when the cloud has no floor / ceiling pair or no
-    wall, :class:`~sbsc_core.errors.InputError` when its dense part is not a building's.
+    with several storeys the ids carry the storey (``S1-W01``).
+
+    With several storeys each storey is segmented on its own points as if it had been scanned
+    alone (:func:`segment_storeys`): a storey's walls do not depend on how many storeys are
+    above or below it. ``storeys``: what :func:`find_scan_storeys` found in ``cloud``
+    (found here without it). Raises :class:`~sbsc_core.errors.NoWallsError` when the cloud
+    has no floor / ceiling pair or no wall, :class:`~sbsc_core.errors.InputError` when its
+    dense part is not a building's.
     """
     s = settings or SegmentationSettings()
-    n = len(cloud)
-    if n == 0:
-        raise NoWallsError("no walls found: the scan has no points")
+    found = storeys or find_scan_storeys(cloud, s)
+    if len(found.levels) > 1:
+        picked: list[np.ndarray] = []
+
+        def own_points(bounds: list[tuple[float, float]], shares: list[float]) -> Iterator[PointCloud]:
+            for lo, hi in bounds:
+                sel = _z_index(cloud.xyz, lo, hi)
+                picked.append(sel)
+                yield PointCloud(xyz=cloud.xyz[sel], rgb=cloud.rgb[sel], origin=cloud.origin, sources=cloud.sources)
+
+        seg = segment_storeys(found, own_points, s)
+        for wall, sel in zip(seg.walls, [picked[int(w.storey[1:]) - 1] for w in seg.walls], strict=True):
+            wall.point_index = sel[wall.point_index]
+        return seg
+    z0 = float(cloud.origin[2])
+    floor, ceiling = found.levels[0]
+    sample = found.sample if found.sample is not None else _dense_sample(cloud, s, found.box)[2]
+    found.sample = None  # not kept beyond the walls' fit
+    walls = _storey_walls(cloud.xyz, sample, found.box, floor, ceiling, cloud.origin, s)
+    return Segmentation(floor_z=floor + z0, ceiling_z=ceiling + z0, storeys=[Storey("S1", floor + z0, ceiling + z0)],
+                        walls=[Wall(id=f"W{i + 1:02d}", frame=f, point_index=idx, storey="S1")
+                               for i, (f, idx) in enumerate(walls)], stray_points=found.stray)
+
+
+def segment_storeys(storeys: ScanStoreys, storey_points: StoreyPoints,
+                    settings: SegmentationSettings | None = None, *, point_index: bool = True) -> Segmentation:
+    """The walls of each of several storeys, each segmented as if it had been scanned alone.
+
+    Each storey's points are those between the middles of the slabs below and above it
+    (:func:`storey_bounds`); ``storey_points`` gives them, storey by storey (a scan read out
+    of core gives them at the density the storey alone would be sampled with). Each is
+    recentred on its own origin and segmented by :func:`segment_storey`: its own sample
+    density, dense part and levels, so that its walls are those of its points scanned alone.
+    The walls' ``point_index`` index their storey's cloud (empty without ``point_index``: not
+    kept from one storey to the next).
+    """
+    s = settings or SegmentationSettings()
+    levels = storeys.levels
+    out: list[Storey] = []
+    walls: list[Wall] = []
+    clouds = storey_points(storey_bounds(levels), list(storeys.shares))
+    for k, ((floor, ceiling), sub) in enumerate(zip(levels, clouds, strict=False)):
+        sid = f"S{k + 1}"
+        if not np.allclose(sub.origin, storeys.origin):
+            raise ValueError(f"storey {sid}: its cloud has another origin than the scan's")
+        shift = sub.origin - _own_origin(sub)
+        if shift.any():  # the storey's cloud is ours: recentred in place
+            sub = PointCloud(xyz=_shift_in_place(sub.xyz, shift), rgb=sub.rgb, origin=sub.origin - shift, sources=sub.sources)
+        box = DenseBox(storeys.box.lo + shift, storeys.box.hi + shift)
+        one = segment_storey(sub, sid, (floor + shift[2], ceiling + shift[2]), s, box)
+        del sub
+        if not point_index:
+            for wall in one.walls:
+                wall.point_index = np.zeros(0, np.int64)
+        out += one.storeys
+        walls += one.walls
+    if len(out) != len(levels):
+        raise ValueError(f"storey points: {len(out)} storey clouds for {len(levels)} storeys")
+    return Segmentation(floor_z=out[0].floor_z, ceiling_z=out[-1].ceiling_z, walls=walls, storeys=out,
+                        stray_points=storeys.stray)
+
+
+def segment_storey(cloud: PointCloud, sid: str, levels: tuple[float, float],
+                   settings: SegmentationSettings | None = None, box: DenseBox | None = None) -> Segmentation:
+    """The walls of one storey's points ``cloud``, segmented as if the storey had been scanned alone.
+
+    Its dense part, sample and levels are its own (as :func:`segment_floor_ceiling_walls`
+    finds them on a one-storey scan), unless its points do not show one storey (then
+    ``levels``, its (floor, ceiling) in the cloud's frame, and ``box``, the building's dense
+    part, apply). Walls get ids ``{sid}-W01, ...`` and the storey ``sid``; their
+    ``point_index`` index ``cloud``.
+    """
+    s = settings or SegmentationSettings()
+    z0 = float(cloud.origin[2])
+    floor, ceiling = levels
+    if len(cloud) == 0:
+        raise NoWallsError(f"storey {sid} (z = {floor + z0:.2f} to {ceiling + z0:.2f} m): no walls found: no points")
+    shift = cloud.origin - _own_origin(cloud)
+    if shift.any():  # in the storey's own frame, as a scan of it alone (the frames are world coordinates)
+        cloud = _shifted(cloud, shift)
+        floor, ceiling = floor + shift[2], ceiling + shift[2]
+        z0 -= shift[2]
+        if box is not None:
+            box = DenseBox(box.lo + shift, box.hi + shift)
+    try:
+        own_box, _, sample = _dense_sample(cloud, s)
+        own = find_storeys(sample[:, 2], s, sample[:, :2])
+    except (NoWallsError, InputError):
+        own = []
+    if len(own) == 1:
+        box = own_box
+        floor, ceiling = own[0]
+    else:  # not one storey on its own: the levels and the dense part found in the whole scan
+        sample = _dense_sample(cloud, s, box)[2]
+    try:
+        found = _storey_walls(cloud.xyz, sample, box, floor, ceiling, cloud.origin, s)
+    except NoWallsError as exc:
+        raise NoWallsError(f"storey {sid} (z = {floor + z0:.2f} to {ceiling + z0:.2f} m): {exc}") from None
+    return Segmentation(floor_z=floor + z0, ceiling_z=ceiling + z0, storeys=[Storey(sid, floor + z0, ceiling + z0)],
+                        walls=[Wall(id=f"{sid}-W{i + 1:02d}", frame=f, point_index=idx, storey=sid)
+                               for i, (f, idx) in enumerate(found)])
+
+
+def _own_origin(cloud: PointCloud) -> np.ndarray:
+    """The recentring origin a scan of ``cloud``'s points alone would have: the rounded median
+    of its first points (as :func:`~sbsc_core.io.scans.iter_scan` sets a file's)."""
+    first = cloud.xyz[:_ORIGIN_POINTS].astype(np.float64) + cloud.origin
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns
+        med = np.nanmedian(first, axis=0)
+    return np.where(np.isfinite(med), np.round(med), 0.0) + 0.0
+
+
+def _shift_in_place(xyz: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    """``xyz += shift`` computed in float64, chunk by chunk (no full-size temporary)."""
+    for a in range(0, len(xyz), _CHUNK):
+        np.add(xyz[a: a + _CHUNK], shift, out=xyz[a: a + _CHUNK], casting="unsafe")
+    return xyz
+
+
+def _shifted(cloud: PointCloud, shift: np.ndarray) -> PointCloud:
+    """``cloud`` recentred on ``origin - shift`` (float32 coordinates plus ``shift``, in float64)."""
+    xyz = np.empty_like(cloud.xyz)
+    for a in range(0, len(xyz), _CHUNK):
+        np.add(cloud.xyz[a: a + _CHUNK], shift, out=xyz[a: a + _CHUNK], casting="unsafe")
+    return PointCloud(xyz=xyz, rgb=cloud.rgb, origin=cloud.origin - shift, sources=cloud.sources)
+
+
+def storey_bounds(levels: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """The Z range ``[lo, hi)`` of each storey's points, from its (floor, ceiling) levels
+    bottom up: from the middle of the slab below to the middle of the slab above (open at
+    the bottom of the lowest storey and the top of the highest)."""
+    mids = [0.5 * (levels[k][1] + levels[k + 1][0]) for k in range(len(levels) - 1)]
+    return list(zip([-math.inf, *mids], [*mids, math.inf], strict=True))
+
+
+def _dense_sample(cloud: PointCloud, s: SegmentationSettings, box: DenseBox | None = None
+                  ) -> tuple[DenseBox, int, np.ndarray]:
+    """The dense part of ``cloud`` (``box``, or found), the number of points outside it and a
+    regular subsample of the points inside (at most about ``2 * fit_max_points``)."""
     xyz = cloud.xyz
-    box = dense_box(xyz, s, where=", ".join(cloud.sources) or "scan")
-    # regular subsample of the dense part for the levels and for fitting
+    n = len(xyz)
+    if box is None:
+        box = dense_box(xyz, s, where=", ".join(cloud.sources) or "scan")
     step = max(1, math.ceil(n / (2 * s.fit_max_points)))
     if step == 1:  # the sample is the dense part itself: one test of the box
         inside = inside_box(xyz, box)
@@ -117,25 +303,14 @@ def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSetting
         stray = n - _count_inside(xyz, box)
         sample = xyz[::step]
         sample = sample[inside_box(sample, box)]
-    levels = find_storeys(sample[:, 2], s, sample[:, :2])
-    multi = len(levels) > 1
-    z0 = float(cloud.origin[2])
-    storeys: list[Storey] = []
-    walls: list[Wall] = []
-    for k, (floor, ceiling) in enumerate(levels):
-        sid = f"S{k + 1}"
-        storeys.append(Storey(sid, floor + z0, ceiling + z0))
-        try:
-            found = _storey_walls(xyz, sample, box, floor, ceiling, cloud.origin, s)
-        except NoWallsError as exc:
-            if not multi:
-                raise
-            raise NoWallsError(f"storey {sid} (z = {floor + z0:.2f} to {ceiling + z0:.2f} m): {exc}") from None
-        prefix = f"{sid}-" if multi else ""
-        walls += [Wall(id=f"{prefix}W{i + 1:02d}", frame=f, point_index=idx, storey=sid)
-                  for i, (f, idx) in enumerate(found)]
-    return Segmentation(floor_z=storeys[0].floor_z, ceiling_z=storeys[-1].ceiling_z, walls=walls,
-                        storeys=storeys, stray_points=int(stray))
+    return box, stray, sample
+
+
+def _z_index(xyz: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """Indices of the points with lo <= z < hi, chunk by chunk."""
+    parts = [np.flatnonzero((xyz[a: a + _CHUNK, 2] >= lo) & (xyz[a: a + _CHUNK, 2] < hi)) + a
+             for a in range(0, len(xyz), _CHUNK)]
+    return np.concatenate(parts) if parts else np.zeros(0, np.int64)
 
 
 def _storey_walls(xyz: np.ndarray, sample: np.ndarray, box: DenseBox, floor: float, ceiling: float,
