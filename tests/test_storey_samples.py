@@ -154,3 +154,20 @@ def test_detect_scans_reads_each_storey_again_as_alone(tmp_path, storey_files) -
     for sid, own in (("S1", storey_files[0]), ("S2", storey_files[1])):
         alone = read_scans(own)
         assert _frames(seg, sid) == _frames(segment_floor_ceiling_walls(alone, s.segmentation))
+
+
+def test_a_storey_whose_points_show_two_storeys_keeps_the_levels_given(storeys) -> None:
+    """A storey's cloud that holds two storeys (Z ranges not cut at the slab) is segmented on
+    the levels and the dense part given, not split again."""
+    from sbsc_core.segmentation import segment_storey
+
+    s1, s2 = storeys
+    building = _stack(s1, s2)
+    z0 = float(building.origin[2])
+    whole = segment_floor_ceiling_walls(building)
+    st = whole.storeys[0]
+    one = segment_storey(building, "S1", (st.floor_z - z0, st.ceiling_z - z0))
+    assert [x.id for x in one.storeys] == ["S1"]
+    assert (one.storeys[0].floor_z, one.storeys[0].ceiling_z) == pytest.approx((st.floor_z, st.ceiling_z), abs=1e-9)
+    assert len(one.walls) == 8 and all(w.id.startswith("S1-W") for w in one.walls)
+    assert all(w.frame.origin[2] == pytest.approx(st.floor_z, abs=1e-6) for w in one.walls)
