@@ -23,7 +23,10 @@ the recognizers' goodness (below).
 The position of an instance is equation 16, c = (rho_D c_D + w_C c_C) / (rho_D + w_C).
 rho_C is a distance (lower is better), so its weight is w_C = 1 - rho_C (in [0.8, 1] for
 accepted candidates with mu_C = 0.2, comparable with rho_D in [0.75, 1]); an exclusive
-detection has the other weight 0, i.e. the candidate's own centre.
+detection has the other weight 0, i.e. the candidate's own centre. Addition to the paper
+(``sharpness_power``): each axis has its own weights, times the precision of the
+recognizer's correlation peak along it (curvature over 1 - peak): a smooth relief or a
+faint print places an object less precisely than a sharp one.
 
 ``suppress_conflicts`` adds what the paper leaves to the expected counts: when every class
 of the library is searched, one place on a wall holds one object, so of two accepted
