@@ -50,7 +50,7 @@ Additions to the paper, each a named setting:
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -523,90 +523,8 @@ def match_depth(
         if settings.free_rotation:
             # refined with the reference model (exemplars are measured turned as they hang)
             kept = [refine_turn(turners[0], c, settings.turn_steps_deg, settings.min_turn_gain) for c in kept]
-        if settings.tail_misfit_ratio > 0:
-            kept = [_untailed(jml, t.depth_filled(), c, settings) for c in kept]
         out.extend(kept)
     return out
-
-
-def edge_shifts(image: np.ndarray, model: np.ndarray, centre: tuple[float, float], *, band_px: int,
-                margin_px: int, max_shift_px: float, sigma_px: float = 0.0, step_px: float = 0.1
-                ) -> tuple[tuple[float, float], tuple[float, float]] | None:
-    """How the top and the bottom edge of ``model`` (placed at ``centre``) fit ``image`` alone.
-
-    The rows of both are averaged over the middle 60 % of the model's columns into vertical
-    profiles; for each edge, the band from ``band_px`` inside the footprint to ``margin_px``
-    outside it is correlated (NCC) with the image's profile shifted by up to
-    ``max_shift_px``. The model is padded with wall plane (0) and smoothed by ``sigma_px``
-    (as the image was). Returns ((shift, ncc) of the top edge, (shift, ncc) of the bottom edge),
-    shifts in rows to add to the centre; None when a profile is flat.
-    """
-    h, w = model.shape
-    pad = int(margin_px + np.ceil(max_shift_px)) + 2
-    padded = _smooth(np.pad(model.astype(np.float32), pad), sigma_px)
-    across = np.linspace(-0.3 * (w - 1), 0.3 * (w - 1), max(3, min(9, w)))
-    r0, c0 = centre
-
-    def scene(k: np.ndarray) -> np.ndarray:
-        rr, cc = np.meshgrid(r0 + k, c0 + across, indexing="ij")
-        return ndimage.map_coordinates(image, [rr.ravel(), cc.ravel()], order=1, mode="nearest"
-                                       ).reshape(rr.shape).mean(axis=1)
-
-    def own(k: np.ndarray) -> np.ndarray:
-        rr, cc = np.meshgrid(pad + (h - 1) / 2.0 + k, pad + (w - 1) / 2.0 + across, indexing="ij")
-        return ndimage.map_coordinates(padded, [rr.ravel(), cc.ravel()], order=1, mode="nearest"
-                                       ).reshape(rr.shape).mean(axis=1)
-
-    out = []
-    half = h / 2.0
-    for lo, hi in ((-half - margin_px, -half + band_px), (half - band_px, half + margin_px)):
-        ks = np.arange(lo, hi + 1.0)
-        b = own(ks)
-        b = b - b.mean()
-        best = None
-        for dl in np.arange(-max_shift_px, max_shift_px + 1e-9, step_px):
-            a = scene(ks + dl)
-            a = a - a.mean()
-            den = float(np.sqrt((a * a).sum() * (b * b).sum()))
-            if den <= 0:
-                return None
-            r = float((a * b).sum()) / den
-            if best is None or r > best[1]:
-                best = (float(dl), r)
-        out.append(best)
-    return out[0], out[1]
-
-
-def _untailed(jml: np.ndarray, model: np.ndarray | None, cand: Candidate,
-              settings: DepthRecognitionSettings) -> Candidate:
-    """``cand`` placed by its top or bottom edge alone when the other edge trails.
-
-    A scanner above an object sees past its lower edge, a scanner below past its upper
-    edge: the beams that graze the edge return ranges mixed between the object and the
-    wall behind it, which the orthoimage shows as a ramp of relief trailing away from the
-    edge (several mm for a radiator's 10 cm of relief). The correlation of the whole model
-    then centres the object between its clean edge and the end of the ramp. When one edge's
-    profile misfits (1 - NCC, :func:`edge_shifts`) ``tail_misfit_ratio`` times more than the
-    other's and at least ``tail_min_misfit``, the clean edge alone places the object
-    vertically. Left as is when the model is turned off the image axes.
-    """
-    if model is None or cand.rotation_deg % 90:
-        return cand
-    rot = rotate_template(model, float(cand.rotation_deg)) if cand.rotation_deg % 360 else model
-    fits = edge_shifts(jml, rot, cand.centre, band_px=settings.tail_band_px, margin_px=settings.tail_margin_px,
-                       max_shift_px=settings.tail_max_shift_px, sigma_px=settings.match_sigma_px)
-    if fits is None:
-        return cand
-    (d_top, r_top), (d_bot, r_bot) = fits
-    m_top, m_bot = 1.0 - r_top, 1.0 - r_bot
-    if m_bot >= settings.tail_misfit_ratio * m_top and m_bot >= settings.tail_min_misfit:
-        shift = d_top
-    elif m_top >= settings.tail_misfit_ratio * m_bot and m_top >= settings.tail_min_misfit:
-        shift = d_bot
-    else:
-        return cand
-    centre = (float(cand.centre[0] + shift), float(cand.centre[1]))
-    return replace(cand, centre=centre, box=box_at(centre, cand.box.height, cand.box.width))
 
 
 def close_see_through(model: np.ndarray, relief_fraction: float) -> np.ndarray | None:

@@ -173,11 +173,6 @@ class DepthRecognitionSettings:
     min_relief_iou: float = 0.5  # where model and scene stand out must overlap this much (IoU)
     nms_overlap: float = 0.3  # same-class matches overlapping more than this are one match
     refit_plane: bool = True  # remove a residual plane fitted to the visible wall
-    tail_misfit_ratio: float = 3.0  # vertical position from the top or bottom edge alone when the other misfits this x more (0: off)
-    tail_min_misfit: float = 0.01  # ... and misfits (1 - NCC of its edge profile) at least this much
-    tail_band_px: int = 6  # the edge profiles span this far inside the model's footprint ...
-    tail_margin_px: int = 8  # ... and this far outside it
-    tail_max_shift_px: float = 3.0  # the edge profiles are compared shifted by up to this
     gap_fill_sigma_px: float = 1.0  # sampling gaps are filled by a normalised Gaussian of this size
     gap_fill_min_weight: float = 0.3  # ... where known neighbours weigh at least this much
     median_px: int = 3  # median filter of J_D against speckle (3 or 5; other values: off)

@@ -337,31 +337,3 @@ def test_parts_that_fit_one_footprint_are_grouped() -> None:
     assert group_boxes(parts, height=30, width=45, gap_px=6) == [Box(0, 0, 25, 40)]
     assert group_boxes(parts, height=30, width=45, gap_px=3) == []  # too far apart to be one object
     assert group_boxes(parts, height=12, width=45, gap_px=6) == []  # together too big for the model
-
-
-def _box_relief(tail_rows: int) -> tuple[np.ndarray, np.ndarray]:
-    """A 40 x 30 px object of 0.1 m relief centred at (60, 50), with a ramp trailing below it."""
-    img = np.zeros((120, 100), np.float32)
-    img[40:80, 35:65] = 0.1
-    for k in range(tail_rows):  # mixed ranges: relief falling off below the lower edge
-        img[80 + k, 35:65] = 0.1 * (1.0 - (k + 1) / (tail_rows + 1))
-    return img, np.full((40, 30), 0.1, np.float32)
-
-
-def test_trailing_edge_does_not_move_the_object() -> None:
-    from sbsc_core.depth_recognition import _untailed, edge_shifts
-    from sbsc_core.matching import box_at
-    from sbsc_core.types import Candidate
-    s = DepthRecognitionSettings()
-    true = (59.5, 49.5)  # centre of rows 40..79, columns 35..64
-    img, model = _box_relief(10)
-    low = (true[0] + 1.5, true[1])  # where the whole model correlates best: pulled down by the ramp
-    cand = Candidate("radiator", "W01", "depth", box_at(low, 40, 30), low, 0.95)
-    (d_top, r_top), (d_bot, r_bot) = edge_shifts(img, model, low, band_px=s.tail_band_px, margin_px=s.tail_margin_px,
-                                                 max_shift_px=s.tail_max_shift_px)
-    assert r_top > r_bot and d_top == pytest.approx(-1.5, abs=0.2)
-    got = _untailed(img, model, cand, s)
-    assert got.centre[0] == pytest.approx(true[0], abs=0.25) and got.centre[1] == low[1]
-    assert got.box == box_at(got.centre, 40, 30)
-    clean, _ = _box_relief(0)  # both edges clean: left where it is
-    assert _untailed(clean, model, replace(cand, centre=true, box=box_at(true, 40, 30)), s).centre == true
