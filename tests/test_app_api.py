@@ -415,8 +415,9 @@ def test_server_restart_mid_job(tmp_path):
                 assert c.post(f"/api/projects/{pid}/scans", files={"file": ("r.ply", fh)}, headers=h).status_code == 201
             fake_control(data, mode="ok", delay_s=60, detections=5)
             a = c.post(f"/api/projects/{pid}/jobs", json={}, headers=h).json()["id"]
-            b = c.post(f"/api/projects/{pid}/jobs", json={}, headers=h).json()["id"]  # waits in the queue
+            # a project holds one queued job at a time (409): the second one is posted once the first runs
             job = wait_job(c, a, tok, until=("running",))
+            b = c.post(f"/api/projects/{pid}/jobs", json={}, headers=h).json()["id"]  # waits in the queue
             while not worker_pid(data, a):
                 time.sleep(0.1)
             worker = worker_pid(data, a)
