@@ -434,8 +434,8 @@ def turned_extent(mask: np.ndarray, settings: ColourRecognitionSettings) -> tupl
 
 def _best_placement(roi: Box, proto: WallPrototype, settings: ColourRecognitionSettings, diff: np.ndarray,
                     variants: list[tuple[float, np.ndarray]]) -> tuple[float, tuple[float, float], float,
-                                                                       tuple[int, int], tuple[float, float]] | None:
-    """(rank, centre, rotation, view shape, peak sharpness) of the best-correlating view of ``variants``."""
+                                                                       tuple[int, int]] | None:
+    """(rank, centre, rotation, view shape) of the best-correlating view of ``variants`` in a RoI."""
     rc = roi.centre
     best = None
     for deg, view in variants:
@@ -453,15 +453,13 @@ def _best_placement(roi: Box, proto: WallPrototype, settings: ColourRecognitionS
             continue
         rank = peaks[0].score + (settings.rotation_margin if deg == 0 else 0.0)
         if best is None or rank > best[0]:
-            best = (rank, (peaks[0].row, peaks[0].col), deg, view.shape[:2], peaks[0].sharpness)
+            best = (rank, (peaks[0].row, peaks[0].col), deg, view.shape[:2])
     return best
 
 
 def _place(img: ColourImage, roi: Box, proto: WallPrototype, settings: ColourRecognitionSettings,
-           diff: np.ndarray, turn: float | None = None
-           ) -> tuple[tuple[float, float], float, Box, tuple[float, float] | None]:
-    """Footprint centre, rotation, box and peak sharpness of a class in a RoI (cross-correlation,
-    else the centroid, with no sharpness).
+           diff: np.ndarray, turn: float | None = None) -> tuple[tuple[float, float], float, Box]:
+    """Footprint centre, rotation and box of a class in a RoI (cross-correlation, else centroid).
 
     The footprint centre is searched around the RoI centre minus the prototype's offset of
     its visible part, within ``search_margin_px`` plus half the size difference. A RoI
@@ -485,9 +483,9 @@ def _place(img: ColourImage, roi: Box, proto: WallPrototype, settings: ColourRec
                     if b is not None and (best is None or b[0] > best[0]):
                         best = b
         if best is not None:
-            _, centre, deg, (h, w), sharp = best
-            return centre, deg, box_at(centre, h, w), sharp
-    return guess, 0, box_at(guess, fh, fw), None
+            _, centre, deg, (h, w) = best
+            return centre, deg, box_at(centre, h, w)
+    return guess, 0, box_at(guess, fh, fw)
 
 
 def depth_agrees(depth: np.ndarray, t: ModelTemplate, box: Box, rotation_deg: float,
@@ -570,11 +568,10 @@ def match_colour(
         for rho, cid in scored:
             if rho > settings.mu_c:
                 break
-            centre, deg, box, sharp = _place(img, roi, protos[cid], settings, diff,
-                                             None if turned is None else turned[0])
+            centre, deg, box = _place(img, roi, protos[cid], settings, diff, None if turned is None else turned[0])
             if not depth_agrees(relief, prototypes.templates[cid], box, deg, settings):
                 continue  # a protruding class where the wall is flat: not this class
-            out.append(Candidate(cid, ortho.wall_id, "colour", box, centre, rho, roi, deg, sharpness=sharp))
+            out.append(Candidate(cid, ortho.wall_id, "colour", box, centre, rho, roi, deg))
             if settings.nearest_only:
                 break
     return out

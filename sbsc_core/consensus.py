@@ -23,10 +23,7 @@ the recognizers' goodness (below).
 The position of an instance is equation 16, c = (rho_D c_D + w_C c_C) / (rho_D + w_C).
 rho_C is a distance (lower is better), so its weight is w_C = 1 - rho_C (in [0.8, 1] for
 accepted candidates with mu_C = 0.2, comparable with rho_D in [0.75, 1]); an exclusive
-detection has the other weight 0, i.e. the candidate's own centre. Addition to the paper
-(``sharpness_power``): each axis has its own weights, times the precision of the
-recognizer's correlation peak along it (curvature over 1 - peak): a smooth relief or a
-faint print places an object less precisely than a sharp one.
+detection has the other weight 0, i.e. the candidate's own centre.
 
 ``suppress_conflicts`` adds what the paper leaves to the expected counts: when every class
 of the library is searched, one place on a wall holds one object, so of two accepted
@@ -119,8 +116,7 @@ def coherence_matrix(depth: list[Candidate], colour: list[Candidate],
 
 
 def weighted_centre(d: Candidate | None, c: Candidate | None,
-                    max_disagreement_px: float | None = None,
-                    sharpness_power: float = 0.0) -> tuple[float, float]:
+                    max_disagreement_px: float | None = None) -> tuple[float, float]:
     """Equation 16: (w_D c_D + w_C c_C) / (w_D + w_C); the plain mean if both weights are 0.
 
     When the two centres lie more than ``max_disagreement_px`` apart (along rows or
@@ -128,12 +124,6 @@ def weighted_centre(d: Candidate | None, c: Candidate | None,
     that differs from the model's (another product's label, only the visible part of a
     sign), while the depth match is metric. The depth centre alone is then the position;
     averaging would put the object between the two, off both.
-
-    With ``sharpness_power`` p > 0 and both candidates' correlation peaks known, each axis
-    (rows, columns) has its own weights w * s**p, s the peak's curvature along that axis
-    (:func:`~sbsc_core.matching.subpixel_peak`): a recognizer whose correlation barely
-    falls off along an axis (a relief without edges across it, a faint print) places the
-    object less precisely there than one with a sharp peak.
     """
     pts = [x for x in (d, c) if x is not None]
     if not pts:
@@ -148,16 +138,8 @@ def weighted_centre(d: Candidate | None, c: Candidate | None,
     if w.sum() <= 0:
         m = np.mean([np.asarray(x.centre, float) for x in pts], axis=0)
         return float(m[0]), float(m[1])
-    wa = np.stack([w, w])  # (axis, recognizer)
-    if sharpness_power > 0 and d.sharpness is not None and c.sharpness is not None:
-        s = np.array([d.sharpness, c.sharpness], float).T  # (axis, recognizer)
-        if np.all(s > 0):
-            wa = wa * s ** sharpness_power
-    out = []
-    for k in range(2):
-        tot = wa[k].sum()
-        out.append(float((wa[k, 0] * cd[k] + wa[k, 1] * cc[k]) / tot) if tot > 0 else float(0.5 * (cd[k] + cc[k])))
-    return out[0], out[1]
+    m = (w[0] * cd + w[1] * cc) / w.sum()
+    return float(m[0]), float(m[1])
 
 
 def make_hit(d: Candidate | None, c: Candidate | None, alpha: float,
@@ -165,8 +147,7 @@ def make_hit(d: Candidate | None, c: Candidate | None, alpha: float,
     """A ConsensusHit from a selected cell of Psi."""
     ref = d if d is not None else c
     assert ref is not None
-    settings = settings or ConsensusSettings()
-    centre = weighted_centre(d, c, settings.max_disagreement_px, settings.sharpness_power)
+    centre = weighted_centre(d, c, (settings or ConsensusSettings()).max_disagreement_px)
     source = "both" if d is not None and c is not None else ("depth" if d is not None else "colour")
     return ConsensusHit(
         class_id=ref.class_id, wall_id=ref.wall_id, centre=centre, alpha=float(alpha),

@@ -490,8 +490,7 @@ def match_depth(
                               min_known=settings.min_known_share, full_known=settings.full_known_share,
                               masked_pre=settings.masked_pre_threshold)
         return [Candidate(cid, ortho.wall_id, "depth", box_at((m.row, m.col), h, w), (m.row, m.col), m.score,
-                          m.roi, deg, gain=m.gain, relief_iou=overlap(m.row, m.col, m.gain), sharpness=m.sharpness)
-                for m in peaks]
+                          m.roi, deg, gain=m.gain, relief_iou=overlap(m.row, m.col, m.gain)) for m in peaks]
 
     out: list[Candidate] = []
     for cid in sorted(templates):

@@ -320,28 +320,15 @@ def footprint_share(known: np.ndarray, ph: int, pw: int, *, pad_px: int, shape: 
 
 def subpixel_offset(corr: np.ndarray, y: int, x: int) -> tuple[float, float]:
     """Parabolic refinement of a correlation peak at (y, x): offsets in pixels, within +-0.5."""
-    dy, dx, _, _ = subpixel_peak(corr, y, x)
-    return dy, dx
-
-
-def subpixel_peak(corr: np.ndarray, y: int, x: int) -> tuple[float, float, float, float]:
-    """Parabolic refinement of a correlation peak at (y, x): (dy, dx, sharpness_y, sharpness_x).
-
-    The offsets (pixels, within +-0.5) are those of a parabola through the peak and its two
-    neighbours along each axis; the sharpness of an axis is the parabola's curvature
-    ``-(a - 2b + c)`` (correlation per pixel squared, 0 where there is no peak along it):
-    a sharp peak places the match precisely, a flat one (a shape or print without edges
-    across that axis) does not.
-    """
-    def fit(a: float, b: float, c: float) -> tuple[float, float]:
+    def fit(a: float, b: float, c: float) -> float:
         den = a - 2.0 * b + c
         if not np.isfinite(den) or den >= 0:
-            return 0.0, 0.0
-        return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5)), float(-den)
+            return 0.0
+        return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
 
-    dy, sy = fit(corr[y - 1, x], corr[y, x], corr[y + 1, x]) if 0 < y < corr.shape[0] - 1 else (0.0, 0.0)
-    dx, sx = fit(corr[y, x - 1], corr[y, x], corr[y, x + 1]) if 0 < x < corr.shape[1] - 1 else (0.0, 0.0)
-    return dy, dx, sy, sx
+    dy = fit(corr[y - 1, x], corr[y, x], corr[y + 1, x]) if 0 < y < corr.shape[0] - 1 else 0.0
+    dx = fit(corr[y, x - 1], corr[y, x], corr[y, x + 1]) if 0 < x < corr.shape[1] - 1 else 0.0
+    return dy, dx
 
 
 ACCEPT, REFUSE_AREA, REFUSE_POINT = "accept", "refuse_area", "refuse_point"
@@ -387,7 +374,6 @@ class Match:
     col: float
     roi: Box
     gain: float  # least-squares amplitude of the image against the padded template
-    sharpness: tuple[float, float] = (0.0, 0.0)  # the peak's curvature along rows, columns over 1 - score
 
 
 def _search_window(roi: Box, margin_px: int, centre_off: tuple[float, float]) -> tuple[int, int, int, int]:
@@ -463,19 +449,18 @@ def match_in_rois(
                 gain = least_squares_gain(patch, tp)
             if gain_range is not None and not gain_range[0] <= gain <= gain_range[1]:
                 return REFUSE_POINT  # a wrong amplitude: not this class here, look on
-            dy, dx, sy, sx = subpixel_peak(c.corr, y, x)
+            dy, dx = subpixel_offset(c.corr, y, x)
             r, col = float(c.rows[y] + dy), float(c.cols[x] + dx)
             if accept is not None and not accept(r, col, gain):
                 return REFUSE_POINT  # a wrong context: look on
-            miss = max(1.0 - float(c.corr[y, x]), 1e-3)  # the peak's shortfall: the noise's share
-            c.kept[(y, x)] = (r, col, gain, (sy / miss, sx / miss))
+            c.kept[(y, x)] = (r, col, gain)
             return ACCEPT
 
         work = np.where(c.valid, c.corr, -np.inf)
         for score, y, x in pick_peaks(work, threshold=threshold, max_peaks=max_peaks,
                                       exclude=(max(1, h // 2), max(1, w // 2)), judge=judge):
-            r, col, gain, sharp = c.kept[(y, x)]
-            out.append(Match(score, r, col, roi, gain, sharp))
+            r, col, gain = c.kept[(y, x)]
+            out.append(Match(score, r, col, roi, gain))
     return out
 
 
@@ -501,7 +486,7 @@ class _RoiCorrelation:
     known: np.ndarray | None  # known mask of ``region`` (float32) or None
     share: np.ndarray | None  # known share of each window's footprint
     masked: np.ndarray  # windows whose coefficient is the masked one
-    kept: dict[tuple[int, int], tuple[float, float, float, tuple[float, float]]]
+    kept: dict[tuple[int, int], tuple[float, float, float]]
 
 
 def _correlate_around(image: np.ndarray, tp: np.ndarray, size: tuple[int, int], roi: Box,

@@ -258,7 +258,6 @@ class ConsensusSettings:
     prefer_depth: bool = True  # at equal alpha: both > depth only > colour only, then goodness
     alpha_tolerance: float = 0.05  # alphas this close count as equal (the tie-break decides)
     max_disagreement_px: float = 3.0  # equation 16 for centres this close, else depth's (.inf: always)
-    sharpness_power: float = 1.0  # equation 16 per axis: weights times (peak curvature / (1 - peak))**this (0: off)
     depth_outscored_margin: float = 0.1  # a depth match beaten by this at its place confirms no colour match
 
 

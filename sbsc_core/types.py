@@ -330,7 +330,6 @@ class Candidate:
     lookalike_margin: float | None = None  # print NCC of its class minus the best other look-alike's
     gain: float | None = None  # depth: least-squares relief amplitude of the scene over the model's
     relief_iou: float | None = None  # depth: IoU of where the scene and the model stand out
-    sharpness: tuple[float, float] | None = None  # the correlation peak's curvature along rows, columns
 
 
 @dataclass

@@ -264,14 +264,3 @@ def test_bundled_library_on_a_low_contrast_wall() -> None:
     tp, fp, err = _score(truth, hits)
     assert tp >= len(truth) - 2, hits
     assert fp <= 1
-
-
-def test_equation_16_per_axis_by_peak_precision() -> None:
-    """Each axis trusts the recognizer whose correlation peak is sharper (and higher) there."""
-    d = Candidate("socket", "W01", "depth", box_at((50, 50), 16, 16), (50.0, 50.0), 0.9, sharpness=(1.0, 0.1))
-    c = Candidate("socket", "W01", "colour", box_at((51, 51), 16, 16), (51.0, 51.0), 0.1, sharpness=(0.1, 1.0))
-    r, col = weighted_centre(d, c, 3.0, sharpness_power=1.0)
-    assert 50.0 < r < 50.2 and 50.8 < col < 51.0  # rows from depth, columns from colour
-    assert weighted_centre(d, c, 3.0, sharpness_power=0.0) == pytest.approx((50.5, 50.5))  # equation 16
-    plain = Candidate("socket", "W01", "colour", box_at((51, 51), 16, 16), (51.0, 51.0), 0.1)
-    assert weighted_centre(d, plain, 3.0, sharpness_power=1.0) == pytest.approx((50.5, 50.5))  # no peak known

@@ -82,14 +82,3 @@ def test_match_in_rois_finds_a_turned_object_with_its_turned_model() -> None:
 
 def test_box_at_centres_the_box() -> None:
     assert box_at((10.0, 20.0), 5, 4) == Box(8, 19, 13, 23)
-
-
-def test_subpixel_peak_offset_and_sharpness() -> None:
-    from sbsc_core.matching import subpixel_offset, subpixel_peak
-    yy, xx = np.mgrid[0:9, 0:9].astype(float)
-    corr = 1.0 - 0.5 * (yy - 4.25) ** 2 - 0.05 * (xx - 3.8) ** 2  # sharp along rows, flat along columns
-    dy, dx, sy, sx = subpixel_peak(corr, 4, 4)
-    assert abs(dy - 0.25) < 1e-9 and abs(dx + 0.2) < 1e-9
-    assert abs(sy - 1.0) < 1e-9 and abs(sx - 0.1) < 1e-9
-    assert subpixel_offset(corr, 4, 4) == (dy, dx)
-    assert subpixel_peak(corr, 0, 4)[2] == 0.0  # no neighbour above: no peak along rows
