@@ -912,6 +912,7 @@ class ReviewSession:
         self.selected: str | None = None
         self._highlight: Any = None
         self._scan_lock = threading.RLock()
+        self._panel_lock = threading.RLock()  # the selection and the panel showing it change together
         self.scan_groups: dict[str, Any] = {}  # layer -> this tab's frame holding its tiles
         self.scan_nodes: dict[str, list[Any]] = {}  # layer -> this tab's point cloud tiles
         self._model_cache: dict[str, np.ndarray | None] = {}
@@ -1121,18 +1122,19 @@ class ReviewSession:
         det = self.scene.detection(did)
         if det is None:
             return
-        self.selected = did
-        pos = self.scene.local(det["position"])
-        if self._highlight is None:
-            self._highlight = self.client.scene.add_icosphere(
-                "/selection", radius=self.scene.s.spot_radius_m * 1.9, color=SELECTION_RGB,
-                wireframe=True, subdivisions=1, cast_shadow=False, receive_shadow=False,
-                position=pos)
-        else:
-            self._highlight.position = pos
-        if det.get("class") in (self.ui_class.options or ()):
-            self.ui_class.value = det["class"]
-        self.show()
+        with self._panel_lock:  # a refresh from the scene's thread shows the old selection before, not after
+            self.selected = did
+            pos = self.scene.local(det["position"])
+            if self._highlight is None:
+                self._highlight = self.client.scene.add_icosphere(
+                    "/selection", radius=self.scene.s.spot_radius_m * 1.9, color=SELECTION_RGB,
+                    wireframe=True, subdivisions=1, cast_shadow=False, receive_shadow=False,
+                    position=pos)
+            else:
+                self._highlight.position = pos
+            if det.get("class") in (self.ui_class.options or ()):
+                self.ui_class.value = det["class"]
+            self.show()
         if fly:
             self.fly_to(det)
         self.update_labels(force=True)
@@ -1302,6 +1304,10 @@ class ReviewSession:
     # -- panel ----------------------------------------------------------------------------
     def show(self) -> None:
         """Bring the panel in line with the selection, the reviewer and the lock."""
+        with self._panel_lock:
+            self._show()
+
+    def _show(self) -> None:
         sc = self.scene
         det = sc.detection(self.selected) if self.selected else None
         can = det is not None and self.user is not None and self.user.may_decide and not sc.locked
