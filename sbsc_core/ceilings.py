@@ -39,7 +39,8 @@ import numpy as np
 
 from .io.scans import ScanChunk
 from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
-from .partition import ScanPart, _part_chunks, append_records, folder_records
+from .partition import ScanPart, append_records, folder_records
+from .partition import part_chunks as file_chunks
 from .settings import CeilingSettings, OrthoimageSettings
 from .types import Candidate, Orthoimage, PointCloud, Segmentation, WallFrame
 
@@ -70,7 +71,7 @@ def part_chunks(part: ScanPart | MemoryPart, origin: np.ndarray) -> Iterator[Sca
     if isinstance(part, MemoryPart):
         yield ScanChunk(part.xyz, part.rgb, np.asarray(origin, np.float64), part.start)
         return
-    yield from _part_chunks(part, origin)
+    yield from file_chunks(part, origin)
 
 
 @dataclass(frozen=True)

@@ -129,7 +129,8 @@ def scan_origin(path: Path | str) -> np.ndarray:
     return next(iter_scan(path, chunk_points=BLOCK_POINTS)).origin
 
 
-def _part_chunks(part: ScanPart, origin: np.ndarray) -> Iterator[ScanChunk]:
+def part_chunks(part: ScanPart, origin: np.ndarray) -> Iterator[ScanChunk]:
+    """The chunks of one scan part, streamed from its file (its point range, or the whole file)."""
     if part.stop is None:
         return iter_scan(part.path, origin)
     return iter_scan(part.path, origin, start=part.start, stop=part.stop)
@@ -154,7 +155,7 @@ def sample_part(part: ScanPart, origin: np.ndarray, step: int, scratch: str | No
         paths = _spill_paths(Path(scratch), part)
         files = (open(paths[0], "wb"), open(paths[1], "wb"))
     try:
-        for chunk in _part_chunks(part, origin):
+        for chunk in part_chunks(part, origin):
             g0 = part.first + (chunk.start - part.start)  # global index of the chunk's first point
             i0 = (-g0) % step
             xs.append(chunk.xyz[i0::step].copy())
@@ -172,7 +173,8 @@ def sample_part(part: ScanPart, origin: np.ndarray, step: int, scratch: str | No
     return PartSample(xyz, rgb, n, spill)
 
 
-def _spilled_chunks(scratch: Path, part: ScanPart, origin: np.ndarray, points: int) -> Iterator[ScanChunk]:
+def spilled_chunks(scratch: Path, part: ScanPart, origin: np.ndarray, points: int) -> Iterator[ScanChunk]:
+    """The chunks of a part whose ``points`` points were spilled to ``scratch`` while sampling."""
     pxyz, prgb = _spill_paths(scratch, part)
     for a in range(0, points, CHUNK_POINTS):
         m = min(CHUNK_POINTS, points - a)
@@ -369,7 +371,7 @@ def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch
     written per wall.
     """
     root = Path(scratch)
-    chunks = _spilled_chunks(root, part, origin, points) if spilled else _part_chunks(part, origin)
+    chunks = spilled_chunks(root, part, origin, points) if spilled else part_chunks(part, origin)
     written = [0] * len(index.frames)
     band_px = [band_rows(f, ortho) * ortho_shape(f, ortho.pixel_m)[1] for f in index.frames]
     made: set[tuple[int, int]] = set()

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError, NoWallsError
-from .io.scans import _ORIGIN_SAMPLE, BLOCK_POINTS
+from .io.scans import BLOCK_POINTS, ORIGIN_SAMPLE
 from .settings import SegmentationSettings
 from .stray_points import DenseBox, dense_box, inside_box
 from .types import PointCloud, Segmentation, Storey, Wall, WallFrame
@@ -56,7 +56,7 @@ __all__ = ["segment_floor_ceiling_walls", "find_scan_storeys", "ScanStoreys", "s
 _DENSE_VOXELS = 1 << 24  # voxel grids up to this size are grouped with bincount, larger ones by sorting
 _CHUNK = 1 << 22  # points handled at once where temporaries would otherwise grow with the wall
 _PLANE_BLOCK = 1 << 15  # voxels compared with every plane at once (bounds a (voxels, planes) array)
-_ORIGIN_POINTS = min(BLOCK_POINTS, _ORIGIN_SAMPLE)  # first points of a file that set its origin
+_ORIGIN_POINTS = min(BLOCK_POINTS, ORIGIN_SAMPLE)  # first points of a file that set its origin
 _ASSIGN_THREADS = 2  # threads assigning points to walls
 _THREAD_MIN_POINTS = 1 << 22  # clouds smaller than this are assigned in one thread
 

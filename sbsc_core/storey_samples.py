@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .partition import ScanPart, _part_chunks, _spilled_chunks
+from .partition import ScanPart, part_chunks, spilled_chunks
 from .types import PointCloud
 
 __all__ = ["storey_steps", "storey_part", "storey_cloud"]
@@ -42,7 +42,7 @@ def storey_part(part: ScanPart, origin: np.ndarray, bounds: Sequence[tuple[float
     the storey's Z range ``bounds[k]`` (relative to ``origin``) whose index over all files is a
     multiple of ``steps[k]``. Returns the number of points written per storey."""
     root = Path(scratch)
-    chunks = _spilled_chunks(root, part, origin, points) if spilled else _part_chunks(part, origin)
+    chunks = spilled_chunks(root, part, origin, points) if spilled else part_chunks(part, origin)
     written = [0] * len(bounds)
     files = [tuple(open(p, "wb") for p in _paths(root, k, part)) for k in range(len(bounds))]
     try:

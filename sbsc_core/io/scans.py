@@ -35,7 +35,7 @@ from ..types import PointCloud
 SCAN_EXTENSIONS: tuple[str, ...] = (".ply", ".e57", ".las", ".laz", ".pcd", ".xyz", ".pts", ".txt")
 CHUNK_POINTS = 1 << 21  # points per chunk handed to the caller
 BLOCK_POINTS = 1 << 16  # points a reader converts at once (bounds float64 / parsing temporaries)
-_ORIGIN_SAMPLE = 100_000  # points of the first block whose median sets the origin
+ORIGIN_SAMPLE = 100_000  # points of the first block whose median sets the origin
 
 RawBlock = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 """x, y, z (world coordinates, any float type) and (n, 3) colours (uint8, or uint16 when wide)."""
@@ -275,7 +275,7 @@ def is_scan_file(path: str | os.PathLike[str]) -> bool:
 
 def _median_origin(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
     """The rounded median of the first points (whole metres; 0 where not finite)."""
-    k = min(len(x), _ORIGIN_SAMPLE)
+    k = min(len(x), ORIGIN_SAMPLE)
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: refused later
         med = np.array([np.nanmedian(np.asarray(c[:k], np.float64)) for c in (x, y, z)])
