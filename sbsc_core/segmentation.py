@@ -127,7 +127,8 @@ def find_scan_storeys(cloud: PointCloud, settings: SegmentationSettings | None =
     if len(levels) > 1:  # each storey is sampled again on its own: this sample is not needed
         del sample
         sample = None
-        shares = [len(_z_index(cloud.xyz, lo, hi)) / len(cloud) for lo, hi in storey_bounds(levels)]
+        shares = [sum(np.count_nonzero(m) for _, m in _z_masks(cloud.xyz, lo, hi)) / len(cloud)
+                  for lo, hi in storey_bounds(levels)]
     return ScanStoreys(levels, np.asarray(cloud.origin, np.float64).copy(), box, int(stray), shares, sample)
 
 
@@ -196,7 +197,7 @@ def segment_storeys(storeys: ScanStoreys, storey_points: StoreyPoints,
             raise ValueError(f"storey {sid}: its cloud has another origin than the scan's")
         shift = sub.origin - _own_origin(sub)
         if shift.any():  # the storey's cloud is ours: recentred in place
-            sub = PointCloud(xyz=_shift_in_place(sub.xyz, shift), rgb=sub.rgb, origin=sub.origin - shift, sources=sub.sources)
+            sub = _recentred(sub, shift, in_place=True)
         box = DenseBox(storeys.box.lo + shift, storeys.box.hi + shift)
         one = segment_storey(sub, sid, (floor + shift[2], ceiling + shift[2]), s, box)
         del sub
@@ -228,7 +229,7 @@ def segment_storey(cloud: PointCloud, sid: str, levels: tuple[float, float],
         raise NoWallsError(f"storey {sid} (z = {floor + z0:.2f} to {ceiling + z0:.2f} m): no walls found: no points")
     shift = cloud.origin - _own_origin(cloud)
     if shift.any():  # in the storey's own frame, as a scan of it alone (the frames are world coordinates)
-        cloud = _shifted(cloud, shift)
+        cloud = _recentred(cloud, shift)
         floor, ceiling = floor + shift[2], ceiling + shift[2]
         z0 -= shift[2]
         if box is not None:
@@ -262,18 +263,13 @@ def _own_origin(cloud: PointCloud) -> np.ndarray:
     return np.where(np.isfinite(med), np.round(med), 0.0) + 0.0
 
 
-def _shift_in_place(xyz: np.ndarray, shift: np.ndarray) -> np.ndarray:
-    """``xyz += shift`` computed in float64, chunk by chunk (no full-size temporary)."""
+def _recentred(cloud: PointCloud, shift: np.ndarray, *, in_place: bool = False) -> PointCloud:
+    """``cloud`` recentred on ``origin - shift``: its float32 coordinates plus ``shift``, added
+    in float64 chunk by chunk (no full-size temporary); ``in_place`` changes ``cloud.xyz``
+    itself instead of a copy."""
+    xyz = cloud.xyz if in_place else cloud.xyz.copy()
     for a in range(0, len(xyz), _CHUNK):
         np.add(xyz[a: a + _CHUNK], shift, out=xyz[a: a + _CHUNK], casting="unsafe")
-    return xyz
-
-
-def _shifted(cloud: PointCloud, shift: np.ndarray) -> PointCloud:
-    """``cloud`` recentred on ``origin - shift`` (float32 coordinates plus ``shift``, in float64)."""
-    xyz = np.empty_like(cloud.xyz)
-    for a in range(0, len(xyz), _CHUNK):
-        np.add(cloud.xyz[a: a + _CHUNK], shift, out=xyz[a: a + _CHUNK], casting="unsafe")
     return PointCloud(xyz=xyz, rgb=cloud.rgb, origin=cloud.origin - shift, sources=cloud.sources)
 
 
@@ -306,10 +302,16 @@ def _dense_sample(cloud: PointCloud, s: SegmentationSettings, box: DenseBox | No
     return box, stray, sample
 
 
+def _z_masks(xyz: np.ndarray, lo: float, hi: float) -> Iterator[tuple[int, np.ndarray]]:
+    """(first index, mask of lo <= z < hi) of each chunk of ``xyz``."""
+    for a in range(0, len(xyz), _CHUNK):
+        z = xyz[a: a + _CHUNK, 2]
+        yield a, (z >= lo) & (z < hi)
+
+
 def _z_index(xyz: np.ndarray, lo: float, hi: float) -> np.ndarray:
     """Indices of the points with lo <= z < hi, chunk by chunk."""
-    parts = [np.flatnonzero((xyz[a: a + _CHUNK, 2] >= lo) & (xyz[a: a + _CHUNK, 2] < hi)) + a
-             for a in range(0, len(xyz), _CHUNK)]
+    parts = [np.flatnonzero(m) + a for a, m in _z_masks(xyz, lo, hi)]
     return np.concatenate(parts) if parts else np.zeros(0, np.int64)
 
 
