@@ -63,6 +63,7 @@ from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
 from .io.crs import georeference_fields, scan_crs
 from .lookalikes import resolve_on_wall
+from .mounting import within_wall_height
 from .orthoimage import build_orthoimage
 from .partition import (
     SampleBuffer,
@@ -379,8 +380,10 @@ def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[
                timings: dict[str, float], log: Callable[[str], None] | None = None) -> DetectionResult:
     progress("consensus", 0.0)
     t = time.perf_counter()
-    depth_c = [c for w in walls.values() for c in w.depth_candidates]
-    colour_c = [c for w in walls.values() for c in w.colour_candidates]
+    orthos = {k: w.ortho for k, w in walls.items()}
+    margin = s.consensus.mount_margin_m
+    depth_c = within_wall_height([c for w in walls.values() for c in w.depth_candidates], orthos, margin_m=margin)
+    colour_c = within_wall_height([c for w in walls.values() for c in w.colour_candidates], orthos, margin_m=margin)
     reliefs = model_reliefs(templates)
 
     def run(d: list[Candidate], c: list[Candidate], counts: dict[str, int] | None) -> list[ConsensusHit]:
@@ -391,7 +394,6 @@ def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[
         chosen = consensus_by_storey(depth_c, colour_c, {w.id: w.storey for w in seg.walls}, per_storey, classes, run)
     else:
         chosen = run(depth_c, colour_c, None if expected is None else expected.counts)
-    orthos = {k: w.ortho for k, w in walls.items()}
     if s.confidence.enabled and s.confidence.report_unknown:  # regions like no class, for review
         chosen += unexplained_regions({k: w.depth_rois for k, w in walls.items()}, chosen, templates)
     detections = place_hits(chosen, orthos, templates)
