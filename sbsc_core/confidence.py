@@ -31,7 +31,8 @@ UNKNOWN_CLASS = "unknown"
 
 CALIBRATION_PATH = Path(__file__).with_name("calibration") / "confidence.json"
 FEATURES = ("in_depth", "in_colour", "rho_depth", "colour_goodness", "alpha", "class_margin",
-            "lookalike_margin", "gain_misfit", "relief_misfit", "unmatched_relief", "relief_margin")
+            "lookalike_margin", "gain_misfit", "relief_misfit", "unmatched_relief", "relief_margin",
+            "colour_only_print")
 _MARGIN_CAP = 0.3  # margins beyond this say nothing more
 _GAIN_CAP = 1.0  # |ln gain| beyond this (a relief e times too deep or too flat) says nothing more
 _RELIEF_CAP_M = 0.02  # a model standing out this far would surely have been matched in depth
@@ -65,6 +66,12 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
     outline can correlate alike (a square call point and a round smoke detector seen through
     mixed pixels), while only the right one stands out where the scene does. 0 without a
     depth match.
+
+    ``colour_only_print``: the look-alike margin again, for a hit found in colour only (0
+    otherwise). Found in colour alone, the print is the only evidence of which class it is:
+    a flat sign lost in a noisy scan's depth whose pictogram matches its class clearly is
+    likely right, one whose pictogram matches another look-alike as well is likely not.
+    With depth the relief tells more than the print does, so the two get weights of their own.
     """
     here = hit.box
 
@@ -96,6 +103,7 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
         float(hit.rho_depth or 0.0), 0.0 if hit.rho_colour is None else 1.0 - float(hit.rho_colour),
         float(hit.alpha), float(np.clip(margin, 0.0, _MARGIN_CAP)), float(np.clip(look, -_MARGIN_CAP, _MARGIN_CAP)),
         gain, relief, unmatched, relief_margin,
+        float(np.clip(look, -_MARGIN_CAP, _MARGIN_CAP)) if d is None and hit.rho_colour is not None else 0.0,
     ])
 
 
@@ -150,7 +158,8 @@ def load_calibration(path: Path | None = None) -> Calibration | None:
 
 # The sign each feature's coefficient must have: better evidence never lowers the confidence.
 MONOTONE = {"rho_depth": 1, "colour_goodness": 1, "alpha": 1, "class_margin": 1, "lookalike_margin": 1,
-            "gain_misfit": -1, "relief_misfit": -1, "unmatched_relief": -1, "relief_margin": 1}
+            "gain_misfit": -1, "relief_misfit": -1, "unmatched_relief": -1, "relief_margin": 1,
+            "colour_only_print": 1}
 
 
 def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int] | None = None) -> Calibration:

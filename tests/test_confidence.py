@@ -231,3 +231,17 @@ def test_screening_goes_on_until_the_count_reaches_the_real_objects(tmp_path) ->
     s = ConfidenceSettings(calibration=str(path))
     hits = screened_consensus(controllers + real, [], {"switch": 2}, ["switch"], ConsensusSettings(), s)
     assert sorted(h.centre for h in hits) == [(150.0, 50.0), (150.0, 90.0)]
+
+
+def test_colour_only_print_is_the_lookalike_margin_of_a_colour_only_hit() -> None:
+    sign = _cand("extinguisher_sign", "colour", 0.08)
+    sign.lookalike_margin = 0.25
+    f = dict(zip(FEATURES, hit_features(make_hit(None, sign, 0.5), [], [sign]), strict=True))
+    assert f["colour_only_print"] == pytest.approx(0.25) and f["lookalike_margin"] == pytest.approx(0.25)
+    d = _cand("extinguisher_sign", "depth", 0.9)
+    both = dict(zip(FEATURES, hit_features(make_hit(d, sign, 1.0), [d], [sign]), strict=True))
+    assert both["colour_only_print"] == 0.0 and both["lookalike_margin"] == pytest.approx(0.25)
+    swapped = _cand("extinguisher_sign", "colour", 0.08)
+    swapped.lookalike_margin = -0.5  # the other look-alike's pictogram matches better
+    g = dict(zip(FEATURES, hit_features(make_hit(None, swapped, 0.5), [], [swapped]), strict=True))
+    assert g["colour_only_print"] == pytest.approx(-0.3)
