@@ -3,8 +3,11 @@
 ``confidence`` is the probability that a detection is an object of its class at that place
 (contract 4). It is a logistic regression on what recognition measured (:func:`hit_features`):
 which recognizers found the object, rho_D, 1 - rho_C, alpha (equation 15), the class
-margin (how much better the hit's class matched there than any other class) and the
-look-alike margin (how much better its print matched than the other look-alikes'). The
+margin (how much better the hit's class matched there than any other class), the
+look-alike margin (how much better its print matched than the other look-alikes'), the
+depth match's own misfit (relief amplitude and extent), how much better its relief fits
+than another class's there, and, for a hit seen in colour only, how far its class's model
+stands out and how clearly its print names its class. The
 coefficients are fitted on the project's own simulated scenes by
 ``benchmarks/bench_confidence.py`` and ship as ``sbsc_core/calibration/confidence.json``.
 
