@@ -571,7 +571,8 @@ def _min_cells(height: float, s: SegmentationSettings) -> float:
 
 
 def _wall_planes(cells: dict[str, np.ndarray], floor: float, height: float, s: SegmentationSettings) -> list[_Segment]:
-    """Vertical planes: dominant normal directions, then offset maxima, then runs along u."""
+    """Vertical planes: dominant normal directions, then offset maxima, each refitted and kept once,
+    then runs along u."""
     c, nrm = cells["c"], cells["n"]
     if len(c) == 0:
         return []
@@ -612,7 +613,8 @@ def _wall_planes(cells: dict[str, np.ndarray], floor: float, height: float, s: S
             n1, s1 = fit_line_2d(c[near, :2], (s.wall_plane_tolerance_m, s.wall_plane_tolerance_m / 2))
             if n1 @ n0 < 0:
                 n1, s1 = -n1, -s1
-            refined.append((n1, s1))
+            refined.append((n1, s1, c[near, :2].mean(axis=0)))
+    refined = _distinct_planes(refined, math.cos(tol), s.wall_plane_tolerance_m)
     if not refined:
         return []
     ns = np.array([p[0] for p in refined])
@@ -627,6 +629,25 @@ def _wall_planes(cells: dict[str, np.ndarray], floor: float, height: float, s: S
         segs += _runs(seg, s)
     return [g for g in segs if _big_enough(g, floor, height, s)]
 
+
+
+def _distinct_planes(planes: list[tuple[np.ndarray, float, np.ndarray]], min_cos: float, tolerance: float
+                     ) -> list[tuple[np.ndarray, float, np.ndarray]]:
+    """The refined planes without repeats: a plane that lies within ``tolerance`` of an earlier
+    (stronger) one, with its normal within the angle tolerance, over the cells it was fitted on
+    (``planes``: normal, offset and the centroid of those cells), is the same wall found again.
+
+    A wall finds itself again when things standing a few centimetres in front of it (boards,
+    posters, trunking, the backs of cabinets and shelves) make a second maximum of the offset
+    histogram beside its own, and the trimmed refit pulls that maximum back onto the wall.
+    Kept twice, the wall's cells would be shared between two identical planes, and each of the
+    two walls would get every other part of its points.
+    """
+    kept: list[tuple[np.ndarray, float, np.ndarray]] = []
+    for n, s, centre in planes:
+        if not any(abs(float(n @ m)) >= min_cos and abs(float(centre @ m) - t) <= tolerance for m, t, _ in kept):
+            kept.append((n, s, centre))
+    return kept
 
 
 def _nearest_planes(xy: np.ndarray, nxy: np.ndarray, ns: np.ndarray, ss: np.ndarray, min_cos: float,

@@ -203,3 +203,21 @@ def test_nearest_planes_blockwise_equals_all_at_once(monkeypatch):
     monkeypatch.setattr(seg, "_PLANE_BLOCK", 77)
     best2, ok2 = seg._nearest_planes(xy, nxy, ns, ss, 0.95, 0.5)
     assert np.array_equal(best, best2) and np.array_equal(ok, ok2)
+
+
+def test_boards_in_front_of_a_wall_do_not_find_it_twice() -> None:
+    """Boards a few cm in front of two walls (notice boards, the backs of shelves) make a second
+    maximum of the offset histogram beside each wall's own; refitted, it lands on the wall. Each
+    wall is found once and keeps all its points (they were shared with a copy of it)."""
+    outline = rotated([(0, 0), (9, 0), (9, 5), (0, 5)], 23.5, (2.0, 1.0))
+    boards = {0: [Block(u, u + 1.0, 0.9, 2.1, 0.05, (200, 190, 170)) for u in (0.5, 2.2, 3.9, 5.6, 7.3)],
+              1: [Block(u, u + 1.0, 0.9, 2.1, 0.06, (90, 90, 90)) for u in (0.5, 2.5)]}
+    plain, _ = make_scene([Room(outline)], spacing=0.025, noise_m=0.003, see_through_m=0.0, origin=ORIGIN)
+    cloud, truth = make_scene([Room(outline, boards)], spacing=0.025, noise_m=0.003, see_through_m=0.0,
+                              origin=ORIGIN)
+    seg = segment_floor_ceiling_walls(cloud)
+    assert len(seg.walls) == 4
+    _check_frames(seg, truth, tol_m=0.025)
+    bare = {_match(w.frame, truth["walls"])["edge"]: len(w.point_index) for w in segment_floor_ceiling_walls(plain).walls}
+    for w in seg.walls:  # a wall with boards has at least the points of the same wall without them
+        assert len(w.point_index) >= 0.98 * bare[_match(w.frame, truth["walls"])["edge"]]
