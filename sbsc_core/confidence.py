@@ -71,10 +71,12 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
     depth match.
 
     ``colour_only_print``: the look-alike margin again, for a hit found in colour only (0
-    otherwise). Found in colour alone, the print is the only evidence of which class it is:
-    a flat sign lost in a noisy scan's depth whose pictogram matches its class clearly is
-    likely right, one whose pictogram matches another look-alike as well is likely not.
-    With depth the relief tells more than the print does, so the two get weights of their own.
+    otherwise), times 1 - ``unmatched_relief``. Found in colour alone, the print is the only
+    evidence of which class it is: a flat sign lost in a noisy scan's depth whose pictogram
+    matches its class clearly is likely right, one whose pictogram matches another
+    look-alike as well is likely not. A class that stands out should have been matched in
+    depth too, so its print alone vouches for less. With depth the relief tells more than
+    the print does, so the two get weights of their own.
     """
     here = hit.box
 
@@ -106,7 +108,8 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
         float(hit.rho_depth or 0.0), 0.0 if hit.rho_colour is None else 1.0 - float(hit.rho_colour),
         float(hit.alpha), float(np.clip(margin, 0.0, _MARGIN_CAP)), float(np.clip(look, -_MARGIN_CAP, _MARGIN_CAP)),
         gain, relief, unmatched, relief_margin,
-        float(np.clip(look, -_MARGIN_CAP, _MARGIN_CAP)) if d is None and hit.rho_colour is not None else 0.0,
+        float(np.clip(look, -_MARGIN_CAP, _MARGIN_CAP)) * (1.0 - unmatched) if d is None and hit.rho_colour is not None
+        else 0.0,
     ])
 
 

@@ -245,3 +245,6 @@ def test_colour_only_print_is_the_lookalike_margin_of_a_colour_only_hit() -> Non
     swapped.lookalike_margin = -0.5  # the other look-alike's pictogram matches better
     g = dict(zip(FEATURES, hit_features(make_hit(None, swapped, 0.5), [], [swapped]), strict=True))
     assert g["colour_only_print"] == pytest.approx(-0.3)
+    deep = dict(zip(FEATURES, hit_features(make_hit(None, sign, 0.5), [], [sign], {"extinguisher_sign": 0.012}),
+                    strict=True))  # a 12 mm relief depth should have seen: the print vouches for less
+    assert deep["unmatched_relief"] == pytest.approx(0.6) and deep["colour_only_print"] == pytest.approx(0.1)
