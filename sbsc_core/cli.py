@@ -417,7 +417,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
         summary = simulate_building(out, args.storeys, scene=args.scene or "scenario", fmt=args.format,
                                     seed=args.seed, angular_step_deg=args.step, log=con.simulation_log,
-                                    object_builder=builder, **surfaces)
+                                    object_builder=builder, **realism, **surfaces)
     elif args.scene:
         summary = simulate_scene(scene_path(args.scene), out, seed=args.seed, angular_step_deg=args.step,
                                  log=con.simulation_log, object_builder=builder, library_builder=library,

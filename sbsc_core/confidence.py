@@ -3,8 +3,11 @@
 ``confidence`` is the probability that a detection is an object of its class at that place
 (contract 4). It is a logistic regression on what recognition measured (:func:`hit_features`):
 which recognizers found the object, rho_D, 1 - rho_C, alpha (equation 15), the class
-margin (how much better the hit's class matched there than any other class) and the
-look-alike margin (how much better its print matched than the other look-alikes'). The
+margin (how much better the hit's class matched there than any other class), the
+look-alike margin (how much better its print matched than the other look-alikes'), the
+depth match's own misfit (relief amplitude and extent), how much better its relief fits
+than another class's there, and, for a hit seen in colour only, how far its class's model
+stands out and how clearly its print names its class. The
 coefficients are fitted on the project's own simulated scenes by
 ``benchmarks/bench_confidence.py`` and ship as ``sbsc_core/calibration/confidence.json``.
 
@@ -31,7 +34,8 @@ UNKNOWN_CLASS = "unknown"
 
 CALIBRATION_PATH = Path(__file__).with_name("calibration") / "confidence.json"
 FEATURES = ("in_depth", "in_colour", "rho_depth", "colour_goodness", "alpha", "class_margin",
-            "lookalike_margin", "gain_misfit", "relief_misfit", "unmatched_relief")
+            "lookalike_margin", "gain_misfit", "relief_misfit", "unmatched_relief", "relief_margin",
+            "colour_only_print")
 _MARGIN_CAP = 0.3  # margins beyond this say nothing more
 _GAIN_CAP = 1.0  # |ln gain| beyond this (a relief e times too deep or too flat) says nothing more
 _RELIEF_CAP_M = 0.02  # a model standing out this far would surely have been matched in depth
@@ -58,6 +62,21 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
     sign is often missed in depth on a noisy scan, a 12 mm switch plate is not, so a
     colour-only switch is more likely something else of its colour. 0 with a depth match
     or without ``reliefs``.
+
+    ``relief_margin``: how much better the hit's depth model covers where the scene stands
+    out than another class's depth model at its place: the hit's relief IoU minus the best
+    rival's, capped to [0, 0.3] (0.3 when no rival has one). Two classes of about the same
+    outline can correlate alike (a square call point and a round smoke detector seen through
+    mixed pixels), while only the right one stands out where the scene does. 0 without a
+    depth match.
+
+    ``colour_only_print``: the look-alike margin again, for a hit found in colour only (0
+    otherwise), times 1 - ``unmatched_relief``. Found in colour alone, the print is the only
+    evidence of which class it is: a flat sign lost in a noisy scan's depth whose pictogram
+    matches its class clearly is likely right, one whose pictogram matches another
+    look-alike as well is likely not. A class that stands out should have been matched in
+    depth too, so its print alone vouches for less. With depth the relief tells more than
+    the print does, so the two get weights of their own.
     """
     here = hit.box
 
@@ -65,9 +84,14 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
         return [c for c in cands if c.wall_id == hit.wall_id and c.class_id != hit.class_id
                 and here is not None and box_overlap(c.box, here) > 0.25]
 
+    relief_margin = 0.0
     if hit.rho_depth is not None:
         rivals = others(depth)
         margin = hit.rho_depth - max(c.score for c in rivals) if rivals else _MARGIN_CAP
+        ious = [c.relief_iou for c in rivals if c.relief_iou is not None]
+        own = None if hit.depth is None else hit.depth.relief_iou
+        if own is not None:
+            relief_margin = float(np.clip(own - max(ious), 0.0, _MARGIN_CAP)) if ious else _MARGIN_CAP
     else:
         rivals = others(colour)
         margin = min(c.score for c in rivals) - float(hit.rho_colour or 0.0) if rivals else _MARGIN_CAP
@@ -83,7 +107,9 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
         float(hit.rho_depth is not None), float(hit.rho_colour is not None),
         float(hit.rho_depth or 0.0), 0.0 if hit.rho_colour is None else 1.0 - float(hit.rho_colour),
         float(hit.alpha), float(np.clip(margin, 0.0, _MARGIN_CAP)), float(np.clip(look, -_MARGIN_CAP, _MARGIN_CAP)),
-        gain, relief, unmatched,
+        gain, relief, unmatched, relief_margin,
+        float(np.clip(look, -_MARGIN_CAP, _MARGIN_CAP)) * (1.0 - unmatched) if d is None and hit.rho_colour is not None
+        else 0.0,
     ])
 
 
@@ -138,7 +164,8 @@ def load_calibration(path: Path | None = None) -> Calibration | None:
 
 # The sign each feature's coefficient must have: better evidence never lowers the confidence.
 MONOTONE = {"rho_depth": 1, "colour_goodness": 1, "alpha": 1, "class_margin": 1, "lookalike_margin": 1,
-            "gain_misfit": -1, "relief_misfit": -1, "unmatched_relief": -1}
+            "gain_misfit": -1, "relief_misfit": -1, "unmatched_relief": -1, "relief_margin": 1,
+            "colour_only_print": 1}
 
 
 def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int] | None = None) -> Calibration:
@@ -220,7 +247,7 @@ def screen_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[C
 
 def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected: dict[str, int] | None,
                        classes: list[str], consensus_settings: ConsensusSettings, settings: ConfidenceSettings,
-                       *, reliefs: dict[str, float] | None = None, max_rounds: int = 4) -> list[ConsensusHit]:
+                       *, reliefs: dict[str, float] | None = None, max_rounds: int = 50) -> list[ConsensusHit]:
     """The consensus of every class (:func:`~sbsc_core.consensus.consensus_all`) with the
     "none of these" rule inside it, in class order.
 
@@ -231,7 +258,9 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
     passes to its next-best class. A candidate of another class that matched there better
     than the refused hit stays (with expected counts, a smoke detector's place may have gone
     to a weak fire-alarm switch while the smoke detectors' count was full of weak hits).
-    At most ``max_rounds`` rounds. With expected counts,
+    Rounds go on until no hit is refused (at most ``max_rounds``: with expected counts, a
+    class's count may be full of look-alike clutter several times over before its real
+    objects, found by depth alone, come up). With expected counts,
     the as-designed model vouches for the objects still missing at the end: the refused
     hits fill their class's count, best confidence first, where their place is free (a
     real object seen in colour only is then kept). The hits still refused come back as

@@ -385,7 +385,7 @@ def _rois_from_jd(jd: np.ndarray, wall: np.ndarray, settings: DepthRecognitionSe
 
 
 def isolation(jd: np.ndarray, box: Box, threshold_m: float, gap_px: int, width_px: int,
-              known: np.ndarray | None = None, min_known: float = 0.5) -> float:
+              known: np.ndarray | None = None, min_known: float = 0.5, *, trails: bool = False) -> float:
     """The largest share, over the four sides of ``box``, of a strip of relief above ``threshold_m``.
 
     Each strip runs along one side at ``gap_px`` .. ``gap_px + width_px`` pixels outside the
@@ -394,14 +394,23 @@ def isolation(jd: np.ndarray, box: Box, threshold_m: float, gap_px: int, width_p
     (a door casing, one half of a double socket) has relief continuing into a strip. With
     ``known``, the share is over a strip's known pixels, and a strip with less than
     ``min_known`` of them known is unknown (it counts as 0, like an unseen strip).
+
+    With ``trails``, a side whose relief falls away from the footprint at every pixel until
+    it is below ``threshold_m``, within the footprint's own extent across that side, is a
+    trail, not something larger (it counts as 0; :func:`is_trail`): a scanner seeing a deep
+    object obliquely returns mixed ranges between its front and the wall behind, a ramp down
+    to the wall beside one edge, while a larger object's relief levels off or rises again.
     """
     out = 0.0
     g, wd = gap_px, width_px
     sides = (Box(box.r0 - g - wd, box.c0, box.r0 - g, box.c1), Box(box.r1 + g, box.c0, box.r1 + g + wd, box.c1),
              Box(box.r0, box.c0 - g - wd, box.r1, box.c0 - g), Box(box.r0, box.c1 + g, box.r1, box.c1 + g + wd))
-    for sb in sides:
+    for k, sb in enumerate(sides):
         strip = crop_padded(jd, sb.r0, sb.r1, sb.c0, sb.c1)
         if not strip.size:
+            continue
+        reach = box.height if k < 2 else box.width
+        if trails and is_trail(_outward_profile(jd, box, k, g, g + reach), threshold_m):
             continue
         stands = np.abs(strip) > threshold_m
         if known is None:
@@ -412,6 +421,36 @@ def isolation(jd: np.ndarray, box: Box, threshold_m: float, gap_px: int, width_p
         if nk and nk >= min_known * k.size:
             out = max(out, float(np.count_nonzero(stands & k)) / nk)
     return out
+
+
+def _outward_profile(jd: np.ndarray, box: Box, side: int, start_px: int, stop_px: int) -> np.ndarray:
+    """The mean relief of each line parallel to side ``side`` of ``box`` (0 top, 1 bottom, 2 left,
+    3 right), from ``start_px`` to ``stop_px`` (excluded) pixels outside it, nearest first."""
+    dists = range(start_px, stop_px)
+    if side == 0:
+        lines = [crop_padded(jd, box.r0 - 1 - d, box.r0 - d, box.c0, box.c1) for d in dists]
+    elif side == 1:
+        lines = [crop_padded(jd, box.r1 + d, box.r1 + d + 1, box.c0, box.c1) for d in dists]
+    elif side == 2:
+        lines = [crop_padded(jd, box.r0, box.r1, box.c0 - 1 - d, box.c0 - d) for d in dists]
+    else:
+        lines = [crop_padded(jd, box.r0, box.r1, box.c1 + d, box.c1 + d + 1) for d in dists]
+    return np.array([float(np.nanmean(x)) if x.size and np.isfinite(x).any() else np.nan for x in lines])
+
+
+def is_trail(profile: np.ndarray, threshold_m: float) -> bool:
+    """Whether a relief ``profile`` (nearest line first, as :func:`_outward_profile`) is a ramp
+    down to the wall: its magnitude falls at every step until it is below ``threshold_m``
+    (a larger object's relief levels off or rises again before that)."""
+    p = np.abs(np.asarray(profile, float))
+    if p.size < 2 or p[0] <= threshold_m:
+        return False
+    for k in range(1, p.size):
+        if not np.isfinite(p[k]) or p[k] >= p[k - 1]:
+            return False
+        if p[k] <= threshold_m:
+            return True
+    return False
 
 
 def relief_overlap(jd: np.ndarray, model: np.ndarray, box: Box, pad_px: int, threshold_m: float,
@@ -479,7 +518,8 @@ def match_depth(
             box = box_at((r, c), h, w)
             thr = max(settings.isolation_relief_fraction * relief * gain, noise_relief)
             if isolation(jml, box, thr, settings.isolation_gap_px, settings.isolation_width_px,
-                         known, settings.min_known_share) > settings.isolation_max_occupancy:
+                         known, settings.min_known_share,
+                         trails=settings.isolation_trails) > settings.isolation_max_occupancy:
                 return False
             return overlap(r, c, gain) >= settings.min_relief_iou
 

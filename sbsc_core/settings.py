@@ -170,6 +170,7 @@ class DepthRecognitionSettings:
     isolation_width_px: int = 3  # ... and are this wide
     isolation_relief_fraction: float = 0.5  # relief above this x the model's (median) counts
     isolation_max_occupancy: float = 0.5  # a side strip with more relief: part of something larger
+    isolation_trails: bool = True  # ... unless it falls at every pixel to the wall: a mixed-pixel trail
     min_relief_iou: float = 0.5  # where model and scene stand out must overlap this much (IoU)
     nms_overlap: float = 0.3  # same-class matches overlapping more than this are one match
     refit_plane: bool = True  # remove a residual plane fitted to the visible wall

@@ -186,3 +186,65 @@ def test_a_refused_hit_does_not_take_a_better_class_out_of_its_place() -> None:
     elsewhere = Candidate("switch", "W1", "depth", Box(100, 100, 120, 120), (110.0, 110.0), 0.9)
     kept = _clear_of([better, worse, same, elsewhere], [weak], 0.25)
     assert kept == [better, elsewhere]
+
+
+def test_relief_margin_compares_where_the_rivals_stand_out() -> None:
+    """A call point and a smoke detector correlate alike at one place; only the call point's
+    model stands out where the scene does (relief IoU 0.77 against 0.59)."""
+    d = _cand("fire_alarm_switch", "depth", 0.90)
+    d.gain, d.relief_iou = 0.82, 0.77
+    rival = _cand("smoke_detector", "depth", 0.86)
+    rival.gain, rival.relief_iou = 1.03, 0.59
+    f = dict(zip(FEATURES, hit_features(make_hit(d, None, 0.5), [d, rival], []), strict=True))
+    assert f["class_margin"] == pytest.approx(0.04) and f["relief_margin"] == pytest.approx(0.18)
+    g = dict(zip(FEATURES, hit_features(make_hit(rival, None, 0.5), [d, rival], []), strict=True))
+    assert g["relief_margin"] == 0.0
+    alone = dict(zip(FEATURES, hit_features(make_hit(d, None, 0.5), [d], []), strict=True))
+    assert alone["relief_margin"] == pytest.approx(0.3)
+    colour = dict(zip(FEATURES, hit_features(make_hit(None, _cand("socket", "colour", 0.1), 0.5), [rival], []),
+                      strict=True))
+    assert colour["relief_margin"] == 0.0
+
+
+def test_screening_goes_on_until_the_count_reaches_the_real_objects(tmp_path) -> None:
+    """Expected two switches; nine room controllers correlate better than both real switches.
+    Each round refuses the controllers that filled the count, until the real ones come up
+    (four rounds were not always enough)."""
+    import json
+
+    from sbsc_core.confidence import screened_consensus
+    from sbsc_core.settings import ConsensusSettings
+
+    cal = Calibration(np.array([0, 0, 0, 0, 0, 0, 0, -20.0]), 5.0)  # a deep misfit is wrong
+    path = tmp_path / "cal.json"
+    path.write_text(json.dumps(cal.to_dict()))
+    controllers = []
+    for k in range(9):
+        c = _cand("switch", "depth", 0.99 - 0.001 * k, 50.0, 50.0 + 40 * k)
+        c.gain = 1.9
+        controllers.append(c)
+    real = []
+    for k in range(2):
+        c = _cand("switch", "depth", 0.95, 150.0, 50.0 + 40 * k)
+        c.gain = 1.0
+        real.append(c)
+    s = ConfidenceSettings(calibration=str(path))
+    hits = screened_consensus(controllers + real, [], {"switch": 2}, ["switch"], ConsensusSettings(), s)
+    assert sorted(h.centre for h in hits) == [(150.0, 50.0), (150.0, 90.0)]
+
+
+def test_colour_only_print_is_the_lookalike_margin_of_a_colour_only_hit() -> None:
+    sign = _cand("extinguisher_sign", "colour", 0.08)
+    sign.lookalike_margin = 0.25
+    f = dict(zip(FEATURES, hit_features(make_hit(None, sign, 0.5), [], [sign]), strict=True))
+    assert f["colour_only_print"] == pytest.approx(0.25) and f["lookalike_margin"] == pytest.approx(0.25)
+    d = _cand("extinguisher_sign", "depth", 0.9)
+    both = dict(zip(FEATURES, hit_features(make_hit(d, sign, 1.0), [d], [sign]), strict=True))
+    assert both["colour_only_print"] == 0.0 and both["lookalike_margin"] == pytest.approx(0.25)
+    swapped = _cand("extinguisher_sign", "colour", 0.08)
+    swapped.lookalike_margin = -0.5  # the other look-alike's pictogram matches better
+    g = dict(zip(FEATURES, hit_features(make_hit(None, swapped, 0.5), [], [swapped]), strict=True))
+    assert g["colour_only_print"] == pytest.approx(-0.3)
+    deep = dict(zip(FEATURES, hit_features(make_hit(None, sign, 0.5), [], [sign], {"extinguisher_sign": 0.012}),
+                    strict=True))  # a 12 mm relief depth should have seen: the print vouches for less
+    assert deep["unmatched_relief"] == pytest.approx(0.6) and deep["colour_only_print"] == pytest.approx(0.1)

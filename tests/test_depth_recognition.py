@@ -231,6 +231,27 @@ def test_plausibility_checks_ignore_unseen_pixels() -> None:
     assert isolation(jd, box, 0.005, 2, 3, known) == 0.0  # ... but it is unseen
 
 
+def test_a_mixed_pixel_trail_is_not_something_larger() -> None:
+    """A 5 cm deep box seen obliquely: mixed ranges ramp down to the wall beside one edge.
+    That side strip stands out, but falls at every pixel to the wall: a trail, not a larger
+    object. Relief that levels off (a neighbour's recessed face) or rises again is not."""
+    from sbsc_core.depth_recognition import is_trail, isolation
+
+    jd = np.zeros((60, 80), np.float32)
+    jd[20:40, 20:40] = 0.05
+    jd[20:40, 40:57] = np.linspace(0.047, 0.0, 17, dtype=np.float32)  # the ramp, 3 mm per pixel
+    box = Box(20, 20, 40, 40)
+    assert isolation(jd, box, 0.02, 2, 3) == 1.0
+    assert isolation(jd, box, 0.02, 2, 3, trails=True) == 0.0
+    jd[20:40, 47:57] = 0.03  # the ramp levels off: a larger object beside the box
+    assert isolation(jd, box, 0.02, 2, 3, trails=True) == 1.0
+    assert is_trail(np.array([0.033, 0.030, 0.027, 0.024, 0.021, 0.018]), 0.02)
+    assert is_trail(-np.array([0.033, 0.030, 0.027, 0.024, 0.021, 0.018]), 0.02)  # a recess the same
+    assert not is_trail(np.array([0.010, 0.009, 0.008, 0.005, 0.005, 0.006, 0.012]), 0.004)  # a double plate
+    assert not is_trail(np.array([0.033, 0.030, 0.027, 0.026]), 0.02)  # never reaches the wall
+    assert not is_trail(np.array([0.01, 0.005]), 0.02)  # no relief beside the box
+
+
 # --------------------------------------------------------------------------- stepped wall
 
 

@@ -142,17 +142,30 @@ def build_building(scene: SceneDescription, object_builder: ObjectBuilder | None
                                     wall.frame.normal.copy(), spec.width_m, spec.height_m, p.rotation_deg))
     stations = station_positions(scene)
     surfaces, columns = add_surface_objects(scene, layout, stations, object_builder, parts, objects)
-    distractors = []
-    if scene.clutter_per_metre or scene.furniture_per_metre:
-        from .clutter import distractor_mesh, place_clutter, place_furniture
-
-        if scene.clutter_per_metre:
-            distractors += place_clutter(scene, layout, seed, scene.clutter_per_metre)
-        if scene.furniture_per_metre:
-            distractors += place_furniture(scene, layout, stations, seed, scene.furniture_per_metre,
-                                           existing=distractors)
-        parts += [distractor_mesh(d, layout) for d in distractors]
+    distractors = add_distractors(scene, layout, stations, seed, parts)
     return Building(scene, layout, M.merge(parts), objects, stations, distractors, surfaces, columns)
+
+
+def add_distractors(scene: SceneDescription, layout: Layout, stations: np.ndarray, seed: int | tuple[int, ...],
+                    parts: list[ColouredMesh]) -> list:
+    """Wall clutter and furniture of the scene's ``clutter`` / ``furniture`` options (:mod:`clutter`).
+
+    Laid out for ``seed`` (an int, or ``(seed, storey)`` in a building) around the scene's
+    objects, openings and ``stations``; appends their meshes (label -2) to ``parts`` and
+    returns the distractors. Nothing when both options are off.
+    """
+    if not (scene.clutter_per_metre or scene.furniture_per_metre):
+        return []
+    from .clutter import distractor_mesh, place_clutter, place_furniture
+
+    distractors = []
+    if scene.clutter_per_metre:
+        distractors += place_clutter(scene, layout, seed, scene.clutter_per_metre)
+    if scene.furniture_per_metre:
+        distractors += place_furniture(scene, layout, stations, seed, scene.furniture_per_metre,
+                                       existing=distractors)
+    parts += [distractor_mesh(d, layout) for d in distractors]
+    return distractors
 
 
 def add_surface_objects(scene: SceneDescription, layout: Layout, stations: np.ndarray,

@@ -109,11 +109,17 @@ def _blocked(scene: SceneDescription, layout: Layout, wall: str, box, placed: li
     return any(d.wall == wall and _overlap(box, d.box(), margin) for d in placed)
 
 
-def place_clutter(scene: SceneDescription, layout: Layout, seed: int, per_metre: float = 0.4,
+def _key(seed: int | tuple[int, ...]) -> list[int]:
+    """A seed, or a tuple of them (a building's ``(seed, storey)``), as a generator key."""
+    return [int(s) for s in seed] if isinstance(seed, tuple) else [int(seed)]
+
+
+def place_clutter(scene: SceneDescription, layout: Layout, seed: int | tuple[int, ...], per_metre: float = 0.4,
                   existing: list[Distractor] | None = None) -> list[Distractor]:
     """Wall clutter for a scene: about ``per_metre`` items per metre of wall, clear of the
-    objects, the openings and each other (deterministic for a seed)."""
-    rng = np.random.default_rng([int(seed), 0xC107])
+    objects, the openings and each other (deterministic for a seed; a tuple such as
+    ``(seed, storey)`` gives each storey of a building its own layout)."""
+    rng = np.random.default_rng([*_key(seed), 0xC107])
     kinds = list(WALL_KINDS)
     weights = np.array([WALL_KINDS[k][0] for k in kinds])
     placed = list(existing or [])
@@ -137,7 +143,7 @@ def place_clutter(scene: SceneDescription, layout: Layout, seed: int, per_metre:
     return out
 
 
-def place_furniture(scene: SceneDescription, layout: Layout, stations: np.ndarray, seed: int,
+def place_furniture(scene: SceneDescription, layout: Layout, stations: np.ndarray, seed: int | tuple[int, ...],
                     per_metre: float = 0.15, existing: list[Distractor] | None = None) -> list[Distractor]:
     """Furniture against the walls: about ``per_metre`` pieces per metre of wall.
 
@@ -149,7 +155,7 @@ def place_furniture(scene: SceneDescription, layout: Layout, stations: np.ndarra
     """
     from .catalogue import CATALOGUE
 
-    rng = np.random.default_rng([int(seed), 0xF0F0])
+    rng = np.random.default_rng([*_key(seed), 0xF0F0])
     kinds = list(FURNITURE_KINDS)
     weights = np.array([FURNITURE_KINDS[k][0] for k in kinds])
     placed: list[Distractor] = []
