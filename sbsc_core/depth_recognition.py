@@ -409,33 +409,32 @@ def isolation(jd: np.ndarray, box: Box, threshold_m: float, gap_px: int, width_p
         strip = crop_padded(jd, sb.r0, sb.r1, sb.c0, sb.c1)
         if not strip.size:
             continue
+        stands = np.abs(strip) > threshold_m
+        if known is None:
+            share = float(np.mean(stands))
+        else:
+            kn = crop_padded(known, sb.r0, sb.r1, sb.c0, sb.c1)
+            nk = int(np.count_nonzero(kn))
+            share = float(np.count_nonzero(stands & kn)) / nk if nk and nk >= min_known * kn.size else 0.0
+        if share <= out:
+            continue
         reach = box.height if k < 2 else box.width
         if trails and is_trail(_outward_profile(jd, box, k, g, g + reach), threshold_m):
             continue
-        stands = np.abs(strip) > threshold_m
-        if known is None:
-            out = max(out, float(np.mean(stands)))
-            continue
-        k = crop_padded(known, sb.r0, sb.r1, sb.c0, sb.c1)
-        nk = int(np.count_nonzero(k))
-        if nk and nk >= min_known * k.size:
-            out = max(out, float(np.count_nonzero(stands & k)) / nk)
+        out = share
     return out
 
 
 def _outward_profile(jd: np.ndarray, box: Box, side: int, start_px: int, stop_px: int) -> np.ndarray:
     """The mean relief of each line parallel to side ``side`` of ``box`` (0 top, 1 bottom, 2 left,
     3 right), from ``start_px`` to ``stop_px`` (excluded) pixels outside it, nearest first."""
-    dists = range(start_px, stop_px)
     if side == 0:
-        lines = [crop_padded(jd, box.r0 - 1 - d, box.r0 - d, box.c0, box.c1) for d in dists]
-    elif side == 1:
-        lines = [crop_padded(jd, box.r1 + d, box.r1 + d + 1, box.c0, box.c1) for d in dists]
-    elif side == 2:
-        lines = [crop_padded(jd, box.r0, box.r1, box.c0 - 1 - d, box.c0 - d) for d in dists]
-    else:
-        lines = [crop_padded(jd, box.r0, box.r1, box.c1 + d, box.c1 + d + 1) for d in dists]
-    return np.array([float(np.nanmean(x)) if x.size and np.isfinite(x).any() else np.nan for x in lines])
+        return crop_padded(jd, box.r0 - stop_px, box.r0 - start_px, box.c0, box.c1).mean(axis=1)[::-1]
+    if side == 1:
+        return crop_padded(jd, box.r1 + start_px, box.r1 + stop_px, box.c0, box.c1).mean(axis=1)
+    if side == 2:
+        return crop_padded(jd, box.r0, box.r1, box.c0 - stop_px, box.c0 - start_px).mean(axis=0)[::-1]
+    return crop_padded(jd, box.r0, box.r1, box.c1 + start_px, box.c1 + stop_px).mean(axis=0)
 
 
 def is_trail(profile: np.ndarray, threshold_m: float) -> bool:
