@@ -363,7 +363,8 @@ def find_storeys(z: np.ndarray, settings: SegmentationSettings | None = None,
     of Z (``storey_bin_m`` bins) holds less than ``slab_gap_fraction`` of its median bin
     between the lowest and the highest point (a floor's walls fill every bin between its
     floor and its ceiling; inside a slab there is nothing to see but a stairwell), with a
-    horizontal surface (a bin of ``slab_level_factor`` times the median) within
+    horizontal surface (a bin, or two neighbouring bins together, of ``slab_level_factor``
+    times the median) within
     ``slab_level_reach_m`` below (a ceiling) and above (a floor). A part lower than
     ``min_room_height_m`` is no storey of its own: it joins the part below it (the lowest
     part joins the one above). Each part's floor and ceiling are then found by :func:`find_floor_ceiling`. The
@@ -382,7 +383,12 @@ def find_storeys(z: np.ndarray, settings: SegmentationSettings | None = None,
     counts = np.bincount(((zs - lo) / b).astype(np.int64)).astype(np.float64)
     median = float(np.median(counts))
     empty = np.convolve(counts, np.ones(3) / 3, mode="same") < s.slab_gap_fraction * median
-    level = counts >= s.slab_level_factor * median  # bins of a horizontal surface
+    # bins of a horizontal surface: one bin, or two neighbours together (range noise and the
+    # stations' registration error spread a floor over a bin edge, half on either side)
+    level = counts >= s.slab_level_factor * median
+    pair = counts[:-1] + counts[1:] >= s.slab_level_factor * median
+    level[:-1] |= pair
+    level[1:] |= pair
     near = max(1, int(round(s.slab_level_reach_m / b)))
     # runs of (almost) empty bins, (first, end) bin numbers, with a ceiling just below and a
     # floor just above (a stairwell's walls go on through the slab, a sparse band in a wall does not)

@@ -304,3 +304,27 @@ def test_each_storey_keeps_its_own_expected_counts() -> None:
     assert storey_counts(seg, ExpectedCounts({"switch": 2}, {"S1": {"switch": 2}}), said.append) is None
     assert said and "S1" in said[0] and "S1, S2" in said[0]
     assert storey_counts(Segmentation(0.0, 2.8, seg.walls[:1], seg.storeys[:1]), per_storey) is None
+
+
+def test_a_floor_level_spread_over_two_bins_still_separates_the_storeys() -> None:
+    """Range noise and registration error spread a storey's floor over two bins of the Z histogram,
+    neither of which holds ``slab_level_factor`` x the median; the two together do."""
+    s = SegmentationSettings()
+    b = s.storey_bin_m
+    per_bin = 1000
+
+    def walls(z0: float, z1: float) -> np.ndarray:  # a uniform band: per_bin points per bin
+        n = int(round((z1 - z0) / b))
+        return np.repeat(z0 + (np.arange(n) + 0.5) * b, per_bin)
+
+    ceiling_1, floor_2 = 2.80, 3.04  # a 0.24 m slab between them
+    level = int(s.slab_level_factor * per_bin)
+    z = np.concatenate([
+        np.zeros(2 * level),  # storey 1's floor, in one bin
+        walls(0.0, ceiling_1), np.full(2 * level, ceiling_1 - 0.005),  # its walls and ceiling
+        np.full(level * 7 // 10, floor_2 - 0.005), np.full(level * 7 // 10, floor_2 + 0.005),  # split floor
+        walls(floor_2, 5.74), np.full(2 * level, 5.735),
+    ])
+    storeys = find_storeys(z, s)
+    assert len(storeys) == 2
+    np.testing.assert_allclose(storeys, [(0.0, ceiling_1), (floor_2, 5.74)], atol=0.011)
