@@ -18,9 +18,12 @@ import argparse
 import json
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
+from bench_realism import (  # benchmarks/ is on sys.path as a script
+    EXPECTED_MODES,
+    scene_and_run_dir,
+)
 
 SIGNS = ("extinguisher_sign", "fire_alarm_switch_sign")
 
@@ -52,14 +55,12 @@ def main(argv: list[str] | None = None) -> int:
 
     from sbsc_core.evaluate import evaluate
     from sbsc_core.io.documents import read_truth
-    from sbsc_core.paths import sample_projects_dir
     from sbsc_core.pipeline import detect_to_dir
     from sbsc_core.simulate.designs_lookalike import lookalike_builder
     from sbsc_core.simulate.scenarios import simulate_scene
 
-    scene = sample_projects_dir() / ("scenario_I.yaml" if args.full else "one_room.yaml")
-    run_dir = Path(args.run_dir) / ("scenario_I" if args.full else "one_room")
-    modes = {"yes": [True], "no": [False], "both": [True, False]}[args.expected]
+    scene, run_dir = scene_and_run_dir(args.full, args.run_dir)
+    modes = EXPECTED_MODES[args.expected]
     lines = []
     for design in args.designs:
         for seed in args.seeds:

@@ -29,7 +29,11 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-from bench_realism import detect  # benchmarks/ is on sys.path when run as a script
+from bench_realism import (  # benchmarks/ is on sys.path as a script
+    EXPECTED_MODES,
+    detect,
+    scene_and_run_dir,
+)
 
 REGISTRATION = {"published": None,
                 "none": {"registration_translation_m": 0.0, "registration_rotation_deg": 0.0}}
@@ -89,11 +93,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from sbsc_core.evaluate import evaluate
     from sbsc_core.io.documents import read_truth
-    from sbsc_core.paths import sample_projects_dir
-
-    scene = sample_projects_dir() / ("scenario_I.yaml" if args.full else "one_room.yaml")
-    run_dir = Path(args.run_dir) / ("scenario_I" if args.full else "one_room")
-    modes = {"yes": [True], "no": [False], "both": [True, False]}[args.expected]
+    scene, run_dir = scene_and_run_dir(args.full, args.run_dir)
+    modes = EXPECTED_MODES[args.expected]
     lines = []
     for design in args.designs:
         for seed in args.seeds:

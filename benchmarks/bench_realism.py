@@ -48,6 +48,15 @@ VARIANTS: dict[str, dict[str, bool]] = {
     "acceptance": {"realistic": True, "clutter": True},
 }
 SIGNS = ("extinguisher_sign", "fire_alarm_switch_sign")
+EXPECTED_MODES = {"yes": [True], "no": [False], "both": [True, False]}  # --expected: detect with counts, without, both
+
+
+def scene_and_run_dir(full: bool, run_dir: str) -> tuple[Path, Path]:
+    """The bundled scene (Scenario I with ``full``, else one_room) and the run folder for it."""
+    from sbsc_core.paths import sample_projects_dir
+
+    scene = sample_projects_dir() / ("scenario_I.yaml" if full else "one_room.yaml")
+    return scene, Path(run_dir) / ("scenario_I" if full else "one_room")
 
 
 @dataclass
@@ -110,11 +119,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from sbsc_core.evaluate import evaluate, format_table
     from sbsc_core.io.documents import read_truth
-    from sbsc_core.paths import sample_projects_dir
-
-    scene = sample_projects_dir() / ("scenario_I.yaml" if args.full else "one_room.yaml")
-    run_dir = Path(args.run_dir) / ("scenario_I" if args.full else "one_room")
-    modes = {"yes": [True], "no": [False], "both": [True, False]}[args.expected]
+    scene, run_dir = scene_and_run_dir(args.full, args.run_dir)
+    modes = EXPECTED_MODES[args.expected]
     results: list[Result] = []
     for design in args.designs:
         for variant in args.variants:
