@@ -96,20 +96,19 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
         rivals = others(colour)
         margin = min(c.score for c in rivals) - float(hit.rho_colour or 0.0) if rivals else _MARGIN_CAP
     looks = [c.lookalike_margin for c in (hit.depth, hit.colour) if c is not None and c.lookalike_margin is not None]
-    look = min(looks) if looks else _MARGIN_CAP
+    look = float(np.clip(min(looks) if looks else _MARGIN_CAP, -_MARGIN_CAP, _MARGIN_CAP))
     d = hit.depth
     gain = 0.0 if d is None or d.gain is None else min(_GAIN_CAP, abs(float(np.log(max(d.gain, 1e-6)))))
     relief = 0.0 if d is None or d.relief_iou is None else float(np.clip(1.0 - d.relief_iou, 0.0, 1.0))
     unmatched = 0.0
     if d is None and reliefs:
         unmatched = min(1.0, float(reliefs.get(hit.class_id, 0.0)) / _RELIEF_CAP_M)
+    colour_only_print = look * (1.0 - unmatched) if d is None and hit.rho_colour is not None else 0.0
     return np.array([
         float(hit.rho_depth is not None), float(hit.rho_colour is not None),
         float(hit.rho_depth or 0.0), 0.0 if hit.rho_colour is None else 1.0 - float(hit.rho_colour),
-        float(hit.alpha), float(np.clip(margin, 0.0, _MARGIN_CAP)), float(np.clip(look, -_MARGIN_CAP, _MARGIN_CAP)),
-        gain, relief, unmatched, relief_margin,
-        float(np.clip(look, -_MARGIN_CAP, _MARGIN_CAP)) * (1.0 - unmatched) if d is None and hit.rho_colour is not None
-        else 0.0,
+        float(hit.alpha), float(np.clip(margin, 0.0, _MARGIN_CAP)), look,
+        gain, relief, unmatched, relief_margin, colour_only_print,
     ])
 
 

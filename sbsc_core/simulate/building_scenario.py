@@ -30,7 +30,6 @@ gives each object's ``visible_fraction`` and, with the realistic scanner, the st
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -59,7 +58,7 @@ from .building import (
 from .catalogue import CATALOGUE, CLASS_ORDER
 from .mesh import ColouredMesh
 from .raycast import MeshRaycaster
-from .realism import CLASS_GLOSS, station_pose_error
+from .realism import CLASS_GLOSS, pose_error_record, station_pose_error
 from .scanner import ScannerSettings, scan_station
 from .scene import SceneDescription, load_scene, outline_cells, parse_scene, validate_scene
 from .survey import SurveyFrame
@@ -394,7 +393,6 @@ def simulate_building(out: Path, storeys: int = 2, *, scene: str = "scenario", f
 
 def _registration_error(seed: int, station: int, effects, storey: str, name: str) -> dict:
     """The truth's record of station ``station``'s registration error (as the scanner drew it)."""
-    rot, shift = station_pose_error(seed, station, effects)
-    angle = math.degrees(math.acos(min(1.0, (float(np.trace(rot)) - 1) / 2)))
+    record = pose_error_record(station, *station_pose_error(seed, station, effects))
     return {"station": station, "storey": storey, "file": f"stations/{name}",
-            "translation_m": [round(float(x), 6) for x in shift], "rotation_deg": round(angle, 6)}
+            "translation_m": record["translation_m"], "rotation_deg": record["rotation_deg"]}

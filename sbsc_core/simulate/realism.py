@@ -190,6 +190,14 @@ def station_pose_error(seed: int, station: int, e: ScanEffects) -> tuple[np.ndar
     return _rotation_xyz(angles), shift
 
 
+def pose_error_record(station: int, rotation: np.ndarray, shift: np.ndarray) -> dict:
+    """The ground truth's record of a station's registration error (:func:`station_pose_error`):
+    its translation (m) and the angle of its rotation (degrees), rounded to 6 decimals."""
+    angle = math.degrees(math.acos(min(1.0, (float(np.trace(rotation)) - 1) / 2)))
+    return {"station": station, "translation_m": [round(float(x), 6) for x in shift],
+            "rotation_deg": round(angle, 6)}
+
+
 def _blackbody_rgb(kelvin: float) -> np.ndarray:
     """Linear RGB of a black body at ``kelvin`` (Tanner Helland's fit of the CIE data), max 1."""
     t = kelvin / 100.0

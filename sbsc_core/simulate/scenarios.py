@@ -13,7 +13,6 @@ under version control; regenerate them with ``python -m sbsc_core.simulate.scena
 from __future__ import annotations
 
 import json
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -156,10 +155,9 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
         for obj, frac in zip(truth["objects"], visible_fractions(building, settings, rc), strict=True):
             obj["visible_fraction"] = round(frac, 4)
         if scan.pose_errors is not None:
-            truth["registration_errors"] = [
-                {"station": k, "translation_m": [round(float(x), 6) for x in t],
-                 "rotation_deg": round(math.degrees(math.acos(min(1.0, (float(np.trace(r)) - 1) / 2))), 6)}
-                for k, (r, t) in enumerate(scan.pose_errors)]
+            from .realism import pose_error_record
+
+            truth["registration_errors"] = [pose_error_record(k, r, t) for k, (r, t) in enumerate(scan.pose_errors)]
     frame = None
     if scene.survey_frame is not None:
         from .survey import SurveyFrame
