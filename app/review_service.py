@@ -66,7 +66,18 @@ def bundled_classes() -> dict:
 
     keys = ("name", "ifc_class", "predefined_type", "width_m", "height_m")
     meta = read_library_metadata(bundled_models_dir())
-    return {cid: {k: meta[cid].get(k) for k in keys} for cid in sorted(meta)}
+    return {cid: {**{k: meta[cid].get(k) for k in keys}, "mount": list(meta[cid]["mount"])} for cid in sorted(meta)}
+
+
+def check_mount(classes: dict, class_id: str, wall: WallRow) -> None:
+    """422 when the library says ``class_id`` is never mounted on this kind of surface (model.json
+    ``mount``: a radiator on a ceiling, a smoke detector on a column). A library stored before
+    ``mount`` was kept allows every surface."""
+    kind = wall.kind or "wall"
+    mounts = classes[class_id].get("mount")
+    if mounts and kind not in mounts:
+        raise Invalid(f"class: '{class_id}' is mounted on {' or '.join(mounts)} (its model.json 'mount'), "
+                      f"not on {kind} {wall.key}")
 
 
 def library_classes(s: Session, models_id: int | None) -> dict:
@@ -171,6 +182,8 @@ def decide(s: Session, did: int, change: Change, user: Principal, *, pid: int | 
         classes = library_classes(s, s.get(Job, d.job_id).models_id)
         if change.class_ not in classes:
             raise Invalid(f"class: '{change.class_}' is not in the project's model library")
+        if (on := _wall(s, d.job_id, d.wall_key)) is not None:
+            check_mount(classes, change.class_, on)
         d.class_id = change.class_
         d.width_m = float(classes[change.class_]["width_m"])
         d.height_m = float(classes[change.class_]["height_m"])
@@ -322,6 +335,7 @@ def add_object(s: Session, pid: int, class_id: str, wall_key: str, u: float, v: 
     wall = _wall(s, job.id, wall_key)
     if wall is None:
         raise Invalid(f"wall: '{wall_key}' is not a wall or surface of the project's current results")
+    check_mount(classes, class_id, wall)
     _check_on_wall(wall, float(u), float(v))
     where = Snap(float(u), float(v))
     if snap:

@@ -313,7 +313,7 @@ def unpack_library(zip_path: Path, filename: str, dest: Path) -> tuple[Path, dic
 
 def library_summary(library) -> dict:  # noqa: ANN001 - sbsc_core.types.ModelLibrary
     return {cid: {"name": m.name, "ifc_class": m.ifc_class, "predefined_type": m.predefined_type,
-                  "width_m": float(m.width_m), "height_m": float(m.height_m)}
+                  "width_m": float(m.width_m), "height_m": float(m.height_m), "mount": list(m.mount)}
             for cid, m in sorted(library.models.items())}
 
 

@@ -138,6 +138,27 @@ def test_adding_a_missed_object_on_a_ceiling_and_a_column(project, client) -> No
     assert sum(d["source"] == "reviewer" and bool(d.get("surface")) for d in served["detections"]) == 3
 
 
+def test_a_class_goes_only_on_the_surfaces_its_model_lists(project, client) -> None:
+    """model.json ``mount``: no radiator on a ceiling, no smoke detector on a column, added or relabelled."""
+    settings, pid, doc = project
+    h = auth(client.token)
+    before = client.get(f"/api/projects/{pid}/detections", headers=h).json()
+    for cls, sid, kind in (("radiator", "C01", "ceiling"), ("smoke_detector", "COL1-E", "column")):
+        r = client.post(f"/api/projects/{pid}/detections", headers=h,
+                        json={"class": cls, "wall": sid, "u": 0.2, "v": 0.5, "snap": False})
+        assert r.status_code == 422, r.text
+        assert r.json()["detail"].startswith(f"class: '{cls}' is mounted on wall") and f"not on {kind} {sid}" in r.json()["detail"]
+    d = _by_ref(before)["D0101"]  # the smoke detector on the ceiling
+    r = client.patch(f"/api/detections/{d['id']}", json={"class": "radiator", "version": d["review"]["version"]},
+                     headers=h)
+    assert r.status_code == 422 and "not on ceiling C01" in r.json()["detail"]
+    r = client.patch(f"/api/detections/{d['id']}", json={"class": "exit_light", "version": d["review"]["version"]},
+                     headers=h)  # also a ceiling class
+    assert r.status_code == 200 and r.json()["class"] == "exit_light"
+    after = client.get(f"/api/projects/{pid}/detections", headers=h).json()
+    assert len(after["detections"]) == len(before["detections"])  # nothing was added by the refused calls
+
+
 def test_export_of_ceiling_and_column_objects(project, client, tmp_path) -> None:
     settings, pid, doc = project
     h = auth(client.token)

@@ -83,6 +83,8 @@ def test_ceiling_object_reviewed_and_added_in_the_gallery(browser, srv):  # noqa
         assert all(x["review"]["status"] == "pending" for x in now if not x.get("surface"))
         # add a missed smoke detector: choose the ceiling, click on its image (seen from below)
         page.select_option("#add-wall", "C01")
+        offered = page.eval_on_selector_all("#add-class option", "os => os.map(o => o.value)")
+        assert offered == ["exit_light", "smoke_detector"]  # the ceiling classes of the library (model.json mount)
         page.select_option("#add-class", "smoke_detector")
         page.wait_for_function("document.querySelector('#wall-img').naturalWidth > 0")
         box = page.locator("#wall-img").bounding_box()
