@@ -129,17 +129,23 @@ def weighted_centre(d: Candidate | None, c: Candidate | None,
     if not pts:
         raise ValueError("no candidate")
     if len(pts) == 1:
-        return float(pts[0].centre[0]), float(pts[0].centre[1])
+        p = _placed(pts[0])
+        return float(p[0]), float(p[1])
     w = _weights(d, c)
-    cd = np.asarray(d.centre, float) if d is not None else np.zeros(2)
+    cd = np.asarray(_placed(d), float) if d is not None else np.zeros(2)
     cc = np.asarray(c.centre, float) if c is not None else np.zeros(2)
     if max_disagreement_px is not None and float(np.abs(cd - cc).max()) > max_disagreement_px:
         return float(cd[0]), float(cd[1])
     if w.sum() <= 0:
-        m = np.mean([np.asarray(x.centre, float) for x in pts], axis=0)
+        m = np.mean([np.asarray(_placed(x), float) for x in pts], axis=0)
         return float(m[0]), float(m[1])
     m = (w[0] * cd + w[1] * cc) / w.sum()
     return float(m[0]), float(m[1])
+
+
+def _placed(x: Candidate) -> tuple[float, float]:
+    """A candidate's centre for placement: a depth match's sharp-edge position when it has one."""
+    return x.position if x.position is not None else x.centre
 
 
 def make_hit(d: Candidate | None, c: Candidate | None, alpha: float,

@@ -56,6 +56,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from .edge_position import EdgeSettings, sharp_edge_centre
 from .matching import (
     box_at,
     boxes_from_mask,
@@ -500,6 +501,7 @@ def match_depth(
     noise_relief, _ = relief_thresholds(jl, _plain_wall(ortho, area, jl, settings), settings)
     jm = _smooth(jd, settings.match_sigma_px)  # correlated: the scene's own relief
     jml = _smooth(jl, settings.match_sigma_px)  # checked: relief above the local wall
+    edges = EdgeSettings() if settings.sharp_edge_position else None
     turns = roi_turns(jml, rois, max(noise_relief, settings.min_relief_m), settings) if settings.free_rotation else []
 
     def search(cid: str, deg: float, rot: np.ndarray, where: list[Box]) -> list[Candidate]:
@@ -529,7 +531,9 @@ def match_depth(
                               min_known=settings.min_known_share, full_known=settings.full_known_share,
                               masked_pre=settings.masked_pre_threshold)
         return [Candidate(cid, ortho.wall_id, "depth", box_at((m.row, m.col), h, w), (m.row, m.col), m.score,
-                          m.roi, deg, gain=m.gain, relief_iou=overlap(m.row, m.col, m.gain)) for m in peaks]
+                          m.roi, deg, gain=m.gain, relief_iou=overlap(m.row, m.col, m.gain),
+                          position=sharp_edge_centre(jl, rot, (m.row, m.col), known, settings=edges)
+                          if edges is not None else None) for m in peaks]
 
     out: list[Candidate] = []
     for cid in sorted(templates):

@@ -187,6 +187,7 @@ class DepthRecognitionSettings:
     level_dead_m: float = 0.0005  # ... levels within this of the plane are 0 (the rest shrunk by it)
     level_max_m: float = 0.006  # ... and it is clamped to this (misregistration steps are a few mm)
     level_min_extent_m: float = 0.5  # ... non-zero only in regions at least this long (no flat sign)
+    sharp_edge_position: bool = True  # a match is placed by its relief's sharp edges (edge_position)
 
 
 @dataclass
