@@ -23,7 +23,9 @@ the recognizers' goodness (below).
 The position of an instance is equation 16, c = (rho_D c_D + w_C c_C) / (rho_D + w_C).
 rho_C is a distance (lower is better), so its weight is w_C = 1 - rho_C (in [0.8, 1] for
 accepted candidates with mu_C = 0.2, comparable with rho_D in [0.75, 1]); an exclusive
-detection has the other weight 0, i.e. the candidate's own centre.
+detection has the other weight 0, i.e. the candidate's own centre. c_D is the depth match's
+centre placed by its relief's sharp edges (``Candidate.position``, :mod:`~sbsc_core.edge_position`)
+when it has one: the correlation's centre leans into an occlusion shadow.
 
 ``suppress_conflicts`` adds what the paper leaves to the expected counts: when every class
 of the library is searched, one place on a wall holds one object, so of two accepted

@@ -45,6 +45,10 @@ Additions to the paper, each a named setting:
 * A slowly varying level of the plain wall (a step of a few mm where a misregistered
   station alone sees the wall) is subtracted before relief is thresholded for RoIs and
   the plausibility checks; the correlation keeps the scene's own relief.
+* A kept match's position (``Candidate.position``, used for placement) is read from its
+  relief's sharp edges (:mod:`~sbsc_core.edge_position`, ``sharp_edge_position``): seen
+  obliquely, one side of an object trails into its occlusion shadow (mixed pixels) and the
+  correlation's centre leans into that ramp by a few mm.
 """
 
 from __future__ import annotations
