@@ -18,7 +18,10 @@ its rise (the distance between the quarter and three-quarter crossings) beyond t
 model's own tells how much the edge is blurred. The two edges' shifts are averaged with
 weights ``1 / (edge_blur_px + excess rise)^4``: a frontal view, both edges sharp, keeps
 their mean (what the correlation measures), an oblique one is placed by its sharp edge.
-Nothing is changed along an axis where the model's outline is no clean step on both sides
+Models shallower than ``min_relief_m`` (2 cm: sockets, switches, signs) keep the
+correlation's centre: grazing beams blend ranges over at most half the shadow, relief x
+tan(incidence) / 2, under a pixel for them, while their few edge pixels are noisier than
+the correlation over the whole relief. Nothing is changed along an axis where the model's outline is no clean step on both sides
 (an extinguisher's valve above its body), where an edge is not found in the scene (unseen,
 a neighbour within reach) or where the refined centre would move more than ``max_shift_px``.
 """
@@ -39,6 +42,7 @@ class EdgeSettings:
     rise_levels: tuple[float, float] = (0.25, 0.75)  # its rise: between these crossings
     edge_blur_px: float = 0.5  # weight of an edge: 1 / (this + rise beyond the model's)^4
     max_shift_px: float = 3.0  # a refinement moving the centre further is not trusted
+    min_relief_m: float = 0.02  # models shallower than this are not refined (their shadow is under a pixel)
     clean_edge_px: float = 3.0  # a model's edge is a clean step: from half to 0.9 of its height within this
     min_known_share: float = 0.8  # profile samples need data on this share of their pixels
 
@@ -155,6 +159,8 @@ def sharp_edge_centre(relief: np.ndarray, model: np.ndarray, centre: tuple[float
     moves more than ``max_shift_px``, keeps the correlation's coordinate.
     """
     s = settings or EdgeSettings()
+    if float(np.max(np.abs(model))) < s.min_relief_m:
+        return float(centre[0]), float(centre[1])
     h, w = model.shape
     sign = 1.0 if float(model.max()) >= -float(model.min()) else -1.0
     m = sign * np.asarray(model, np.float64)

@@ -102,6 +102,12 @@ def test_a_recessed_model_is_read_with_its_sign() -> None:
     assert abs(r - truth[0]) < 0.25 and abs(c - truth[1]) < 0.25
 
 
+def test_a_shallow_model_keeps_the_correlation_centre() -> None:
+    shallow = MODEL * (0.015 / RELIEF_M)  # a socket 15 mm deep: its shadow is under a pixel
+    scene = _scene((60.3, 80.6), ramp_px=6) * (0.015 / RELIEF_M)
+    assert sharp_edge_centre(scene, shallow, (59.8, 80.1)) == (59.8, 80.1)
+
+
 def test_placement_uses_the_depth_matchs_edge_position() -> None:
     box = Box(0, 10, 0, 10)
     d = Candidate("x", "W01", "depth", box, (10.0, 10.0), 0.9, position=(10.5, 9.5))
