@@ -23,7 +23,9 @@ the recognizers' goodness (below).
 The position of an instance is equation 16, c = (rho_D c_D + w_C c_C) / (rho_D + w_C).
 rho_C is a distance (lower is better), so its weight is w_C = 1 - rho_C (in [0.8, 1] for
 accepted candidates with mu_C = 0.2, comparable with rho_D in [0.75, 1]); an exclusive
-detection has the other weight 0, i.e. the candidate's own centre.
+detection has the other weight 0, i.e. the candidate's own centre. c_D is the depth match's
+centre placed by its relief's sharp edges (``Candidate.position``, :mod:`~sbsc_core.edge_position`)
+when it has one: the correlation's centre leans into an occlusion shadow.
 
 ``suppress_conflicts`` adds what the paper leaves to the expected counts: when every class
 of the library is searched, one place on a wall holds one object, so of two accepted
@@ -123,23 +125,32 @@ def weighted_centre(d: Candidate | None, c: Candidate | None,
     columns) they do not measure the same point: the colour match was placed on a print
     that differs from the model's (another product's label, only the visible part of a
     sign), while the depth match is metric. The depth centre alone is then the position;
-    averaging would put the object between the two, off both.
+    averaging would put the object between the two, off both. Each centre is good to about
+    2 mm (one sigma), so two that measure the same point lie within ~7.5 mm (1.5 pixels of
+    5 mm, the default) of each other: on realistic scans every pair further apart had the
+    colour centre 10-22 mm off and the depth centre within 3.4 mm.
     """
     pts = [x for x in (d, c) if x is not None]
     if not pts:
         raise ValueError("no candidate")
     if len(pts) == 1:
-        return float(pts[0].centre[0]), float(pts[0].centre[1])
+        p = _placed(pts[0])
+        return float(p[0]), float(p[1])
     w = _weights(d, c)
-    cd = np.asarray(d.centre, float) if d is not None else np.zeros(2)
+    cd = np.asarray(_placed(d), float) if d is not None else np.zeros(2)
     cc = np.asarray(c.centre, float) if c is not None else np.zeros(2)
     if max_disagreement_px is not None and float(np.abs(cd - cc).max()) > max_disagreement_px:
         return float(cd[0]), float(cd[1])
     if w.sum() <= 0:
-        m = np.mean([np.asarray(x.centre, float) for x in pts], axis=0)
+        m = np.mean([np.asarray(_placed(x), float) for x in pts], axis=0)
         return float(m[0]), float(m[1])
     m = (w[0] * cd + w[1] * cc) / w.sum()
     return float(m[0]), float(m[1])
+
+
+def _placed(x: Candidate) -> tuple[float, float]:
+    """A candidate's centre for placement: a depth match's sharp-edge position when it has one."""
+    return x.position if x.position is not None else x.centre
 
 
 def make_hit(d: Candidate | None, c: Candidate | None, alpha: float,

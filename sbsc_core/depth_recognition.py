@@ -45,6 +45,10 @@ Additions to the paper, each a named setting:
 * A slowly varying level of the plain wall (a step of a few mm where a misregistered
   station alone sees the wall) is subtracted before relief is thresholded for RoIs and
   the plausibility checks; the correlation keeps the scene's own relief.
+* A kept match's position (``Candidate.position``, used for placement) is read from its
+  relief's sharp edges (:mod:`~sbsc_core.edge_position`, ``sharp_edge_position``): seen
+  obliquely, one side of an object trails into its occlusion shadow (mixed pixels) and the
+  correlation's centre leans into that ramp by a few mm.
 """
 
 from __future__ import annotations
@@ -56,6 +60,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from .edge_position import EdgeSettings, sharp_edge_centre
 from .matching import (
     box_at,
     boxes_from_mask,
@@ -500,6 +505,8 @@ def match_depth(
     noise_relief, _ = relief_thresholds(jl, _plain_wall(ortho, area, jl, settings), settings)
     jm = _smooth(jd, settings.match_sigma_px)  # correlated: the scene's own relief
     jml = _smooth(jl, settings.match_sigma_px)  # checked: relief above the local wall
+    edges = EdgeSettings() if settings.sharp_edge_position else None
+    matched_model: dict[int, np.ndarray] = {}  # id of a candidate -> the (turned) model it matched
     turns = roi_turns(jml, rois, max(noise_relief, settings.min_relief_m), settings) if settings.free_rotation else []
 
     def search(cid: str, deg: float, rot: np.ndarray, where: list[Box]) -> list[Candidate]:
@@ -528,8 +535,10 @@ def match_depth(
                               min_energy=min_energy, accept=plausible, known=known,
                               min_known=settings.min_known_share, full_known=settings.full_known_share,
                               masked_pre=settings.masked_pre_threshold)
-        return [Candidate(cid, ortho.wall_id, "depth", box_at((m.row, m.col), h, w), (m.row, m.col), m.score,
-                          m.roi, deg, gain=m.gain, relief_iou=overlap(m.row, m.col, m.gain)) for m in peaks]
+        found = [Candidate(cid, ortho.wall_id, "depth", box_at((m.row, m.col), h, w), (m.row, m.col), m.score,
+                           m.roi, deg, gain=m.gain, relief_iou=overlap(m.row, m.col, m.gain)) for m in peaks]
+        matched_model.update((id(c), rot) for c in found)
+        return found
 
     out: list[Candidate] = []
     for cid in sorted(templates):
@@ -561,6 +570,9 @@ def match_depth(
         if settings.free_rotation:
             # refined with the reference model (exemplars are measured turned as they hang)
             kept = [refine_turn(turners[0], c, settings.turn_steps_deg, settings.min_turn_gain) for c in kept]
+        if edges is not None:  # placed by the relief's sharp edges (only the kept ones: speed)
+            for c in kept:
+                c.position = sharp_edge_centre(jl, matched_model[id(c)], c.centre, known, settings=edges)
         out.extend(kept)
     return out
 

@@ -187,6 +187,7 @@ class DepthRecognitionSettings:
     level_dead_m: float = 0.0005  # ... levels within this of the plane are 0 (the rest shrunk by it)
     level_max_m: float = 0.006  # ... and it is clamped to this (misregistration steps are a few mm)
     level_min_extent_m: float = 0.5  # ... non-zero only in regions at least this long (no flat sign)
+    sharp_edge_position: bool = True  # a match is placed by its relief's sharp edges (edge_position)
 
 
 @dataclass
@@ -258,7 +259,7 @@ class ConsensusSettings:
     suppress_overlap: float = 0.25  # cross-class suppression: max overlap of two accepted objects
     prefer_depth: bool = True  # at equal alpha: both > depth only > colour only, then goodness
     alpha_tolerance: float = 0.05  # alphas this close count as equal (the tie-break decides)
-    max_disagreement_px: float = 3.0  # equation 16 for centres this close, else depth's (.inf: always)
+    max_disagreement_px: float = 1.5  # equation 16 for centres this close, else depth's (.inf: always)
     depth_outscored_margin: float = 0.1  # a depth match beaten by this at its place confirms no colour match
     mount_margin_m: float = 0.03  # a footprint passing its wall's floor or top by more than this is not on it
 

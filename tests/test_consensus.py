@@ -105,6 +105,11 @@ def test_equation_16_only_for_centres_that_agree() -> None:
     assert weighted_centre(d, c, 4.0) == pytest.approx((11.0, 12.0))  # within 4 px: equation 16
     hit = consensus([d], [c], None, ConsensusSettings(max_disagreement_px=3.0))[0]
     assert hit.centre == (10.0, 10.0) and hit.source == "both"
+    # by default centres 2 px (10 mm) apart do not agree: each is good to ~2 mm
+    c = cand("colour", (12.0, 10.5), 0.1)
+    assert consensus([d], [c], None, ConsensusSettings())[0].centre == (10.0, 10.0)
+    c = cand("colour", (11.0, 10.5), 0.1)  # 1 px: equation 16
+    assert consensus([d], [c], None, ConsensusSettings())[0].centre == pytest.approx((10.5, 10.25))
 
 
 def _hit(cls: str, centre, alpha: float, rho_d=None, rho_c=None, size=(16, 16), wall="W01") -> ConsensusHit:
