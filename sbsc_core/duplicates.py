@@ -78,6 +78,8 @@ def cross_surface_duplicates(hits: list[ConsensusHit], frames: Mapping[str, tupl
             b, fb, cb, wb, hb = placed[j]
             if b.wall_id == a.wall_id or id(b) in drop:
                 continue
+            if float(np.linalg.norm(cb - ca)) > max(wa, ha, wb, hb):  # far apart: the footprints cannot overlap
+                continue
             if float(np.dot(fa.normal, fb.normal)) < _SAME_FACING_COS:
                 continue
             du, dv, dd = (fa.to_uvd(cb[None, :])[0] - fa.to_uvd(ca[None, :])[0])
