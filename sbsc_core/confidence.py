@@ -19,16 +19,18 @@ gives a detection of class ``unknown`` for review (its footprint is the best cla
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .consensus import ConsensusHit, consensus_all
+from .duplicates import cross_surface_duplicates
 from .matching import box_overlap
 from .settings import ConfidenceSettings, ConsensusSettings
 from .templates import ModelTemplate
-from .types import Box, Candidate
+from .types import Box, Candidate, WallFrame
 
 UNKNOWN_CLASS = "unknown"
 
@@ -246,7 +248,8 @@ def screen_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[C
 
 def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected: dict[str, int] | None,
                        classes: list[str], consensus_settings: ConsensusSettings, settings: ConfidenceSettings,
-                       *, reliefs: dict[str, float] | None = None, max_rounds: int = 50) -> list[ConsensusHit]:
+                       *, reliefs: dict[str, float] | None = None, max_rounds: int = 50,
+                       frames: Mapping[str, tuple[WallFrame, float]] | None = None) -> list[ConsensusHit]:
     """The consensus of every class (:func:`~sbsc_core.consensus.consensus_all`) with the
     "none of these" rule inside it, in class order.
 
@@ -266,27 +269,39 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
     ``unknown`` with ``report_unknown`` (when no kept hit covers them).
     Without a calibration or with screening off this is the plain consensus. ``reliefs``:
     see :func:`hit_features` (:func:`model_reliefs` of the templates searched).
+
+    With ``frames`` (wall id -> frame and pixel size of its orthoimage), a hit that repeats
+    a better one on another wall of the same plane
+    (:func:`~sbsc_core.duplicates.cross_surface_duplicates`: two overlapping pieces of one
+    wall both see the object) is taken out like a refused hit, so that it neither counts
+    twice nor uses up its class's expected count; it is never reported, not even as
+    ``unknown``.
     """
     def run(d: list[Candidate], c: list[Candidate]) -> list[ConsensusHit]:
         hits = consensus_all(d, c, expected, consensus_settings, classes)
         return [h for cls in classes for h in hits.get(cls, [])]
 
+    def repeated(hits: list[ConsensusHit]) -> list[ConsensusHit]:
+        if not frames:
+            return []
+        return cross_surface_duplicates(hits, frames, overlap=consensus_settings.suppress_overlap)
+
     cal = load_calibration(Path(settings.calibration) if settings.calibration else None) if settings.enabled else None
-    if cal is None:
-        return run(depth, colour)
     refused: list[ConsensusHit] = []
     for _ in range(max(1, max_rounds)):
         hits = run(depth, colour)
         for h, conf in zip(hits, score_hits(hits, depth, colour, cal, reliefs), strict=True):
             h.confidence = conf
         weak = [h for h in hits if h.confidence is not None and h.confidence < settings.min_confidence]
-        if not weak:
+        twice = repeated([h for h in hits if not any(h is w for w in weak)])
+        if not weak and not twice:
             break
         refused.extend(weak)
-
-        depth = _clear_of(depth, weak, consensus_settings.suppress_overlap)
-        colour = _clear_of(colour, weak, consensus_settings.suppress_overlap)
+        depth = _clear_of(depth, weak + twice, consensus_settings.suppress_overlap)
+        colour = _clear_of(colour, weak + twice, consensus_settings.suppress_overlap)
     hits = [h for h in hits if h.confidence is None or h.confidence >= settings.min_confidence]
+    if cal is None:
+        return hits
     if expected is not None:  # the as-designed counts vouch for objects still missing: the best refused fill them
         left = {n: int(expected.get(n, 0)) - sum(h.class_id == n for h in hits) for n in classes}
         for h in sorted(refused, key=lambda h: -(h.confidence or 0.0)):

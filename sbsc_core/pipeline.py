@@ -385,9 +385,10 @@ def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[
     depth_c = within_wall_height([c for w in walls.values() for c in w.depth_candidates], orthos, margin_m=margin)
     colour_c = within_wall_height([c for w in walls.values() for c in w.colour_candidates], orthos, margin_m=margin)
     reliefs = model_reliefs(templates)
+    frames = {k: (o.frame, o.pixel_m) for k, o in orthos.items()}  # one object seen on two pieces of a wall
 
     def run(d: list[Candidate], c: list[Candidate], counts: dict[str, int] | None) -> list[ConsensusHit]:
-        return screened_consensus(d, c, counts, classes, s.consensus, s.confidence, reliefs=reliefs)
+        return screened_consensus(d, c, counts, classes, s.consensus, s.confidence, reliefs=reliefs, frames=frames)
 
     per_storey = storey_counts(seg, expected, log)
     if per_storey is not None:
