@@ -329,6 +329,7 @@ def _storey_walls(xyz: np.ndarray, sample: np.ndarray, box: DenseBox, floor: flo
         raise NoWallsError("no walls found: no vertical plane between floor and ceiling is large enough")
     slab = sample[(np.abs(zs - floor) < s.slab_tolerance_m) | (np.abs(zs - ceiling) < s.slab_tolerance_m)]
     segs = _orient(segs, slab[:, :2].astype(np.float64), s)
+    segs = _drop_standing_in_front(segs, s)
     segs = _split_at_junctions(segs, s)
     _snap_corners(segs, s)
     segs = [g for g in segs if _big_enough(g, floor, height, s)]
@@ -737,6 +738,41 @@ def _drop_recessed(segs: list[_Segment], s: SegmentationSettings) -> list[_Segme
                 recessed = True
                 break
         if not recessed:
+            out.append(g)
+    return out
+
+
+def _drop_standing_in_front(segs: list[_Segment], s: SegmentationSettings) -> list[_Segment]:
+    """Drop planes that stand in front of a wall: furniture fronts and door casings.
+
+    A plane ``g`` is such a thing when another plane ``h`` parallel to it has ``g`` on its
+    room side, at most ``furniture_depth_m`` in front of its face (or less than half
+    ``wall_plane_tolerance_m`` behind it: a door casing 1.5 cm proud is the wall found a
+    second time), spans ``g``'s whole length and reaches higher than ``g`` by more than two
+    voxels (the wall goes on up to its ceiling above a tall cabinet, a shelf or a door
+    casing). ``g``'s own facing is not used: a cabinet front has ceiling points on both
+    sides (above the cabinet), so it may face either way. Run on the unsplit planes, right
+    after :func:`_orient`, so that a wall's extent is its whole run. The points of such a
+    plane that fall within a wall's slab then go to that wall (the casing, and the objects
+    on the wall around it, are the wall's); the rest belong to no wall.
+    """
+    cos_tol = math.cos(math.radians(s.angle_tolerance_deg))
+    tops = [float(g.cells[:, 2].max()) for g in segs]
+    out = []
+    for g, top_g in zip(segs, tops, strict=True):
+        centre = g.cells[:, :2].mean(axis=0)
+        in_front = False
+        for h, top_h in zip(segs, tops, strict=True):
+            if h is g or abs(float(g.n @ h.n)) < cos_tol or top_h <= top_g + 2 * s.fit_cell_m:
+                continue
+            ahead = float(centre @ h.n) - h.s  # how far g stands in front of h's face, on its room side
+            if not -0.5 * s.wall_plane_tolerance_m < ahead <= s.furniture_depth_m:
+                continue
+            ug = g.cells[:, :2] @ h.t
+            if ug.min() >= h.u0 - s.fit_cell_m and ug.max() <= h.u1 + s.fit_cell_m:
+                in_front = True
+                break
+        if not in_front:
             out.append(g)
     return out
 
