@@ -124,11 +124,12 @@ def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shap
 
     With ``layer_gap`` (metres) the medians are those of one layer of each pixel, not of
     all its points (see :func:`_pixel_layers`): a pixel's points, in depth order, are cut
-    into layers wherever two neighbours are more than ``layer_gap`` apart; a layer holding a
-    point beyond ``furniture_depth`` is furniture (no wall object stands out so far) and is
-    never used; of the others the layer nearest the wall plane holding at least
-    ``min_layer_share`` of the pixel's points is kept (else the largest one). A pixel with
-    furniture alone has no data: furniture in front of a wall hides it, it is no relief of it.
+    into layers wherever two neighbours are more than ``layer_gap`` apart. A pixel with a
+    point beyond ``furniture_depth`` saw furniture (no wall object stands out so far): only
+    its layer on the wall plane is kept, and without one the pixel has no data - furniture
+    in front of a wall hides it, it is no relief of it. Elsewhere the layer nearest the wall
+    plane holding at least ``min_layer_share`` of the pixel's points is kept (else the
+    largest one): the median of a mixture of two surfaces is neither.
     """
     h, w = shape
     npx = h * w
@@ -216,9 +217,12 @@ def _pixel_layers(q: np.ndarray, start: np.ndarray, n: np.ndarray, gap_q: int, f
 
     ``q`` holds the quantised depths sorted per pixel (pixel ``k``'s are
     ``q[start[k]:start[k] + n[k]]``). A new layer begins where a depth exceeds the previous
-    one by more than ``gap_q``. Layers with a depth beyond ``far_q`` are furniture and never
-    kept; of the others, those with at least ``min_share`` of the pixel's points qualify and
-    the one whose median is nearest ``zero_q`` (the wall plane) is kept, else the largest.
+    one by more than ``gap_q``. A pixel with a point beyond ``far_q`` saw furniture: only a
+    layer on the wall plane (median within ``gap_q`` of ``zero_q``) may be kept there, the
+    largest; without one the pixel has no data (the furniture's other points - a desk top
+    seen edge-on, a cabinet's side - are no relief of the wall). Elsewhere the layers with at
+    least ``min_share`` of the pixel's points qualify and the one whose median is nearest
+    the wall plane is kept, else the largest.
     """
     total = len(q)
     pid = np.repeat(np.arange(len(n)), n)
@@ -228,13 +232,15 @@ def _pixel_layers(q: np.ndarray, start: np.ndarray, n: np.ndarray, gap_q: int, f
     s0 = np.flatnonzero(brk)
     size = np.diff(np.append(s0, total))
     lp = pid[s0]
-    last = q[s0 + size - 1].astype(np.int64)
+    del pid, brk
     mid = (q[s0 + (size - 1) // 2].astype(np.int64) + q[s0 + size // 2]) // 2
-    usable = last <= far_q
-    share_ok = usable & (size >= min_share * n[lp])
+    off = np.abs(mid - zero_q)
+    furniture = (q[start + n - 1] > far_q)[lp]  # the layer's pixel saw furniture
+    usable = ~furniture | (off <= gap_q)
+    share_ok = ~furniture & (size >= min_share * n[lp])
     # rank: qualifying layers first, by distance to the plane; then the others by size
     big = np.int64(1) << 40
-    rank = np.where(share_ok, np.abs(mid - zero_q), big - size)
+    rank = np.where(share_ok, off, big - size)
     rank[~usable] = big << 1
     order = np.lexsort((rank, lp))
     best = order[np.unique(lp[order], return_index=True)[1]]  # lp of every pixel occurs: one per pixel
