@@ -154,33 +154,33 @@ def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shap
         else:
             key = pixel * nq
             key += q.astype(np.int64)
-        if layer_gap is not None:
+        key.sort()
+        if layer_gap is None:
+            lo_i, hi_i = start + (n - 1) // 2, start + n // 2
+            med = 0.5 * ((key[lo_i] % nq) + (key[hi_i] % nq))
+        else:
             far = nq if furniture_depth is None else int(round((furniture_depth - depth_range[0]) / quantum))
             zero = int(round(-depth_range[0] / quantum))
-            sq = np.sort(key) % nq
+            sq = key % nq
             first, size = _pixel_layers(sq, start, n, int(round(layer_gap / quantum)), far, zero, min_layer_share)
-            lo_q, hi_q = sq[first], sq[first + np.maximum(size, 1) - 1]
-            del sq
-            # the points of the kept layers: their own pixel's bounds, read back per point
-            lo_p = np.full(npx, nq, np.int64)
-            hi_p = np.full(npx, -1, np.int64)
             good = size > 0
+            first, size = first[good], size[good]
+            med = 0.5 * (sq[first + (size - 1) // 2] + sq[first + size // 2])
+            # the colour is that of the kept layer's points: each point against its pixel's bounds
+            lo_p = np.full(npx, nq, sq.dtype)
+            hi_p = np.zeros(npx, sq.dtype)
             where = np.flatnonzero(mask)[good]
-            lo_p[where], hi_p[where] = lo_q[good], hi_q[good]
-            qp = q.astype(np.int64)
+            lo_p[where], hi_p[where] = sq[first], sq[first + size - 1]
+            del sq
+            qp = q.astype(lo_p.dtype)
             keep = (qp >= lo_p[pixel]) & (qp <= hi_p[pixel])
             del qp, lo_p, hi_p
-            pixel, rgb, key = pixel[keep], np.asarray(rgb)[keep], key[keep]
-            counts = np.bincount(pixel, minlength=npx)
-            mask = counts > 0
-            start = (np.cumsum(counts) - counts)[mask]
-            n = counts[mask]
-            key.sort()
-        else:
-            key.sort()
-        del q
-        lo_i, hi_i = start + (n - 1) // 2, start + n // 2
-        med = 0.5 * ((key[lo_i] % nq) + (key[hi_i] % nq))
+            pixel, rgb = pixel[keep], np.asarray(rgb)[keep]
+            mask[:] = False
+            mask[where] = True
+            start = np.cumsum(size) - size  # the kept points of each pixel, in pixel order
+            lo_i, hi_i = start + (size - 1) // 2, start + size // 2
+        del q, key
         depth_img[mask] = (depth_range[0] + med * quantum).astype(np.float32)
         # colour: that of the point with the median luminance; the colour rides in the sort key
         packed = rgb[:, 0].astype(np.int64)  # 24 bits r, g, b
@@ -242,8 +242,12 @@ def _pixel_layers(q: np.ndarray, start: np.ndarray, n: np.ndarray, gap_q: int, f
     big = np.int64(1) << 40
     rank = np.where(share_ok, off, big - size)
     rank[~usable] = big << 1
-    order = np.lexsort((rank, lp))
-    best = order[np.unique(lp[order], return_index=True)[1]]  # lp of every pixel occurs: one per pixel
+    # the best-ranked layer of each pixel (its layers are consecutive, pixel by pixel): the
+    # first layer holding its pixel's minimum rank
+    pix_first = np.flatnonzero(np.r_[True, lp[1:] != lp[:-1]])
+    low = np.minimum.reduceat(rank, pix_first)
+    cand = np.flatnonzero(rank == low[lp])
+    best = cand[np.r_[True, lp[cand[1:]] != lp[cand[:-1]]]]
     first = s0[best]
     count = np.where(usable[best], size[best], 0)
     return first, count
