@@ -84,7 +84,7 @@ class OrthoimageSettings:
     depth_quantum_m: float = 0.0001  # depth resolution of the per-pixel median
     fill_gaps_px: int = 3  # no-data pixels with data on every side within this radius are sampling gaps (0: off)
     fill_min_fraction: float = 0.15  # ... filled when at least this fraction of the window has data
-    layer_gap_m: float | None = 0.02  # a pixel's points this far apart in depth are two layers (None: one median)
+    layer_gap_m: float | None = None  # a pixel's points this far apart in depth are two layers (None: one median; 0.02 tried)
     furniture_depth_m: float | None = 0.25  # a layer reaching farther out is furniture, not used (None: none is)
     min_layer_share: float = 0.5  # the layer nearest the wall with this share of the pixel's points is kept (else the largest)
 

@@ -175,7 +175,7 @@ def test_desk_in_front_of_a_wall_leaves_the_wall_and_a_socket_under_it() -> None
     """A desk's top (a horizontal surface: one pixel row sees it at every depth) and a cabinet's
     side (one pixel column), both reaching far out, seen with the wall and a socket beside
     them: the wall stays at the plane, the socket keeps its relief and the cabinet-only
-    pixels are holes, not relief (default settings)."""
+    pixels are holes, not relief (with ``layer_gap_m``; off by default)."""
     rng = np.random.default_rng(5)
     fr = _wall(width=1.0, height=1.0)
     wall = _grid(fr, 0.004, rng)
@@ -189,7 +189,7 @@ def test_desk_in_front_of_a_wall_leaves_the_wall_and_a_socket_under_it() -> None
     uvd = np.concatenate([wall[~hidden], top, side, front])
     rgb = np.concatenate([np.tile(WALL_RGB, ((~hidden).sum(), 1)), np.tile((90, 60, 30), (3 * n, 1))])
     cloud, w = _cloud(fr, uvd, rgb)
-    o = build_orthoimage(cloud, w, OrthoimageSettings(fill_gaps_px=0))
+    o = build_orthoimage(cloud, w, OrthoimageSettings(fill_gaps_px=0, layer_gap_m=0.02))
     px = 0.005
     row = int((1.0 - 0.7025) / px)
     seen = o.mask[row, : int(0.78 / px)]
