@@ -26,7 +26,7 @@ from .settings import OrthoimageSettings
 from .types import Orthoimage, PointCloud, Wall, WallFrame
 
 __all__ = ["build_orthoimage", "ortho_shape", "ortho_pixels", "orthoimage_from_pixels", "orthoimage_from_images",
-           "wall_coordinates", "rasterize_median", "fill_sampling_gaps"]
+           "wall_coordinates", "rasterize_median", "fill_sampling_gaps", "layer_options"]
 
 
 def build_orthoimage(cloud: PointCloud, wall: Wall, settings: OrthoimageSettings | None = None) -> Orthoimage:
@@ -74,8 +74,17 @@ def orthoimage_from_pixels(wall_id: str, frame: WallFrame, pixel: np.ndarray, de
     s = settings or OrthoimageSettings()
     px = float(s.pixel_m)
     d0, d1 = s.depth_range_m
-    depth, colour, mask = rasterize_median(pixel, depth, rgb, ortho_shape(frame, px), (d0, d1), s.depth_quantum_m)
+    depth, colour, mask = rasterize_median(pixel, depth, rgb, ortho_shape(frame, px), (d0, d1), s.depth_quantum_m,
+                                           **layer_options(s))
     return orthoimage_from_images(wall_id, frame, depth, colour, mask, s)
+
+
+def layer_options(settings: OrthoimageSettings) -> dict[str, float | None]:
+    """The keyword options of :func:`rasterize_median` that ``settings`` give (the per-pixel layers)."""
+    if settings.layer_gap_m is None:
+        return {}
+    return {"layer_gap": settings.layer_gap_m, "furniture_depth": settings.furniture_depth_m,
+            "min_layer_share": settings.min_layer_share}
 
 
 def orthoimage_from_images(wall_id: str, frame: WallFrame, depth: np.ndarray, colour: np.ndarray, mask: np.ndarray,
@@ -103,7 +112,8 @@ def wall_coordinates(xyz: np.ndarray, frame: WallFrame, cloud_origin: np.ndarray
 
 
 def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shape: tuple[int, int],
-                     depth_range: tuple[float, float], quantum: float
+                     depth_range: tuple[float, float], quantum: float, *, layer_gap: float | None = None,
+                     furniture_depth: float | None = None, min_layer_share: float = 0.5
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-pixel median depth and the colour of the point with the median luminance.
 
@@ -111,6 +121,15 @@ def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shap
     (H, W) float32 with NaN where no point fell, colour (H, W, 3) uint8 with 0 there, and
     the mask of pixels with data. The median of an even count is the mean of the two middle
     values; depth is resolved to ``quantum``.
+
+    With ``layer_gap`` (metres) the medians are those of one layer of each pixel, not of
+    all its points (see :func:`_pixel_layers`): a pixel's points, in depth order, are cut
+    into layers wherever two neighbours are more than ``layer_gap`` apart. A pixel with a
+    point beyond ``furniture_depth`` saw furniture (no wall object stands out so far): only
+    its layer on the wall plane is kept, and without one the pixel has no data - furniture
+    in front of a wall hides it, it is no relief of it. Elsewhere the layer nearest the wall
+    plane holding at least ``min_layer_share`` of the pixel's points is kept (else the
+    largest one): the median of a mixture of two surfaces is neither.
     """
     h, w = shape
     npx = h * w
@@ -122,7 +141,6 @@ def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shap
     if len(pixel):
         start = (np.cumsum(counts) - counts)[mask]
         n = counts[mask]
-        lo_i, hi_i = start + (n - 1) // 2, start + n // 2
         # depth: sort (pixel, quantised depth) keys
         nq = int(math.ceil((depth_range[1] - depth_range[0]) / quantum)) + 1
         q = np.asarray(depth, np.float32) - np.float32(depth_range[0])
@@ -136,9 +154,33 @@ def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shap
         else:
             key = pixel * nq
             key += q.astype(np.int64)
-        del q
         key.sort()
-        med = 0.5 * ((key[lo_i] % nq) + (key[hi_i] % nq))
+        if layer_gap is None:
+            lo_i, hi_i = start + (n - 1) // 2, start + n // 2
+            med = 0.5 * ((key[lo_i] % nq) + (key[hi_i] % nq))
+        else:
+            far = nq if furniture_depth is None else int(round((furniture_depth - depth_range[0]) / quantum))
+            zero = int(round(-depth_range[0] / quantum))
+            sq = key % nq
+            first, size = _pixel_layers(sq, start, n, int(round(layer_gap / quantum)), far, zero, min_layer_share)
+            good = size > 0
+            first, size = first[good], size[good]
+            med = 0.5 * (sq[first + (size - 1) // 2] + sq[first + size // 2])
+            # the colour is that of the kept layer's points: each point against its pixel's bounds
+            lo_p = np.full(npx, nq, sq.dtype)
+            hi_p = np.zeros(npx, sq.dtype)
+            where = np.flatnonzero(mask)[good]
+            lo_p[where], hi_p[where] = sq[first], sq[first + size - 1]
+            del sq
+            qp = q.astype(lo_p.dtype)
+            keep = (qp >= lo_p[pixel]) & (qp <= hi_p[pixel])
+            del qp, lo_p, hi_p
+            pixel, rgb = pixel[keep], np.asarray(rgb)[keep]
+            mask[:] = False
+            mask[where] = True
+            start = np.cumsum(size) - size  # the kept points of each pixel, in pixel order
+            lo_i, hi_i = start + (size - 1) // 2, start + size // 2
+        del q, key
         depth_img[mask] = (depth_range[0] + med * quantum).astype(np.float32)
         # colour: that of the point with the median luminance; the colour rides in the sort key
         packed = rgb[:, 0].astype(np.int64)  # 24 bits r, g, b
@@ -167,6 +209,48 @@ def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shap
         for k, shift in enumerate((16, 8, 0)):
             colour[mask, k] = ((((c_lo >> shift) & 255) + ((c_hi >> shift) & 255) + 1) // 2).astype(np.uint8)
     return depth_img.reshape(h, w), colour.reshape(h, w, 3), mask.reshape(h, w)
+
+
+def _pixel_layers(q: np.ndarray, start: np.ndarray, n: np.ndarray, gap_q: int, far_q: int, zero_q: int,
+                  min_share: float) -> tuple[np.ndarray, np.ndarray]:
+    """The kept layer of each pixel: (index of its first point in ``q``, its point count; 0: none).
+
+    ``q`` holds the quantised depths sorted per pixel (pixel ``k``'s are
+    ``q[start[k]:start[k] + n[k]]``). A new layer begins where a depth exceeds the previous
+    one by more than ``gap_q``. A pixel with a point beyond ``far_q`` saw furniture: only a
+    layer on the wall plane (median within ``gap_q`` of ``zero_q``) may be kept there, the
+    largest; without one the pixel has no data (the furniture's other points - a desk top
+    seen edge-on, a cabinet's side - are no relief of the wall). Elsewhere the layers with at
+    least ``min_share`` of the pixel's points qualify and the one whose median is nearest
+    the wall plane is kept, else the largest.
+    """
+    total = len(q)
+    pid = np.repeat(np.arange(len(n)), n)
+    brk = np.zeros(total, bool)
+    brk[start] = True
+    brk[1:] |= (q[1:].astype(np.int64) - q[:-1]) > gap_q
+    s0 = np.flatnonzero(brk)
+    size = np.diff(np.append(s0, total))
+    lp = pid[s0]
+    del pid, brk
+    mid = (q[s0 + (size - 1) // 2].astype(np.int64) + q[s0 + size // 2]) // 2
+    off = np.abs(mid - zero_q)
+    furniture = (q[start + n - 1] > far_q)[lp]  # the layer's pixel saw furniture
+    usable = ~furniture | (off <= gap_q)
+    share_ok = ~furniture & (size >= min_share * n[lp])
+    # rank: qualifying layers first, by distance to the plane; then the others by size
+    big = np.int64(1) << 40
+    rank = np.where(share_ok, off, big - size)
+    rank[~usable] = big << 1
+    # the best-ranked layer of each pixel (its layers are consecutive, pixel by pixel): the
+    # first layer holding its pixel's minimum rank
+    pix_first = np.flatnonzero(np.r_[True, lp[1:] != lp[:-1]])
+    low = np.minimum.reduceat(rank, pix_first)
+    cand = np.flatnonzero(rank == low[lp])
+    best = cand[np.r_[True, lp[cand[1:]] != lp[cand[:-1]]]]
+    first = s0[best]
+    count = np.where(usable[best], size[best], 0)
+    return first, count
 
 
 def fill_sampling_gaps(depth: np.ndarray, colour: np.ndarray, mask: np.ndarray, radius: int,

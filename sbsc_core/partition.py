@@ -40,6 +40,7 @@ import numpy as np
 
 from .io.scans import BLOCK_POINTS, CHUNK_POINTS, ScanChunk, iter_scan, open_scan, sample_scan
 from .orthoimage import (
+    layer_options,
     ortho_pixels,
     ortho_shape,
     orthoimage_from_images,
@@ -471,7 +472,8 @@ def wall_orthoimage(scratch: Path | str, w: int, wall_id: str, frame: WallFrame,
         pixel = rec["pixel"].astype(np.int64)
         pixel -= r0 * width
         d, c, m = rasterize_median(pixel, np.ascontiguousarray(rec["depth"]), np.ascontiguousarray(rec["rgb"]),
-                                   (r1 - r0, width), settings.depth_range_m, settings.depth_quantum_m)
+                                   (r1 - r0, width), settings.depth_range_m, settings.depth_quantum_m,
+                                   **layer_options(settings))
         del rec, pixel
         depth[r0:r1], colour[r0:r1], mask[r0:r1] = d, c, m
     return orthoimage_from_images(wall_id, frame, depth, colour, mask, settings)

@@ -329,6 +329,7 @@ def _storey_walls(xyz: np.ndarray, sample: np.ndarray, box: DenseBox, floor: flo
         raise NoWallsError("no walls found: no vertical plane between floor and ceiling is large enough")
     slab = sample[(np.abs(zs - floor) < s.slab_tolerance_m) | (np.abs(zs - ceiling) < s.slab_tolerance_m)]
     segs = _orient(segs, slab[:, :2].astype(np.float64), s)
+    segs = _drop_standing_in_front(segs, s)
     segs = _split_at_junctions(segs, s)
     _snap_corners(segs, s)
     segs = [g for g in segs if _big_enough(g, floor, height, s)]
@@ -737,6 +738,41 @@ def _drop_recessed(segs: list[_Segment], s: SegmentationSettings) -> list[_Segme
                 recessed = True
                 break
         if not recessed:
+            out.append(g)
+    return out
+
+
+def _drop_standing_in_front(segs: list[_Segment], s: SegmentationSettings) -> list[_Segment]:
+    """Drop planes that stand in front of a wall: furniture (fronts and sides) and door casings.
+
+    A plane ``g`` is such a thing when a wall ``h`` that reaches higher than ``g`` by more
+    than two voxels (the wall goes on up to its ceiling above a tall cabinet, a shelf or a
+    door casing) has all of ``g`` on its room side, at most ``furniture_depth_m`` in front
+    of its face (or less than half ``wall_plane_tolerance_m`` behind it: a door casing
+    1.5 cm proud is the wall found a second time) and within its length. ``g`` may be
+    parallel to ``h`` (a cabinet front, a casing) or not (a cabinet's side, which would
+    otherwise split the wall behind it at a T-junction). ``g``'s own facing is not used: a
+    cabinet front has ceiling points on both sides (above the cabinet), so it may face
+    either way. Run on the unsplit planes, right after :func:`_orient`, so that a wall's
+    extent is its whole run. The points of such a plane that fall within a wall's slab then
+    go to that wall (the casing, and the objects on the wall around it, are the wall's); the
+    rest belong to no wall.
+    """
+    tops = [float(g.cells[:, 2].max()) for g in segs]
+    out = []
+    for g, top_g in zip(segs, tops, strict=True):
+        in_front = False
+        for h, top_h in zip(segs, tops, strict=True):
+            if h is g or top_h <= top_g + 2 * s.fit_cell_m:
+                continue
+            ahead = np.percentile(g.cells[:, :2] @ h.n - h.s, (2, 98))  # how far g stands in front of h's face
+            if ahead[0] <= -0.5 * s.wall_plane_tolerance_m or ahead[1] > s.furniture_depth_m:
+                continue
+            ug = g.cells[:, :2] @ h.t
+            if ug.min() >= h.u0 - s.fit_cell_m and ug.max() <= h.u1 + s.fit_cell_m:
+                in_front = True
+                break
+        if not in_front:
             out.append(g)
     return out
 

@@ -59,6 +59,7 @@ class SegmentationSettings:
     refit_max_points: int = 50_000  # points used for the final least-squares plane of each wall
     wall_top_quantile: float = 0.998  # a wall's top (its own room's ceiling) is this quantile of its plane's z
     recess_max_m: float = 0.3  # a plane this far behind a wall, inside it and not reaching its top is no wall
+    furniture_depth_m: float = 1.0  # a plane this far in front of a wall, inside it and lower is no wall (furniture)
     # stray points and the dense extent (see stray_points.py)
     stray_sample_points: int = 2_000_000  # the dense part is found on a regular subsample of this size
     stray_cell_m: float = 1.0  # voxel of the occupancy grid
@@ -83,6 +84,9 @@ class OrthoimageSettings:
     depth_quantum_m: float = 0.0001  # depth resolution of the per-pixel median
     fill_gaps_px: int = 3  # no-data pixels with data on every side within this radius are sampling gaps (0: off)
     fill_min_fraction: float = 0.15  # ... filled when at least this fraction of the window has data
+    layer_gap_m: float | None = None  # a pixel's points this far apart in depth are two layers (None: one median; 0.02 tried)
+    furniture_depth_m: float | None = 0.25  # a layer reaching farther out is furniture, not used (None: none is)
+    min_layer_share: float = 0.5  # the layer nearest the wall with this share of the pixel's points is kept (else the largest)
 
 
 @dataclass

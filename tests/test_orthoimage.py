@@ -140,3 +140,64 @@ def test_sparse_scan_is_filled_but_hole_edges_do_not_move() -> None:
     # no pixel more than 1.5 cm (= one point spacing) inside the hole got data
     inner = (slice(int(0.415 / 0.005), int(0.685 / 0.005)), slice(int(0.315 / 0.005), int(0.585 / 0.005)))
     assert not o.mask[inner].any()
+
+
+def test_layers_keep_the_wall_behind_furniture_and_hide_furniture_alone() -> None:
+    """Per-pixel layers: points of furniture standing off the wall (a layer reaching beyond
+    ``furniture_depth_m``) never mix into the wall's depth or colour; where furniture alone was
+    seen the pixel has no data; an object's relief (one layer) and a pixel whose majority is
+    a near layer keep their depth, the plain median (no layers) is unchanged."""
+    pixel = np.array([0, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4])
+    depth = np.array([0.001, -0.001, 0.12, 0.28,  # wall, a desk top continuum 0.12..0.28 in front
+                      0.12, 0.2, 0.29,  # furniture alone (a desk top seen edge-on, reaching 0.29)
+                      0.118, 0.12, 0.121,  # an extinguisher's front: one layer
+                      0.05, 0.051, 0.0,  # a board 5 cm out seen twice, the wall once: the board
+                      0.0, 0.0, 0.29])  # the wall, a stray cabinet point far out
+    rgb = np.array([[200, 190, 180], [202, 192, 182], [90, 60, 30], [90, 60, 30],
+                    [90, 60, 30]] * 2 + [[220, 30, 30]] * 3 + [[20, 20, 200]] * 2 + [[200, 190, 180]] * 3)[:16]
+    rgb[7:10] = (220, 30, 30)
+    rgb[10:12] = (20, 20, 200)
+    rgb[12:15] = (200, 190, 180)
+    rgb[15] = (90, 60, 30)
+    d, c, m = rasterize_median(pixel, depth, rgb, (1, 5), (-0.06, 0.3), 0.0001, layer_gap=0.02,
+                               furniture_depth=0.25, min_layer_share=0.5)
+    np.testing.assert_array_equal(m.ravel(), [True, False, True, True, True])
+    assert d.ravel()[0] == pytest.approx(0.0, abs=2e-4) and d.ravel()[4] == pytest.approx(0.0, abs=2e-4)
+    assert (np.abs(c[0, 0].astype(int) - (201, 191, 181)) <= 1).all()  # the wall's colour, not the desk's
+    assert (c[0, 4] == (200, 190, 180)).all()
+    assert d.ravel()[2] == pytest.approx(0.12, abs=2e-4) and (c[0, 2] == (220, 30, 30)).all()
+    assert d.ravel()[3] == pytest.approx(0.0505, abs=2e-4) and (c[0, 3] == (20, 20, 200)).all()
+    plain = rasterize_median(pixel, depth, rgb, (1, 5), (-0.06, 0.3), 0.0001)
+    assert plain[2].all() and plain[0].ravel()[0] == pytest.approx(0.0605, abs=2e-4)
+
+
+def test_desk_in_front_of_a_wall_leaves_the_wall_and_a_socket_under_it() -> None:
+    """A desk's top (a horizontal surface: one pixel row sees it at every depth) and a cabinet's
+    side (one pixel column), both reaching far out, seen with the wall and a socket beside
+    them: the wall stays at the plane, the socket keeps its relief and the cabinet-only
+    pixels are holes, not relief (with ``layer_gap_m``; off by default)."""
+    rng = np.random.default_rng(5)
+    fr = _wall(width=1.0, height=1.0)
+    wall = _grid(fr, 0.004, rng)
+    sock = (np.abs(wall[:, 0] - 0.5) < 0.04) & (np.abs(wall[:, 1] - 0.3) < 0.04)
+    wall[sock, 2] += 0.012
+    n = 4000
+    top = np.column_stack([rng.uniform(0.0, 1.0, n), rng.uniform(0.7, 0.705, n), rng.uniform(0.01, 0.3, n)])
+    side = np.column_stack([rng.uniform(0.8, 0.805, n), rng.uniform(0.0, 0.7, n), rng.uniform(0.01, 0.3, n)])
+    front = np.column_stack([rng.uniform(0.85, 1.0, n), rng.uniform(0.0, 0.7, n), rng.uniform(0.26, 0.29, n)])
+    hidden = (wall[:, 0] > 0.81) & (wall[:, 1] < 0.7)  # behind the cabinet: not seen
+    uvd = np.concatenate([wall[~hidden], top, side, front])
+    rgb = np.concatenate([np.tile(WALL_RGB, ((~hidden).sum(), 1)), np.tile((90, 60, 30), (3 * n, 1))])
+    cloud, w = _cloud(fr, uvd, rgb)
+    o = build_orthoimage(cloud, w, OrthoimageSettings(fill_gaps_px=0, layer_gap_m=0.02))
+    px = 0.005
+    row = int((1.0 - 0.7025) / px)
+    seen = o.mask[row, : int(0.78 / px)]
+    top_row = o.depth[row, : int(0.78 / px)]
+    assert seen.mean() > 0.7 and np.nanmedian(np.abs(top_row)) < 0.003
+    assert (np.abs(top_row[seen]) < 0.025).mean() > 0.95
+    assert not o.mask[int(0.5 / px):, int(0.86 / px):].any()  # the cabinet's front alone: no data
+    s = o.depth[int((1.0 - 0.3) / px), int(0.5 / px)]
+    assert s == pytest.approx(0.012, abs=0.003)
+    old = build_orthoimage(cloud, w, OrthoimageSettings(fill_gaps_px=0, layer_gap_m=None))
+    assert np.nanmax(old.depth[row, : int(0.78 / px)]) > 0.05  # the plain median mixed the desk in

@@ -221,3 +221,22 @@ def test_boards_in_front_of_a_wall_do_not_find_it_twice() -> None:
     bare = {_match(w.frame, truth["walls"])["edge"]: len(w.point_index) for w in segment_floor_ceiling_walls(plain).walls}
     for w in seg.walls:  # a wall with boards has at least the points of the same wall without them
         assert len(w.point_index) >= 0.98 * bare[_match(w.frame, truth["walls"])["edge"]]
+
+
+def test_tall_cabinet_fronts_and_door_casings_are_no_walls() -> None:
+    """Planes standing in front of a wall and lower than it - the fronts of tall cabinets
+    (0.45 m out, 1.9 m high) and a door casing 1.5 cm proud - are furniture or trim, not walls:
+    each wall is found once, at its own plane, and keeps the points around them."""
+    outline = rotated([(0, 0), (8, 0), (8, 5), (0, 5)], 23.5, (2.0, 1.0))
+    cabinets = {0: [Block(1.0, 2.0, 0.0, 1.9, 0.45, (120, 122, 126)), Block(5.0, 5.9, 0.0, 1.95, 0.5, (200, 180, 140))],
+                2: [Block(2.0, 2.07, 0.0, 2.17, 0.015, (96, 70, 50)), Block(2.97, 3.04, 0.0, 2.17, 0.015, (96, 70, 50)),
+                    Block(2.0, 3.04, 2.1, 2.17, 0.015, (96, 70, 50)), Block(2.3, 2.38, 1.06, 1.14, 0.012, (250, 250, 250)),
+                    Block(2.5, 2.86, 2.19, 2.33, 0.05, (30, 160, 60))]}
+    cloud, truth = make_scene([Room(outline, cabinets)], spacing=0.02, noise_m=0.003, see_through_m=0.0, origin=ORIGIN)
+    seg = segment_floor_ceiling_walls(cloud)
+    assert len(seg.walls) == 4
+    _check_frames(seg, truth, tol_m=0.02)
+    casing_wall = next(w for w in seg.walls if _match(w.frame, truth["walls"])["edge"] == 2)
+    fr = casing_wall.frame
+    d = (cloud.xyz[casing_wall.point_index] + cloud.origin - fr.origin) @ fr.normal
+    assert ((d > 0.035) & (d < 0.065)).sum() > 100  # the exit light above the casing is this wall's
