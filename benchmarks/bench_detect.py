@@ -197,6 +197,7 @@ def main() -> int:
     run = Path(args.run_dir or f"runs/bench_{args.scenario}")
     scan = run / "scan"
     if not (scan / "scan.ply").exists():
+        run.mkdir(parents=True, exist_ok=True)  # simulate creates only the last folder
         subprocess.run([sys.executable, "-m", "sbsc_core", "simulate", "--scenario", args.scenario,
                         "--out", str(scan)], check=True)
     scans = tile_scans(scan / "scan.ply", args.tiles, run)
