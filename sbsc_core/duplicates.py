@@ -19,7 +19,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from .consensus import ConsensusHit
-from .types import WallFrame
+from .types import WallFrame, pixel_to_uv
 
 _SAME_FACING_COS = float(np.cos(np.deg2rad(10.0)))  # normals within 10 degrees face the same way
 _EVIDENCE = {"both": 2, "depth": 1, "colour": 0}
@@ -27,12 +27,10 @@ _EVIDENCE = {"both": 2, "depth": 1, "colour": 0}
 
 def _footprint(hit: ConsensusHit, frame: WallFrame, pixel_m: float) -> tuple[np.ndarray, float, float]:
     """World centre and footprint size (width, height, metres) of a hit on its wall."""
-    r, c = hit.centre
-    u = (float(c) + 0.5) * pixel_m
-    v = frame.height_m - (float(r) + 0.5) * pixel_m
+    u, v = pixel_to_uv(frame, pixel_m, *hit.centre)
     box = hit.box
     w, h = (0.0, 0.0) if box is None else (box.width * pixel_m, box.height * pixel_m)
-    return np.asarray(frame.to_world(u, v, 0.0), float).reshape(3), w, h
+    return np.asarray(frame.to_world(float(u), float(v), 0.0), float).reshape(3), w, h
 
 
 def _rank(hit: ConsensusHit) -> tuple[float, int, float]:

@@ -210,6 +210,15 @@ class Segmentation:
     stray_points: int = 0  # points outside the dense part of the scan, ignored
 
 
+def pixel_to_uv(frame: WallFrame, pixel_m: float, r: np.ndarray | float, c: np.ndarray | float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous pixel coordinates (row, col; a pixel *centre* is an integer) of an image of
+    ``frame`` with pixels of ``pixel_m`` to (u, v) in metres (see the module's convention)."""
+    u = (np.asarray(c, float) + 0.5) * pixel_m
+    v = frame.height_m - (np.asarray(r, float) + 0.5) * pixel_m
+    return u, v
+
+
 @dataclass
 class Orthoimage:
     """The 4D orthoimage J_CD of one wall (paper, section 3.2).
@@ -231,9 +240,7 @@ class Orthoimage:
 
     def pixel_to_uv(self, r: np.ndarray | float, c: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Continuous pixel coordinates (row, col of a pixel *centre* = integer) to (u, v)."""
-        u = (np.asarray(c, float) + 0.5) * self.pixel_m
-        v = self.frame.height_m - (np.asarray(r, float) + 0.5) * self.pixel_m
-        return u, v
+        return pixel_to_uv(self.frame, self.pixel_m, r, c)
 
     def uv_to_pixel(self, u: np.ndarray | float, v: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """(u, v) in metres to continuous (row, col)."""
