@@ -11,6 +11,13 @@ plate in a 0.21 x 0.21 m one look alike on a wall. An extinguisher sign and a fi
 sign, both square red plates, are such a pair: depth correlates 0.94-0.97 with either and
 the 15 global colour descriptors are alike.
 
+With ``depth_alike_any_colour`` (the default), same-size classes whose depth models correlate
+at least ``min_depth_ncc`` are look-alikes whatever their mean colours: the depth recognizer
+cannot tell them apart, and the colour recognizer, which could, does not always find the
+object (a red call point whose relief correlates 0.95 with a white smoke detector's was found
+in depth only, as a smoke detector). Their prints then decide at every depth candidate, as
+for any look-alikes.
+
 For a candidate of a class in such a set, the colour orthoimage patch (Lab difference to
 the local wall colour, the foreground only: what the colour recognizer sees) is compared
 with each class's front view as seen on that wall (:class:`~sbsc_core.colour_recognition.
@@ -150,9 +157,10 @@ def lookalike_sets(templates: dict[str, ModelTemplate], settings: LookalikeSetti
             ta, tb = templates[a], templates[b]
             if labs[a] is None or labs[b] is None or not _same_size(ta, tb, settings.size_tolerance):
                 continue
-            if float(np.linalg.norm(labs[a] - labs[b])) > settings.max_colour_delta_e:
+            same_colour = float(np.linalg.norm(labs[a] - labs[b])) <= settings.max_colour_delta_e
+            if not same_colour and not settings.depth_alike_any_colour:
                 continue
-            if (settings.relief_decides and _has_relief(ta) and _has_relief(tb)) or \
+            if (same_colour and settings.relief_decides and _has_relief(ta) and _has_relief(tb)) or \
                     depth_similarity(ta, tb) >= settings.min_depth_ncc:
                 parent[root(b)] = root(a)
     groups: dict[str, set[str]] = {}
@@ -373,7 +381,7 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
     if not settings.enabled:
         return depth, colour
     key = ("lookalike_sets", settings.size_tolerance, settings.min_depth_ncc, settings.max_colour_delta_e,
-           settings.relief_decides)
+           settings.relief_decides, settings.depth_alike_any_colour)
     if key not in prototypes._cache:
         prototypes._cache[key] = lookalike_sets(prototypes.templates, settings)  # type: ignore[assignment]
     groups: list[frozenset[str]] = list(prototypes._cache[key])  # type: ignore[arg-type]

@@ -245,6 +245,7 @@ class LookalikeSettings:
     size_tolerance: float = 0.15  # footprints whose sides differ by at most this share are the same size
     min_depth_ncc: float = 0.9  # ... whose depth models correlate at least this much
     max_colour_delta_e: float = 25.0  # ... and whose mean colours differ by at most this (CIE76)
+    depth_alike_any_colour: bool = True  # same size and depth NCC >= min_depth_ncc: look-alikes whatever their colours
     search_px: int = 3  # the print is compared within this many pixels of the candidate's centre
     min_margin: float = 0.05  # another look-alike's print must correlate this much better to relabel
     min_print_ncc: float = 0.5  # ... and at least this much

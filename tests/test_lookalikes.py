@@ -219,3 +219,60 @@ def test_white_plates_without_print_are_told_apart_by_relief_alone(white_plates)
     near = lambda cands, p: {x.class_id for x in cands if np.hypot(x.centre[0] - p[0], x.centre[1] - p[1]) < 3}  # noqa: E731
     for cid, p in places.items():
         assert near(d2, p) == {cid}, (cid, near(d, p))
+
+
+# --------------------------------------------------------------------------- same relief, other colours
+
+def _boxed(body: tuple[int, int, int], mark: str, px: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """A 4 cm deep box with bevelled edges, ``body``-coloured with a ``mark``: 'bar' (a
+    white bar across its middle) or 'ring' (a grey ring). Both share the relief."""
+    rgb = np.empty((px, px, 3), np.uint8)
+    rgb[:] = body
+    yy, xx = np.mgrid[0:px, 0:px]
+    if mark == "bar":
+        rgb[8:12, 3:-3] = WHITE
+    else:
+        r = np.hypot(yy - (px - 1) / 2, xx - (px - 1) / 2)
+        rgb[(r > 4) & (r < 7)] = (120, 120, 120)
+    edge = np.minimum.reduce([yy, xx, px - 1 - yy, px - 1 - xx]).astype(np.float32)
+    depth = 0.04 * np.minimum(1.0, (edge + 1) / 3.0)
+    return _rgba(rgb), depth.astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def depth_alikes() -> ModelLibrary:
+    """A red call-point box and a white detector box of the same size and relief: depth cannot
+    tell them, and their mean colours are far apart (CIE76 ~ 70)."""
+    specs = {"call_point": _boxed(RED, "bar"), "detector": _boxed(WHITE, "ring"), "socket": socket_like()}
+    return ModelLibrary({k: make_model(k, v, d) for k, (v, d) in specs.items()}, root="synthetic")
+
+
+def test_depth_alikes_of_other_colours_are_lookalikes(depth_alikes) -> None:
+    from dataclasses import replace
+    s = DetectionSettings().lookalikes
+    templates = make_templates(depth_alikes, 0.005)
+    assert lookalike_sets(templates, s) == [frozenset({"call_point", "detector"})]
+    assert lookalike_sets(templates, replace(s, depth_alike_any_colour=False)) == []
+
+
+@pytest.mark.parametrize("seed", [5, 6, 7])
+def test_a_box_found_in_depth_only_takes_the_class_its_colour_shows(depth_alikes, seed: int) -> None:
+    """Depth gives both classes at both boxes; whichever the depth step ranks first, after the
+    look-alike step each box has the class of its colours, also where colour recognition found
+    nothing (the depth candidates alone are resolved)."""
+    s = DetectionSettings()
+    templates = make_templates(depth_alikes, 0.005)
+    ortho, area = make_wall(seed=seed, holes=0, w_px=420)
+    rng = np.random.default_rng(seed)
+    places = {"call_point": (120.0 + rng.uniform(-0.5, 0.5), 100.0), "detector": (140.0, 300.0 + rng.uniform(-0.5, 0.5))}
+    for cid, c in places.items():
+        paste(ortho, area, templates[cid], c, 0, seed=seed)
+    protos = learn_prototypes(templates, s.colour)
+    d = match_depth(ortho, area, depth_rois(ortho, area, s.depth, templates), templates, s.depth)
+    img = colour_image(ortho, area, s.colour)
+    near = lambda cands, p: {x.class_id for x in cands if np.hypot(x.centre[0] - p[0], x.centre[1] - p[1]) < 3}  # noqa: E731
+    for p in places.values():
+        assert near(d, p) == set(places)  # depth alone cannot tell
+    d2, _ = resolve_on_wall(d, [], img, protos, s.lookalikes)
+    for cid, p in places.items():
+        assert near(d2, p) == {cid}
