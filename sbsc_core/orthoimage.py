@@ -9,6 +9,10 @@ as highlights or mixed edge returns are rejected). Both medians are computed for
 pixels at once by sorting one packed integer key per point (pixel number, then the
 quantised value) - no Python loop over points.
 
+A pixel whose points lie behind a coherent surface of its neighbourhood - the wall seen
+obliquely behind an object standing off it - shows that surface instead, as a view straight
+on would (:mod:`sbsc_core.occlusion`, ``occlusion_gap_m``).
+
 Pixels without points have ``mask`` False, depth NaN and colour 0: holes stay holes. Only
 sampling gaps - no-data pixels with data on every side within ``fill_gaps_px`` - are
 filled with the mean of their neighbours, so that a scan somewhat coarser than the pixel
@@ -22,11 +26,12 @@ import math
 import cv2
 import numpy as np
 
+from .occlusion import FrontLayers, front_layers, hide_occluded
 from .settings import OrthoimageSettings
 from .types import Orthoimage, PointCloud, Wall, WallFrame
 
 __all__ = ["build_orthoimage", "ortho_shape", "ortho_pixels", "orthoimage_from_pixels", "orthoimage_from_images",
-           "wall_coordinates", "rasterize_median", "fill_sampling_gaps", "layer_options"]
+           "wall_coordinates", "rasterize_median", "fill_sampling_gaps", "layer_options", "front_images"]
 
 
 def build_orthoimage(cloud: PointCloud, wall: Wall, settings: OrthoimageSettings | None = None) -> Orthoimage:
@@ -74,9 +79,18 @@ def orthoimage_from_pixels(wall_id: str, frame: WallFrame, pixel: np.ndarray, de
     s = settings or OrthoimageSettings()
     px = float(s.pixel_m)
     d0, d1 = s.depth_range_m
-    depth, colour, mask = rasterize_median(pixel, depth, rgb, ortho_shape(frame, px), (d0, d1), s.depth_quantum_m,
-                                           **layer_options(s))
-    return orthoimage_from_images(wall_id, frame, depth, colour, mask, s)
+    shape = ortho_shape(frame, px)
+    images = rasterize_median(pixel, depth, rgb, shape, (d0, d1), s.depth_quantum_m, **layer_options(s))
+    return orthoimage_from_images(wall_id, frame, *images, s, front=front_images(pixel, depth, rgb, shape, s))
+
+
+def front_images(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shape: tuple[int, int],
+                 settings: OrthoimageSettings) -> FrontLayers | None:
+    """The pixels' front layers (:func:`~sbsc_core.occlusion.front_layers`) for the
+    occlusion test, or None when ``settings.occlusion_gap_m`` is None."""
+    if settings.occlusion_gap_m is None:
+        return None
+    return front_layers(pixel, depth, rgb, shape, gap_m=settings.occlusion_gap_m, far_m=settings.furniture_depth_m)
 
 
 def layer_options(settings: OrthoimageSettings) -> dict[str, float | None]:
@@ -88,9 +102,14 @@ def layer_options(settings: OrthoimageSettings) -> dict[str, float | None]:
 
 
 def orthoimage_from_images(wall_id: str, frame: WallFrame, depth: np.ndarray, colour: np.ndarray, mask: np.ndarray,
-                           settings: OrthoimageSettings | None = None) -> Orthoimage:
-    """Orthoimage J_CD from the per-pixel medians (:func:`rasterize_median`): the sampling gaps filled."""
+                           settings: OrthoimageSettings | None = None, *,
+                           front: FrontLayers | None = None) -> Orthoimage:
+    """Orthoimage J_CD from the per-pixel medians (:func:`rasterize_median`): the pixels hidden
+    behind a coherent front surface (``front``, from :func:`front_images`; see
+    :mod:`sbsc_core.occlusion`) replaced, then the sampling gaps filled."""
     s = settings or OrthoimageSettings()
+    if front is not None and s.occlusion_gap_m is not None:
+        depth, colour, mask = hide_occluded(depth, colour, mask, front, gap_m=s.occlusion_gap_m)
     if s.fill_gaps_px > 0:
         depth, colour, mask = fill_sampling_gaps(depth, colour, mask, s.fill_gaps_px, s.fill_min_fraction)
     return Orthoimage(wall_id=wall_id, frame=frame, pixel_m=float(s.pixel_m), colour=colour, depth=depth, mask=mask)

@@ -39,7 +39,9 @@ from pathlib import Path
 import numpy as np
 
 from .io.scans import BLOCK_POINTS, CHUNK_POINTS, ScanChunk, iter_scan, open_scan, sample_scan
+from .occlusion import FrontLayers, stack_front
 from .orthoimage import (
+    front_images,
     layer_options,
     ortho_pixels,
     ortho_shape,
@@ -464,6 +466,7 @@ def wall_orthoimage(scratch: Path | str, w: int, wall_id: str, frame: WallFrame,
     depth = np.full((h, width), np.nan, np.float32)
     colour = np.zeros((h, width, 3), np.uint8)
     mask = np.zeros((h, width), bool)
+    bands: list[tuple[int, FrontLayers]] = []
     for b, r0 in enumerate(range(0, h, rows)):
         rec = wall_records(scratch, w, b)
         if not len(rec):
@@ -471,12 +474,16 @@ def wall_orthoimage(scratch: Path | str, w: int, wall_id: str, frame: WallFrame,
         r1 = min(h, r0 + rows)
         pixel = rec["pixel"].astype(np.int64)
         pixel -= r0 * width
-        d, c, m = rasterize_median(pixel, np.ascontiguousarray(rec["depth"]), np.ascontiguousarray(rec["rgb"]),
-                                   (r1 - r0, width), settings.depth_range_m, settings.depth_quantum_m,
-                                   **layer_options(settings))
-        del rec, pixel
+        pd, prgb = np.ascontiguousarray(rec["depth"]), np.ascontiguousarray(rec["rgb"])
+        del rec
+        d, c, m = rasterize_median(pixel, pd, prgb, (r1 - r0, width), settings.depth_range_m,
+                                   settings.depth_quantum_m, **layer_options(settings))
         depth[r0:r1], colour[r0:r1], mask[r0:r1] = d, c, m
-    return orthoimage_from_images(wall_id, frame, depth, colour, mask, settings)
+        band_front = front_images(pixel, pd, prgb, (r1 - r0, width), settings)
+        if band_front is not None:
+            bands.append((r0, band_front))
+        del pixel, pd, prgb
+    return orthoimage_from_images(wall_id, frame, depth, colour, mask, settings, front=stack_front(bands, (h, width)))
 
 
 def worker_ready() -> bool:

@@ -87,6 +87,7 @@ class OrthoimageSettings:
     layer_gap_m: float | None = None  # a pixel's points this far apart in depth are two layers (None: one median; 0.02 tried)
     furniture_depth_m: float | None = 0.25  # a layer reaching farther out is furniture, not used (None: none is)
     min_layer_share: float = 0.5  # the layer nearest the wall with this share of the pixel's points is kept (else the largest)
+    occlusion_gap_m: float | None = 0.02  # a coherent surface this far in front of a pixel hides it (None: off)
 
 
 @dataclass
@@ -348,6 +349,8 @@ def _build(kind: type, data: dict[str, Any], where: str) -> Any:
             if not isinstance(value, (list, tuple)) or not (any_length or len(value) == len(default)):
                 raise InputError(f"{where}.{key}", f"expected a list like {list(default)}")
             kwargs[key] = tuple(_scalar(0.0, v, f"{where}.{key}") for v in value)
+        elif str(known[key].type) == "float | None" and (value is None or default is None):  # either
+            kwargs[key] = None if value is None else _scalar(0.0, value, f"{where}.{key}")
         else:
             kwargs[key] = _scalar(default, value, f"{where}.{key}")
     return kind(**kwargs)
