@@ -45,6 +45,14 @@ Additions to the paper, each a named setting:
 * A slowly varying level of the plain wall (a step of a few mm where a misregistered
   station alone sees the wall) is subtracted before relief is thresholded for RoIs and
   the plausibility checks; the correlation keeps the scene's own relief.
+* Furniture standing close in front of the wall (a desk's modesty panel and legs, a bin, a
+  chair) lies within the wall's depth band and makes one RoI, much larger than any model,
+  with the objects beside it. Matching inside that RoI is by depth layers
+  (:func:`model_view`): relief beyond ``foreground_factor`` x a model's peak, with its edge
+  (:func:`foreground_source`), is another object in front, unknown to that model (masked
+  NCC, plausibility checks on the rest). A match must then be seen over its footprint (not
+  behind the object) and, as that side's isolation is unverified, correlate at least
+  ``foreground_mu_d``.
 * A kept match's position (``Candidate.position``, used for placement) is read from its
   relief's sharp edges (:mod:`~sbsc_core.edge_position`, ``sharp_edge_position``): seen
   obliquely, one side of an object trails into its occlusion shadow (mixed pixels) and the
