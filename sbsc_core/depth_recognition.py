@@ -551,7 +551,8 @@ def _propagate_down(mag: np.ndarray, edge_m_per_px: float, steps: int) -> np.nda
     return src
 
 
-def model_view(jm: np.ndarray, known: np.ndarray, source: np.ndarray | None, limit_m: float) -> ModelView:
+def model_view(jm: np.ndarray, known: np.ndarray, source: np.ndarray | None, limit_m: float,
+               min_area_px: int = 0, relief: np.ndarray | None = None) -> ModelView:
     """The image and known mask one depth model is matched on (:func:`match_depth`), by depth layers.
 
     An object's relief is bounded by its model's depth (times the largest gain a match may
@@ -565,12 +566,24 @@ def model_view(jm: np.ndarray, known: np.ndarray, source: np.ndarray | None, lim
     wall: the panel's relief no longer dominates the correlation window nor fills the side
     strips of the isolation check. An object mostly behind the foreground still needs
     ``min_known_share`` of its footprint seen.
+
+    Only furniture counts: a connected foreground region whose pixels beyond ``limit_m`` in
+    ``relief`` number fewer than ``min_area_px`` (the model's footprint) is small, a hook on
+    a rail, a knob, perhaps a part of something the model would match: it stays known.
     """
     if source is None or limit_m <= 0:
         return ModelView(jm, known)
     deep = source > limit_m
     if not deep.any():
         return ModelView(jm, known)
+    if min_area_px > 0 and relief is not None:
+        lab, n = ndimage.label(deep)
+        beyond = np.bincount(lab[np.abs(relief) > limit_m], minlength=n + 1)
+        large = beyond >= min_area_px
+        large[0] = False
+        deep = large[lab]
+        if not deep.any():
+            return ModelView(jm, known)
     return ModelView(np.where(deep, np.float32(0.0), jm), known & ~deep, deep)
 
 
@@ -607,17 +620,18 @@ def match_depth(
     source = foreground_source(jml, settings.min_relief_m, settings.foreground_edge_px,
                                settings.foreground_factor * min(peaks)) \
         if settings.foreground_factor > 0 and peaks else None
-    views: dict[float, ModelView] = {}  # by the foreground's limit in mm (a model, its turns and look-alikes share it)
+    views: dict[tuple[float, int], ModelView] = {}  # by limit (mm) and area: a model's turns share one
 
-    def view_of(peak_m: float) -> ModelView:
-        limit = round(settings.foreground_factor * peak_m, 3)
-        if limit not in views:
-            views[limit] = model_view(jm, known, source, limit)
-        return views[limit]
+    def view_of(peak_m: float, area_px: int) -> ModelView:
+        key = (round(settings.foreground_factor * peak_m, 3), area_px)
+        if key not in views:
+            views[key] = model_view(jm, known, source, key[0], area_px, jml)
+        return views[key]
 
-    def search(cid: str, deg: float, rot: np.ndarray, where: list[Box], peak_m: float) -> list[Candidate]:
+    def search(cid: str, deg: float, rot: np.ndarray, where: list[Box], peak_m: float, area_px: int
+               ) -> list[Candidate]:
         h, w = rot.shape
-        v = view_of(peak_m)
+        v = view_of(peak_m, area_px)
         flat_m = 1e-5  # a window whose relief varies by less than this is flat (exactly 0 in openings)
         min_energy = (h + 2 * settings.template_pad_px) * (w + 2 * settings.template_pad_px) * flat_m ** 2
         relief = float(np.median(np.abs(rot[np.abs(rot) > 0.1 * np.abs(rot).max()])))
@@ -665,7 +679,7 @@ def match_depth(
         found: list[Candidate] = []
         turners = []
         for model in models:
-            peak = float(np.abs(model).max())
+            peak, area = float(np.abs(model).max()), int(model.size)
             closed = close_see_through(model, settings.see_through_fraction) if settings.see_through_fraction > 0 else None
             for deg, rot in rotated_variants(model, settings.rotations) + (
                     rotated_variants(closed, settings.rotations) if closed is not None else []):
@@ -673,11 +687,11 @@ def match_depth(
                                     gap_px=int(round(settings.part_gap_fraction * min(rot.shape))),
                                     slack_px=settings.template_pad_px) \
                     if settings.part_gap_fraction > 0 else []
-                found.extend(search(cid, deg, rot, rois + [b for b in parts if b not in rois], peak))
+                found.extend(search(cid, deg, rot, rois + [b for b in parts if b not in rois], peak, area))
 
             def turned(a: float, where: list[Box], cid: str = cid, model: np.ndarray = model,
-                       peak: float = peak) -> list[Candidate]:
-                return search(cid, a, rotate_template(model, a), where, peak)
+                       peak: float = peak, area: int = area) -> list[Candidate]:
+                return search(cid, a, rotate_template(model, a), where, peak, area)
 
             turners.append(turned)
             for roi, turn in turns:
