@@ -551,39 +551,52 @@ def _propagate_down(mag: np.ndarray, edge_m_per_px: float, steps: int) -> np.nda
     return src
 
 
-def model_view(jm: np.ndarray, known: np.ndarray, source: np.ndarray | None, limit_m: float,
-               min_area_px: int = 0, relief: np.ndarray | None = None) -> ModelView:
+@dataclass
+class ForegroundRegions:
+    """The connected foreground regions above one limit (:func:`foreground_regions`)."""
+
+    labels: np.ndarray  # (H, W) int32: region number, 0 outside
+    beyond: np.ndarray  # per region number: its pixels beyond the limit (index 0: none)
+
+
+def foreground_regions(source: np.ndarray, relief: np.ndarray, limit_m: float) -> ForegroundRegions | None:
+    """The 4-connected regions of ``source > limit_m`` (foreground with its edges,
+    :func:`foreground_source`) and how many of their pixels stand out beyond ``limit_m``
+    in ``relief``; None when there is none."""
+    deep = source > limit_m
+    if not deep.any():
+        return None
+    lab, n = ndimage.label(deep)
+    return ForegroundRegions(lab, np.bincount(lab[np.abs(relief) > limit_m], minlength=n + 1))
+
+
+def model_view(jm: np.ndarray, known: np.ndarray, regions: ForegroundRegions | None, min_area_px: int = 0
+               ) -> ModelView:
     """The image and known mask one depth model is matched on (:func:`match_depth`), by depth layers.
 
     An object's relief is bounded by its model's depth (times the largest gain a match may
-    have): a surface standing out much further than that (``limit_m``, ``foreground_factor``
-    x the model's peak) is another object in front of the wall, a different depth layer: a
-    desk's modesty panel or legs, a bin, a chair. With its edges (``source``,
-    :func:`foreground_source`) it is unknown to this model, like an unseen pixel (the NCC is
-    then taken over the known pixels, an extension of the paper's correlation in a RoI
+    have): a surface standing out much further than that (the limit of ``regions``,
+    ``foreground_factor`` x the model's peak) is another object in front of the wall, a
+    different depth layer: a desk's modesty panel or legs, a bin, a chair. With its edges
+    (:func:`foreground_source`) it is unknown to this model, like an unseen pixel (the NCC
+    is then taken over the known pixels, an extension of the paper's correlation in a RoI
     window, and the plausibility checks ignore it), and at the wall plane in the correlated
     image. Beside a desk panel or a bin, a fully visible socket then stands alone on its
     wall: the panel's relief no longer dominates the correlation window nor fills the side
     strips of the isolation check. An object mostly behind the foreground still needs
     ``min_known_share`` of its footprint seen.
 
-    Only furniture counts: a connected foreground region whose pixels beyond ``limit_m`` in
-    ``relief`` number fewer than ``min_area_px`` (the model's footprint) is small, a hook on
-    a rail, a knob, perhaps a part of something the model would match: it stays known.
+    Only furniture counts: a region with fewer than ``min_area_px`` pixels beyond the limit
+    (the model's footprint) is small, a hook on a rail, a knob, perhaps a part of something
+    the model would match: it stays known.
     """
-    if source is None or limit_m <= 0:
+    if regions is None:
         return ModelView(jm, known)
-    deep = source > limit_m
-    if not deep.any():
+    large = regions.beyond >= max(min_area_px, 1)
+    large[0] = False
+    if not large.any():
         return ModelView(jm, known)
-    if min_area_px > 0 and relief is not None:
-        lab, n = ndimage.label(deep)
-        beyond = np.bincount(lab[np.abs(relief) > limit_m], minlength=n + 1)
-        large = beyond >= min_area_px
-        large[0] = False
-        deep = large[lab]
-        if not deep.any():
-            return ModelView(jm, known)
+    deep = large[regions.labels]
     return ModelView(np.where(deep, np.float32(0.0), jm), known & ~deep, deep)
 
 
@@ -620,12 +633,17 @@ def match_depth(
     source = foreground_source(jml, settings.min_relief_m, settings.foreground_edge_px,
                                settings.foreground_factor * min(peaks)) \
         if settings.foreground_factor > 0 and peaks else None
-    views: dict[tuple[float, int], ModelView] = {}  # by limit (mm) and area: a model's turns share one
+    regions: dict[float, ForegroundRegions | None] = {}  # by limit (mm): models of one depth share them
+    views: dict[tuple[float, bytes], ModelView] = {}  # by limit and the regions kept: a model's turns share one
 
     def view_of(peak_m: float, area_px: int) -> ModelView:
-        key = (round(settings.foreground_factor * peak_m, 3), area_px)
+        limit = round(settings.foreground_factor * peak_m, 3)
+        if limit not in regions:
+            regions[limit] = foreground_regions(source, jml, limit) if source is not None else None
+        found = regions[limit]
+        key = (limit, b"" if found is None else np.packbits(found.beyond >= area_px).tobytes())
         if key not in views:
-            views[key] = model_view(jm, known, source, key[0], area_px, jml)
+            views[key] = model_view(jm, known, found, area_px)
         return views[key]
 
     def search(cid: str, deg: float, rot: np.ndarray, where: list[Box], peak_m: float, area_px: int

@@ -12,7 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sbsc_core.depth_recognition import depth_rois, foreground_source, match_depth, model_view
+from sbsc_core.depth_recognition import (
+    depth_rois,
+    foreground_regions,
+    foreground_source,
+    match_depth,
+    model_view,
+)
 from sbsc_core.io.models import load_model_library
 from sbsc_core.settings import DepthRecognitionSettings
 from sbsc_core.templates import make_templates
@@ -88,6 +94,8 @@ def test_foreground_takes_the_edge_of_a_panel_down_to_the_wall() -> None:
     deep = src > 0.036  # 3 x the socket's 12 mm
     assert deep[:10].all()  # the panel and its ramp
     assert not deep[10:].any()  # the socket (a level stretch) and the wall stay
-    view = model_view(relief, np.ones_like(deep), src, 0.036)
+    view = model_view(relief, np.ones_like(deep), foreground_regions(src, relief, 0.036), 35)
     assert (view.image[:10] == 0).all() and not view.known[:10].any() and view.known[10:].all()
-    assert model_view(relief, np.ones_like(deep), src, 0.1).known.all()  # a deep model: nothing in front
+    assert foreground_regions(src, relief, 0.1) is None  # a deep model: nothing in front
+    # a region with fewer pixels beyond the limit (7 x 5 here) than the model's footprint is no furniture
+    assert model_view(relief, np.ones_like(deep), foreground_regions(src, relief, 0.036), 36).known.all()
