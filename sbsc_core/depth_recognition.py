@@ -45,6 +45,14 @@ Additions to the paper, each a named setting:
 * A slowly varying level of the plain wall (a step of a few mm where a misregistered
   station alone sees the wall) is subtracted before relief is thresholded for RoIs and
   the plausibility checks; the correlation keeps the scene's own relief.
+* Furniture standing close in front of the wall (a desk's modesty panel and legs, a bin, a
+  chair) lies within the wall's depth band and makes one RoI, much larger than any model,
+  with the objects beside it. Matching inside that RoI is by depth layers
+  (:func:`model_view`): relief beyond ``foreground_factor`` x a model's peak, with its edge
+  (:func:`foreground_source`), is another object in front, unknown to that model (masked
+  NCC, plausibility checks on the rest). A match must then be seen over its footprint (not
+  behind the object) and, as that side's isolation is unverified, correlate at least
+  ``foreground_mu_d``.
 * A kept match's position (``Candidate.position``, used for placement) is read from its
   relief's sharp edges (:mod:`~sbsc_core.edge_position`, ``sharp_edge_position``): seen
   obliquely, one side of an object trails into its occlusion shadow (mixed pixels) and the
@@ -480,6 +488,118 @@ def relief_overlap(jd: np.ndarray, model: np.ndarray, box: Box, pad_px: int, thr
     return float(np.count_nonzero(m & s)) / union if union else 0.0
 
 
+@dataclass
+class ModelView:
+    """What one depth model is matched on: the correlated image and the known mask."""
+
+    image: np.ndarray  # J_D smoothed (correlated), other objects in front at the wall plane
+    known: np.ndarray  # pixels with data that are not another object in front
+    front: np.ndarray | None = None  # the other objects in front with their edges (None: none)
+
+    def front_share(self, box: Box) -> float:
+        """The share of ``box`` covered by objects in front (0 without any)."""
+        if self.front is None:
+            return 0.0
+        part = crop_padded(self.front, box.r0, box.r1, box.c0, box.c1)
+        return float(np.mean(part)) if part.size else 0.0
+
+
+def foreground_source(relief: np.ndarray, edge_m_per_px: float, max_edge_px: int, floor_m: float = 0.0
+                      ) -> np.ndarray:
+    """For each pixel, the highest relief (absolute, metres) from which it is reached down an
+    edge: the pixel itself, or a pixel at most ``max_edge_px`` 4-connected steps away from
+    which every step falls by at least ``edge_m_per_px`` (a depth discontinuity; :func:`match_depth`
+    takes ``min_relief_m`` per pixel, so the soft tail of the blur that runs on into an object
+    the foreground touches is not taken).
+
+    ``foreground_source(...) > limit`` is the foreground above ``limit`` together with its
+    edges (:func:`model_view`): the ramp of mixed pixels and blur of a desk panel or a bin
+    down towards the wall belongs to it, up to where the relief levels off (the wall, or
+    an object the panel stands against). Computed once per wall for every limit at least
+    ``floor_m`` (only the pixels within ``max_edge_px`` of relief above it are worked on).
+    """
+    mag = np.abs(relief).astype(np.float32)
+    src = mag.copy()
+    if max_edge_px <= 0 or mag.size == 0:
+        return src
+    seeds = mag > floor_m
+    if not seeds.any():
+        return src
+    near = cv2.dilate(seeds.astype(np.uint8), np.ones((2 * max_edge_px + 1,) * 2, np.uint8))
+    lab, _ = ndimage.label(near)
+    for sl in ndimage.find_objects(lab):
+        np.maximum(src[sl], _propagate_down(mag[sl], edge_m_per_px, max_edge_px), out=src[sl])
+    return src
+
+
+def _propagate_down(mag: np.ndarray, edge_m_per_px: float, steps: int) -> np.ndarray:
+    """:func:`foreground_source` on one window (dense, ``steps`` 4-neighbour iterations)."""
+    src = mag.copy()
+    down = mag[:-1] - mag[1:] >= edge_m_per_px  # pixel r + 1 lies an edge below pixel r
+    up = mag[1:] - mag[:-1] >= edge_m_per_px
+    right = mag[:, :-1] - mag[:, 1:] >= edge_m_per_px
+    left = mag[:, 1:] - mag[:, :-1] >= edge_m_per_px
+    for _ in range(steps):
+        new = src.copy()
+        np.maximum(new[1:], np.where(down, src[:-1], 0.0), out=new[1:])
+        np.maximum(new[:-1], np.where(up, src[1:], 0.0), out=new[:-1])
+        np.maximum(new[:, 1:], np.where(right, src[:, :-1], 0.0), out=new[:, 1:])
+        np.maximum(new[:, :-1], np.where(left, src[:, 1:], 0.0), out=new[:, :-1])
+        if np.array_equal(new, src):
+            break
+        src = new
+    return src
+
+
+@dataclass
+class ForegroundRegions:
+    """The connected foreground regions above one limit (:func:`foreground_regions`)."""
+
+    labels: np.ndarray  # (H, W) int32: region number, 0 outside
+    beyond: np.ndarray  # per region number: its pixels beyond the limit (index 0: none)
+
+
+def foreground_regions(source: np.ndarray, relief: np.ndarray, limit_m: float) -> ForegroundRegions | None:
+    """The 4-connected regions of ``source > limit_m`` (foreground with its edges,
+    :func:`foreground_source`) and how many of their pixels stand out beyond ``limit_m``
+    in ``relief``; None when there is none."""
+    deep = source > limit_m
+    if not deep.any():
+        return None
+    lab, n = ndimage.label(deep)
+    return ForegroundRegions(lab, np.bincount(lab[np.abs(relief) > limit_m], minlength=n + 1))
+
+
+def model_view(jm: np.ndarray, known: np.ndarray, regions: ForegroundRegions | None, min_area_px: int = 0
+               ) -> ModelView:
+    """The image and known mask one depth model is matched on (:func:`match_depth`), by depth layers.
+
+    An object's relief is bounded by its model's depth (times the largest gain a match may
+    have): a surface standing out much further than that (the limit of ``regions``,
+    ``foreground_factor`` x the model's peak) is another object in front of the wall, a
+    different depth layer: a desk's modesty panel or legs, a bin, a chair. With its edges
+    (:func:`foreground_source`) it is unknown to this model, like an unseen pixel (the NCC
+    is then taken over the known pixels, an extension of the paper's correlation in a RoI
+    window, and the plausibility checks ignore it), and at the wall plane in the correlated
+    image. Beside a desk panel or a bin, a fully visible socket then stands alone on its
+    wall: the panel's relief no longer dominates the correlation window nor fills the side
+    strips of the isolation check. An object mostly behind the foreground still needs
+    ``min_known_share`` of its footprint seen.
+
+    Only furniture counts: a region with fewer than ``min_area_px`` pixels beyond the limit
+    (the model's footprint) is small, a hook on a rail, a knob, perhaps a part of something
+    the model would match: it stays known.
+    """
+    if regions is None:
+        return ModelView(jm, known)
+    large = regions.beyond >= max(min_area_px, 1)
+    large[0] = False
+    if not large.any():
+        return ModelView(jm, known)
+    deep = large[regions.labels]
+    return ModelView(np.where(deep, np.float32(0.0), jm), known & ~deep, deep)
+
+
 def match_depth(
     ortho: Orthoimage,
     area: WallArea,
@@ -509,8 +629,27 @@ def match_depth(
     matched_model: dict[int, np.ndarray] = {}  # id of a candidate -> the (turned) model it matched
     turns = roi_turns(jml, rois, max(noise_relief, settings.min_relief_m), settings) if settings.free_rotation else []
 
-    def search(cid: str, deg: float, rot: np.ndarray, where: list[Box]) -> list[Candidate]:
+    peaks = [float(np.abs(t.depth).max()) for t in templates.values() if t.depth is not None and t.depth.size]
+    source = foreground_source(jml, settings.min_relief_m, settings.foreground_edge_px,
+                               settings.foreground_factor * min(peaks)) \
+        if settings.foreground_factor > 0 and peaks else None
+    regions: dict[float, ForegroundRegions | None] = {}  # by limit (mm): models of one depth share them
+    views: dict[tuple[float, bytes], ModelView] = {}  # by limit and the regions kept: a model's turns share one
+
+    def view_of(peak_m: float, area_px: int) -> ModelView:
+        limit = round(settings.foreground_factor * peak_m, 3)
+        if limit not in regions:
+            regions[limit] = foreground_regions(source, jml, limit) if source is not None else None
+        found = regions[limit]
+        key = (limit, b"" if found is None else np.packbits(found.beyond >= area_px).tobytes())
+        if key not in views:
+            views[key] = model_view(jm, known, found, area_px)
+        return views[key]
+
+    def search(cid: str, deg: float, rot: np.ndarray, where: list[Box], peak_m: float, area_px: int
+               ) -> list[Candidate]:
         h, w = rot.shape
+        v = view_of(peak_m, area_px)
         flat_m = 1e-5  # a window whose relief varies by less than this is flat (exactly 0 in openings)
         min_energy = (h + 2 * settings.template_pad_px) * (w + 2 * settings.template_pad_px) * flat_m ** 2
         relief = float(np.median(np.abs(rot[np.abs(rot) > 0.1 * np.abs(rot).max()])))
@@ -518,23 +657,30 @@ def match_depth(
 
         def overlap(r: float, c: float, gain: float) -> float:
             return relief_overlap(jml, smooth_model, box_at((r, c), h, w), settings.template_pad_px,
-                                  settings.isolation_relief_fraction * relief, gain, known)
+                                  settings.isolation_relief_fraction * relief, gain, v.known)
 
         def plausible(r: float, c: float, gain: float) -> bool:
             box = box_at((r, c), h, w)
+            g = settings.isolation_gap_px  # the footprint's own blurred edge may meet a ramp of the other object
+            if v.front_share(Box(box.r0 + g, box.c0 + g, box.r1 - g, box.c1 - g)) > 1.0 - settings.full_known_share:
+                return False  # partly behind another object: not told apart from a smaller class
             thr = max(settings.isolation_relief_fraction * relief * gain, noise_relief)
             if isolation(jml, box, thr, settings.isolation_gap_px, settings.isolation_width_px,
-                         known, settings.min_known_share,
+                         v.known, settings.min_known_share,
                          trails=settings.isolation_trails) > settings.isolation_max_occupancy:
                 return False
             return overlap(r, c, gain) >= settings.min_relief_iou
 
-        peaks = match_in_rois(jm, rot, where, threshold=settings.mu_d, pad_px=settings.template_pad_px,
+        peaks = match_in_rois(v.image, rot, where, threshold=settings.mu_d, pad_px=settings.template_pad_px,
                               margin_px=settings.search_margin_px, max_peaks=settings.max_peaks_per_roi,
                               sigma_px=settings.match_sigma_px, gain_range=settings.gain_range,
-                              min_energy=min_energy, accept=plausible, known=known,
+                              min_energy=min_energy, accept=plausible, known=v.known,
                               min_known=settings.min_known_share, full_known=settings.full_known_share,
                               masked_pre=settings.masked_pre_threshold)
+        if v.front is not None:  # beside an object in front, the isolation is unverified on that side
+            reach = settings.template_pad_px + settings.isolation_gap_px + settings.isolation_width_px
+            peaks = [m for m in peaks if m.score >= settings.foreground_mu_d
+                     or v.front_share(box_at((m.row, m.col), h + 2 * reach, w + 2 * reach)) == 0.0]
         found = [Candidate(cid, ortho.wall_id, "depth", box_at((m.row, m.col), h, w), (m.row, m.col), m.score,
                            m.roi, deg, gain=m.gain, relief_iou=overlap(m.row, m.col, m.gain)) for m in peaks]
         matched_model.update((id(c), rot) for c in found)
@@ -551,6 +697,7 @@ def match_depth(
         found: list[Candidate] = []
         turners = []
         for model in models:
+            peak, area = float(np.abs(model).max()), int(model.size)
             closed = close_see_through(model, settings.see_through_fraction) if settings.see_through_fraction > 0 else None
             for deg, rot in rotated_variants(model, settings.rotations) + (
                     rotated_variants(closed, settings.rotations) if closed is not None else []):
@@ -558,10 +705,11 @@ def match_depth(
                                     gap_px=int(round(settings.part_gap_fraction * min(rot.shape))),
                                     slack_px=settings.template_pad_px) \
                     if settings.part_gap_fraction > 0 else []
-                found.extend(search(cid, deg, rot, rois + [b for b in parts if b not in rois]))
+                found.extend(search(cid, deg, rot, rois + [b for b in parts if b not in rois], peak, area))
 
-            def turned(a: float, where: list[Box], cid: str = cid, model: np.ndarray = model) -> list[Candidate]:
-                return search(cid, a, rotate_template(model, a), where)
+            def turned(a: float, where: list[Box], cid: str = cid, model: np.ndarray = model,
+                       peak: float = peak, area: int = area) -> list[Candidate]:
+                return search(cid, a, rotate_template(model, a), where, peak, area)
 
             turners.append(turned)
             for roi, turn in turns:

@@ -177,6 +177,11 @@ class DepthRecognitionSettings:
     isolation_max_occupancy: float = 0.5  # a side strip with more relief: part of something larger
     isolation_trails: bool = True  # ... unless it falls at every pixel to the wall: a mixed-pixel trail
     min_relief_iou: float = 0.5  # where model and scene stand out must overlap this much (IoU)
+    foreground_factor: float = 3.0  # relief beyond this x a model's peak is another object in front of the wall
+    # (a desk panel, a bin): unknown to that model, like an unseen pixel (0: off); above gain_range's top
+    foreground_edge_px: int = 8  # ... with its edge (falling by min_relief_m per pixel) up to this wide
+    foreground_mu_d: float = 0.9  # a match whose window or side strips reach such an object must correlate this
+    # (that side's isolation is unverified); its footprint must be seen (full_known_share), not behind it
     nms_overlap: float = 0.3  # same-class matches overlapping more than this are one match
     refit_plane: bool = True  # remove a residual plane fitted to the visible wall
     gap_fill_sigma_px: float = 1.0  # sampling gaps are filled by a normalised Gaussian of this size
