@@ -3,19 +3,65 @@ pictograms, found from the library itself and told apart by their print."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
 
-from sbsc_core.colour_recognition import colour_image, colour_rois, learn_prototypes, match_colour
+from sbsc_core.colour_recognition import (
+    ColourImage,
+    ColourPrototypes,
+    colour_image,
+    colour_rois,
+    learn_prototypes,
+    match_colour,
+)
 from sbsc_core.consensus import consensus_all
 from sbsc_core.depth_recognition import depth_rois, match_depth
 from sbsc_core.lookalikes import content_box, lookalike_sets, resolve_on_wall
 from sbsc_core.settings import DetectionSettings
 from sbsc_core.templates import make_templates
-from sbsc_core.types import ModelLibrary, ObjectModel
+from sbsc_core.types import Candidate, ModelLibrary, ObjectModel, Orthoimage, WallArea
 from tests.recognition_synth import _rgba, make_model, make_wall, paste, socket_like
 
 RED, WHITE = (200, 30, 35), (250, 250, 250)
+
+
+@dataclass
+class _Recognized:
+    """A synthetic wall with objects pasted on it, and what the paper's recognizers found."""
+
+    templates: dict
+    ortho: Orthoimage
+    area: WallArea
+    protos: ColourPrototypes
+    image: ColourImage
+    depth: list[Candidate]
+    colour: list[Candidate]
+
+
+def _recognized(library: ModelLibrary, places: dict[str, tuple[float, float]], s: DetectionSettings, *, seed: int,
+                turns: dict[str, int] | None = None, gain: np.ndarray | None = None, **wall) -> _Recognized:
+    """Each class of ``places`` pasted at its centre (turned by ``turns``) on ``make_wall(seed, **wall)``,
+    seen with the colour ``gain`` of a station (exposure and white balance), and its depth and
+    colour candidates."""
+    templates = make_templates(library, 0.005)
+    ortho, area = make_wall(seed=seed, holes=0, **wall)
+    for cid, c in places.items():
+        paste(ortho, area, templates[cid], c, (turns or {}).get(cid, 0), seed=seed)
+    if gain is not None:
+        ortho.colour[:] = np.clip(ortho.colour * gain, 0, 255).astype(np.uint8)
+        area.wall_colour = np.median(ortho.colour[area.visible], axis=0).astype(float)
+    protos = learn_prototypes(templates, s.colour)
+    d = match_depth(ortho, area, depth_rois(ortho, area, s.depth, templates), templates, s.depth)
+    img = colour_image(ortho, area, s.colour)
+    c = match_colour(ortho, area, colour_rois(ortho, area, s.colour, img), protos, s.colour, img)
+    return _Recognized(templates, ortho, area, protos, img, d, c)
+
+
+def _near(cands: list[Candidate], p: tuple[float, float]) -> set[str]:
+    """The classes of the candidates within 3 pixels of ``p``."""
+    return {x.class_id for x in cands if np.hypot(x.centre[0] - p[0], x.centre[1] - p[1]) < 3}
 
 
 def _plate(pictogram: str, px: int = 40) -> tuple[np.ndarray, np.ndarray]:
@@ -49,21 +95,14 @@ def test_lookalike_sets_come_from_the_library(library) -> None:
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_same_size_signs_are_told_apart_by_their_pictogram(library, seed: int) -> None:
     s = DetectionSettings()
-    templates = make_templates(library, 0.005)
-    ortho, area = make_wall(seed=seed, holes=0)
     rng = np.random.default_rng(seed)
     places = {"extinguisher_sign": (80.0 + rng.uniform(-0.5, 0.5), 120.0), "call_point_sign": (200.0, 330.0)}
     turns = {"extinguisher_sign": 0, "call_point_sign": int(rng.choice([0, 90]))}
-    for cid, c in places.items():
-        paste(ortho, area, templates[cid], c, turns[cid], seed=seed)
-    protos = learn_prototypes(templates, s.colour)
-    d = match_depth(ortho, area, depth_rois(ortho, area, s.depth, templates), templates, s.depth)
-    img = colour_image(ortho, area, s.colour)
-    c = match_colour(ortho, area, colour_rois(ortho, area, s.colour, img), protos, s.colour, img)
+    w = _recognized(library, places, s, seed=seed, turns=turns)
     # the paper's recognizers alone cannot tell: depth gives both classes at both places
-    assert {x.class_id for x in d} >= set(places)
-    d2, c2 = resolve_on_wall(d, c, img, protos, s.lookalikes)
-    hits = consensus_all(d2, c2, None, s.consensus, sorted(templates))
+    assert {x.class_id for x in w.depth} >= set(places)
+    d2, c2 = resolve_on_wall(w.depth, w.colour, w.image, w.protos, s.lookalikes)
+    hits = consensus_all(d2, c2, None, s.consensus, sorted(w.templates))
     found = {h.class_id: h.centre for v in hits.values() for h in v}
     assert set(found) == set(places)
     for cid, (r, col) in places.items():
@@ -108,28 +147,18 @@ def test_rendered_lookalike_signs_are_not_swapped(rendered_signs, seed: int) -> 
     swap of issue 13); after the look-alike step each place has its own class."""
     _, library = rendered_signs
     s = DetectionSettings()
-    templates = make_templates(library, 0.005)
-    ortho, area = make_wall(seed=seed, holes=0, w_px=420)
     rng = np.random.default_rng(seed)
     places = {"extinguisher_sign": (110.0 + rng.uniform(-0.5, 0.5), 90.0 + rng.uniform(-0.5, 0.5)),
               "fire_alarm_switch_sign": (150.0, 300.0 + rng.uniform(-0.5, 0.5))}
-    for cid, c in places.items():
-        paste(ortho, area, templates[cid], c, 0, seed=seed)
     gain = np.array([1.12, 1.0, 0.86]) * rng.uniform(0.85, 1.1)  # exposure and white balance of the station
-    ortho.colour[:] = np.clip(ortho.colour * gain, 0, 255).astype(np.uint8)
-    area.wall_colour = np.median(ortho.colour[area.visible], axis=0).astype(float)
-    protos = learn_prototypes(templates, s.colour)
-    d = match_depth(ortho, area, depth_rois(ortho, area, s.depth, templates), templates, s.depth)
-    img = colour_image(ortho, area, s.colour)
-    c = match_colour(ortho, area, colour_rois(ortho, area, s.colour, img), protos, s.colour, img)
-    near = lambda cands, p: {x.class_id for x in cands if np.hypot(x.centre[0] - p[0], x.centre[1] - p[1]) < 3}  # noqa: E731
+    w = _recognized(library, places, s, seed=seed, gain=gain, w_px=420)
     for p in places.values():
-        assert near(d, p) == set(places)  # depth alone cannot tell
-    d2, c2 = resolve_on_wall(d, c, img, protos, s.lookalikes)
+        assert _near(w.depth, p) == set(places)  # depth alone cannot tell
+    d2, c2 = resolve_on_wall(w.depth, w.colour, w.image, w.protos, s.lookalikes)
     for cid, p in places.items():
-        assert near(d2, p) == {cid}
-        assert near(c2, p) <= {cid}
-    hits = consensus_all(d2, c2, None, s.consensus, sorted(templates))
+        assert _near(d2, p) == {cid}
+        assert _near(c2, p) <= {cid}
+    hits = consensus_all(d2, c2, None, s.consensus, sorted(w.templates))
     found = {h.class_id: h.centre for v in hits.values() for h in v}
     for cid, (r, col) in places.items():
         assert np.hypot(found[cid][0] - r, found[cid][1] - col) < 2.0, cid
@@ -178,23 +207,15 @@ def test_white_plates_are_told_apart_by_their_fine_relief(white_plates, seed: in
     from sbsc_core.depth_recognition import depth_images
 
     s = DetectionSettings()
-    templates = make_templates(white_plates, 0.005)
-    ortho, area = make_wall(seed=seed, holes=0, colour=WALL)
     rng = np.random.default_rng(seed)
     places = {"socket": (100.0 + rng.uniform(-0.5, 0.5), 120.0), "switch": (180.0, 330.0 + rng.uniform(-0.5, 0.5))}
-    for cid, c in places.items():
-        paste(ortho, area, templates[cid], c, 0, seed=seed)
-    protos = learn_prototypes(templates, s.colour)
-    d = match_depth(ortho, area, depth_rois(ortho, area, s.depth, templates), templates, s.depth)
-    img = colour_image(ortho, area, s.colour)
-    c = match_colour(ortho, area, colour_rois(ortho, area, s.colour, img), protos, s.colour, img)
-    relief = depth_images(ortho, area, s.depth).levelled
-    d2, c2 = resolve_on_wall(d, c, img, protos, s.lookalikes, relief=relief)
-    near = lambda cands, p: {x.class_id for x in cands if np.hypot(x.centre[0] - p[0], x.centre[1] - p[1]) < 3}  # noqa: E731
+    w = _recognized(white_plates, places, s, seed=seed, colour=WALL)
+    relief = depth_images(w.ortho, w.area, s.depth).levelled
+    d2, c2 = resolve_on_wall(w.depth, w.colour, w.image, w.protos, s.lookalikes, relief=relief)
     for cid, p in places.items():
-        assert near(d2, p) <= {cid}, (cid, near(d, p), near(d2, p))
-        assert near(c2, p) <= {cid}, (cid, near(c, p), near(c2, p))
-    hits = consensus_all(d2, c2, None, s.consensus, sorted(templates))
+        assert _near(d2, p) <= {cid}, (cid, _near(w.depth, p), _near(d2, p))
+        assert _near(c2, p) <= {cid}, (cid, _near(w.colour, p), _near(c2, p))
+    hits = consensus_all(d2, c2, None, s.consensus, sorted(w.templates))
     found = {h.class_id for v in hits.values() for h in v}
     assert found == set(places)
 
@@ -261,18 +282,11 @@ def test_a_box_found_in_depth_only_takes_the_class_its_colour_shows(depth_alikes
     look-alike step each box has the class of its colours, also where colour recognition found
     nothing (the depth candidates alone are resolved)."""
     s = DetectionSettings()
-    templates = make_templates(depth_alikes, 0.005)
-    ortho, area = make_wall(seed=seed, holes=0, w_px=420)
     rng = np.random.default_rng(seed)
     places = {"call_point": (120.0 + rng.uniform(-0.5, 0.5), 100.0), "detector": (140.0, 300.0 + rng.uniform(-0.5, 0.5))}
-    for cid, c in places.items():
-        paste(ortho, area, templates[cid], c, 0, seed=seed)
-    protos = learn_prototypes(templates, s.colour)
-    d = match_depth(ortho, area, depth_rois(ortho, area, s.depth, templates), templates, s.depth)
-    img = colour_image(ortho, area, s.colour)
-    near = lambda cands, p: {x.class_id for x in cands if np.hypot(x.centre[0] - p[0], x.centre[1] - p[1]) < 3}  # noqa: E731
+    w = _recognized(depth_alikes, places, s, seed=seed, w_px=420)
     for p in places.values():
-        assert near(d, p) == set(places)  # depth alone cannot tell
-    d2, _ = resolve_on_wall(d, [], img, protos, s.lookalikes)
+        assert _near(w.depth, p) == set(places)  # depth alone cannot tell
+    d2, _ = resolve_on_wall(w.depth, [], w.image, w.protos, s.lookalikes)
     for cid, p in places.items():
-        assert near(d2, p) == {cid}
+        assert _near(d2, p) == {cid}
