@@ -714,32 +714,36 @@ def _big_enough(g: _Segment, floor: float, height: float, s: SegmentationSetting
     return len(layers) * s.fit_cell_m >= s.min_wall_height_fraction * height
 
 
+def _within_run(g: _Segment, h: _Segment, s: SegmentationSettings) -> bool:
+    """Whether all of ``g`` lies within ``h``'s length (its run along ``h.t``, one voxel slack)."""
+    ug = g.cells[:, :2] @ h.t
+    return bool(ug.min() >= h.u0 - s.fit_cell_m and ug.max() <= h.u1 + s.fit_cell_m)
+
+
+def _drop_hidden_by(segs: list[_Segment], hides: Callable[[_Segment, _Segment, bool], bool],
+                    s: SegmentationSettings) -> list[_Segment]:
+    """The planes ``g`` for which no other plane ``h`` ``hides(g, h, higher)``; ``higher``: ``h``
+    reaches higher than ``g`` by more than two voxels (a wall going on above a door or a cabinet)."""
+    tops = [float(g.cells[:, 2].max()) for g in segs]
+    return [g for g, top_g in zip(segs, tops, strict=True)
+            if not any(hides(g, h, top_h > top_g + 2 * s.fit_cell_m)
+                       for h, top_h in zip(segs, tops, strict=True) if h is not g)]
+
+
 def _drop_recessed(segs: list[_Segment], s: SegmentationSettings) -> list[_Segment]:
     """Drop planes set back in an opening of a wall: a door leaf a few cm behind the wall face.
 
     A plane is such a recess when another plane of the same facing stands in front of it by
     at most ``recess_max_m``, spans its whole length, and reaches higher than it by more
-    than a voxel (the wall goes on above the door; the leaf stops at the door head).
+    than two voxels (the wall goes on above the door; the leaf stops at the door head).
     """
-    out = []
-    for g in segs:
-        top_g = float(g.cells[:, 2].max())
-        recessed = False
-        for h in segs:
-            if h is g or float(g.n @ h.n) < math.cos(math.radians(s.angle_tolerance_deg)):
-                continue
-            ahead = h.s - float(g.cells[:, :2].mean(axis=0) @ h.n)  # how far h's face is in front of g
-            if not 0.5 * s.wall_plane_tolerance_m < ahead <= s.recess_max_m:
-                continue
-            ug = g.cells[:, :2] @ h.t
-            if ug.min() < h.u0 - s.fit_cell_m or ug.max() > h.u1 + s.fit_cell_m:
-                continue
-            if float(h.cells[:, 2].max()) > top_g + 2 * s.fit_cell_m:
-                recessed = True
-                break
-        if not recessed:
-            out.append(g)
-    return out
+    def recessed_behind(g: _Segment, h: _Segment, higher: bool) -> bool:
+        if float(g.n @ h.n) < math.cos(math.radians(s.angle_tolerance_deg)):
+            return False
+        ahead = h.s - float(g.cells[:, :2].mean(axis=0) @ h.n)  # how far h's face is in front of g
+        return 0.5 * s.wall_plane_tolerance_m < ahead <= s.recess_max_m and _within_run(g, h, s) and higher
+
+    return _drop_hidden_by(segs, recessed_behind, s)
 
 
 def _drop_standing_in_front(segs: list[_Segment], s: SegmentationSettings) -> list[_Segment]:
@@ -758,23 +762,14 @@ def _drop_standing_in_front(segs: list[_Segment], s: SegmentationSettings) -> li
     go to that wall (the casing, and the objects on the wall around it, are the wall's); the
     rest belong to no wall.
     """
-    tops = [float(g.cells[:, 2].max()) for g in segs]
-    out = []
-    for g, top_g in zip(segs, tops, strict=True):
-        in_front = False
-        for h, top_h in zip(segs, tops, strict=True):
-            if h is g or top_h <= top_g + 2 * s.fit_cell_m:
-                continue
-            ahead = np.percentile(g.cells[:, :2] @ h.n - h.s, (2, 98))  # how far g stands in front of h's face
-            if ahead[0] <= -0.5 * s.wall_plane_tolerance_m or ahead[1] > s.furniture_depth_m:
-                continue
-            ug = g.cells[:, :2] @ h.t
-            if ug.min() >= h.u0 - s.fit_cell_m and ug.max() <= h.u1 + s.fit_cell_m:
-                in_front = True
-                break
-        if not in_front:
-            out.append(g)
-    return out
+    def standing_in_front(g: _Segment, h: _Segment, higher: bool) -> bool:
+        if not higher:
+            return False
+        ahead = np.percentile(g.cells[:, :2] @ h.n - h.s, (2, 98))  # how far g stands in front of h's face
+        return bool(ahead[0] > -0.5 * s.wall_plane_tolerance_m and ahead[1] <= s.furniture_depth_m) \
+            and _within_run(g, h, s)
+
+    return _drop_hidden_by(segs, standing_in_front, s)
 
 
 # --------------------------------------------------------------------------- room side
