@@ -53,6 +53,14 @@ Additions to the paper, each a named setting:
   NCC, plausibility checks on the rest). A match must then be seen over its footprint (not
   behind the object) and, as that side's isolation is unverified, correlate at least
   ``foreground_mu_d``.
+* In the shadow of furniture the wall is seen sparsely, through gaps, and the mixed pixels
+  of the furniture's edges scatter relief blobs over it; the sampling gaps and holes are
+  filled, so such a patch looks known. A match whose window (its footprint with the side
+  strips) is seen on less than ``min_seen_share`` of the wall's own share of seen pixels
+  (:func:`seen_share`: pixels with points or inside an object's own solid occlusion
+  shadow; openings and unseen wall reaching the border are not seen) stands on
+  interpolated data and unverified surroundings: like a match beside an object in front,
+  it must correlate at least ``foreground_mu_d``.
 * A kept match's position (``Candidate.position``, used for placement) is read from its
   relief's sharp edges (:mod:`~sbsc_core.edge_position`, ``sharp_edge_position``): seen
   obliquely, one side of an object trails into its occlusion shadow (mixed pixels) and the
@@ -600,6 +608,47 @@ def model_view(jm: np.ndarray, known: np.ndarray, regions: ForegroundRegions | N
     return ModelView(np.where(deep, np.float32(0.0), jm), known & ~deep, deep)
 
 
+@dataclass
+class SeenShare:
+    """Where one wall's orthoimage is seen (:func:`seen_share`), to measure windows."""
+
+    table: np.ndarray  # (H + 1, W + 1) integral image of the seen pixels
+    wall_share: float  # the share of the visible wall's pixels that are seen
+
+    def of(self, box: Box) -> float:
+        """The share of ``box``'s pixels inside the image that are seen, relative to the
+        wall's own share (1: seen as densely as the wall; 1 for a box outside the image)."""
+        h, w = self.table.shape[0] - 1, self.table.shape[1] - 1
+        r0, r1, c0, c1 = max(box.r0, 0), min(box.r1, h), max(box.c0, 0), min(box.c1, w)
+        if r1 <= r0 or c1 <= c0 or self.wall_share <= 0:
+            return 1.0
+        n = (r1 - r0) * (c1 - c0)
+        t = self.table
+        seen = float(t[r1, c1] - t[r0, c1] - t[r1, c0] + t[r0, c0])
+        return seen / n / self.wall_share
+
+
+def seen_share(ortho: Orthoimage, area: WallArea) -> SeenShare:
+    """Where ``ortho`` is seen (:class:`SeenShare`) and the share of it on the visible wall.
+
+    A pixel is seen when it holds scan points (before any gap is filled), or when it lies
+    inside a solid hole enclosed by data (all of its 3 x 3 neighbours empty too): an object's
+    own occlusion shadow or an unseen recess, which the data around explains. The lattice of
+    sampling gaps of a patch seen only through gaps (furniture's shadow), unseen wall reaching
+    the image's border and openings (no wall there to verify) are not seen.
+    """
+    opening = area.opening_mask if area.opening_mask is not None and area.opening_mask.shape == ortho.depth.shape \
+        else np.zeros(ortho.depth.shape, bool)
+    points = np.isfinite(np.asarray(ortho.depth))
+    holes = ~points & ~opening
+    solid = cv2.erode(holes.astype(np.uint8), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT,
+                      borderValue=0) > 0
+    seen = (points & ~opening) | (solid & _enclosed(holes))
+    on = area.visible if area.visible.shape == seen.shape and area.visible.any() else np.ones_like(seen)
+    table = cv2.integral(seen.astype(np.uint8), sdepth=cv2.CV_32S)
+    return SeenShare(table, float(np.count_nonzero(seen & on)) / max(1, int(np.count_nonzero(on))))
+
+
 def match_depth(
     ortho: Orthoimage,
     area: WallArea,
@@ -616,7 +665,8 @@ def match_depth(
     relief is turned (:func:`roi_turns`) is also searched with the model turned by that
     angle plus multiples of 90 degrees, then refined by ``turn_refine_deg`` around the
     best of those (coarse to fine). ``images`` (of this wall, as given to
-    :func:`depth_rois`) saves computing them again.
+    :func:`depth_rois`) saves computing them again. A match in a sparsely seen window
+    (``min_seen_share``, :class:`SeenShare`) must correlate at least ``foreground_mu_d``.
     """
     if not rois:
         return []
@@ -633,6 +683,7 @@ def match_depth(
     source = foreground_source(jml, settings.min_relief_m, settings.foreground_edge_px,
                                settings.foreground_factor * min(peaks)) \
         if settings.foreground_factor > 0 and peaks else None
+    seen = seen_share(ortho, area) if settings.min_seen_share > 0 else None
     regions: dict[float, ForegroundRegions | None] = {}  # by limit (mm): models of one depth share them
     views: dict[tuple[float, bytes], ModelView] = {}  # by limit and the regions kept: a model's turns share one
 
@@ -677,10 +728,13 @@ def match_depth(
                               min_energy=min_energy, accept=plausible, known=v.known,
                               min_known=settings.min_known_share, full_known=settings.full_known_share,
                               masked_pre=settings.masked_pre_threshold)
+        reach = settings.template_pad_px + settings.isolation_gap_px + settings.isolation_width_px
         if v.front is not None:  # beside an object in front, the isolation is unverified on that side
-            reach = settings.template_pad_px + settings.isolation_gap_px + settings.isolation_width_px
             peaks = [m for m in peaks if m.score >= settings.foreground_mu_d
                      or v.front_share(box_at((m.row, m.col), h + 2 * reach, w + 2 * reach)) == 0.0]
+        if seen is not None:  # in a shadow: relief and isolation read on interpolated data
+            peaks = [m for m in peaks if m.score >= settings.foreground_mu_d
+                     or seen.of(box_at((m.row, m.col), h + 2 * reach, w + 2 * reach)) >= settings.min_seen_share]
         found = [Candidate(cid, ortho.wall_id, "depth", box_at((m.row, m.col), h, w), (m.row, m.col), m.score,
                            m.roi, deg, gain=m.gain, relief_iou=overlap(m.row, m.col, m.gain)) for m in peaks]
         matched_model.update((id(c), rot) for c in found)

@@ -182,6 +182,9 @@ class DepthRecognitionSettings:
     foreground_edge_px: int = 8  # ... with its edge (falling by min_relief_m per pixel) up to this wide
     foreground_mu_d: float = 0.9  # a match whose window or side strips reach such an object must correlate this
     # (that side's isolation is unverified); its footprint must be seen (full_known_share), not behind it
+    min_seen_share: float = 0.8  # a match whose window (with its side strips) is seen on less than this x the
+    # wall's share (seen_share: points or an object's own shadow) lies in furniture's shadow: must correlate
+    # foreground_mu_d (0: off)
     nms_overlap: float = 0.3  # same-class matches overlapping more than this are one match
     refit_plane: bool = True  # remove a residual plane fitted to the visible wall
     gap_fill_sigma_px: float = 1.0  # sampling gaps are filled by a normalised Gaussian of this size
