@@ -98,6 +98,7 @@ from .types import Box, Candidate, Orthoimage, WallArea
 
 _DEPTH_UNIT_M = 1e-5  # int16 gradient unit for cv2.Canny(dx, dy, ...)
 _LEVEL_EDGE_PX = 2  # wall level: pixels this close to relief (an object's sloped edge) are no plain wall
+_GAP_PX = 2  # seen share: the visible wall's own sampling gaps reach this far from its pixels with data
 
 
 # --------------------------------------------------------------------------- J_D
@@ -635,7 +636,9 @@ def seen_share(ortho: Orthoimage, area: WallArea) -> SeenShare:
     inside a solid hole enclosed by data (all of its 3 x 3 neighbours empty too): an object's
     own occlusion shadow or an unseen recess, which the data around explains. The lattice of
     sampling gaps of a patch seen only through gaps (furniture's shadow), unseen wall reaching
-    the image's border and openings (no wall there to verify) are not seen.
+    the image's border and openings (no wall there to verify) are not seen. The wall's share
+    is taken over its visible area with the sampling gaps in it (``_GAP_PX``), so a scan
+    sampled sparsely everywhere is no shadow.
     """
     opening = area.opening_mask if area.opening_mask is not None and area.opening_mask.shape == ortho.depth.shape \
         else np.zeros(ortho.depth.shape, bool)
@@ -644,7 +647,9 @@ def seen_share(ortho: Orthoimage, area: WallArea) -> SeenShare:
     solid = cv2.erode(holes.astype(np.uint8), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT,
                       borderValue=0) > 0
     seen = (points & ~opening) | (solid & _enclosed(holes))
-    on = area.visible if area.visible.shape == seen.shape and area.visible.any() else np.ones_like(seen)
+    on = np.ones_like(seen)
+    if area.visible.shape == seen.shape and area.visible.any():  # with its sampling gaps (visible wall has data)
+        on = cv2.dilate(area.visible.astype(np.uint8), np.ones((2 * _GAP_PX + 1,) * 2, np.uint8)) > 0
     table = cv2.integral(seen.astype(np.uint8), sdepth=cv2.CV_32S)
     return SeenShare(table, float(np.count_nonzero(seen & on)) / max(1, int(np.count_nonzero(on))))
 

@@ -68,13 +68,13 @@ def test_no_match_in_a_furniture_shadow(templates, name) -> None:
     assert seen.of(window) < s.min_seen_share
 
 
-def _wall(seen: np.ndarray, opening: np.ndarray | None = None):
+def _wall(seen: np.ndarray, opening: np.ndarray | None = None, visible: np.ndarray | None = None):
     h, w = seen.shape
     depth = np.where(seen, 0.0, np.nan).astype(np.float32)
     frame = WallFrame(origin=np.zeros(3), axis_u=np.array([1.0, 0.0, 0.0]), axis_v=np.array([0.0, 0.0, 1.0]),
                       normal=np.array([0.0, -1.0, 0.0]), width_m=w * PIXEL_M, height_m=h * PIXEL_M)
     ortho = Orthoimage("W01", frame, PIXEL_M, np.zeros((h, w, 3), np.uint8), depth, seen)
-    area = WallArea(visible=np.ones((h, w), bool), openings=[],
+    area = WallArea(visible=np.ones((h, w), bool) if visible is None else visible, openings=[],
                     opening_mask=np.zeros((h, w), bool) if opening is None else opening,
                     wall_colour=np.array([200.0, 200.0, 200.0]))
     return ortho, area
@@ -101,5 +101,6 @@ def test_an_objects_own_shadow_is_seen_a_lattice_of_gaps_is_not() -> None:
 def test_seen_share_is_relative_to_the_wall() -> None:
     seen = np.ones((40, 40), bool)
     seen[:, ::2] = False  # a wall sampled on every other column everywhere: half its pixels hold points
-    s = seen_share(*_wall(seen))
-    assert s.of(Box(10, 10, 30, 30)) == pytest.approx(1.0, abs=0.1)
+    s = seen_share(*_wall(seen, visible=seen.copy()))  # the visible wall is where it has data
+    assert s.wall_share == pytest.approx(0.5, abs=0.05)
+    assert s.of(Box(10, 10, 30, 30)) == pytest.approx(1.0, abs=0.1)  # no shadow: as dense as its wall
