@@ -87,13 +87,15 @@ class Registration:
     groups: list[list[int]]  # connected groups of stations (by overlap)
 
     def records(self, names: Sequence[str]) -> list[dict]:
-        """Per station: its name (``file``), how far its points were moved (translation at the origin,
-        metres) and turned (degrees); for the detections document and the log."""
+        """Per station: its name (``file``), how far its points were moved (translation at the
+        scan's recentring ``origin``, metres) and turned (degrees), and the whole ``pose`` (4x4
+        rows, applied to points relative to that origin); for the detections document."""
         out = []
         for name, pose in zip(names, self.poses, strict=True):
             angle = math.degrees(math.acos(max(-1.0, min(1.0, (float(np.trace(pose[:3, :3])) - 1) / 2))))
             out.append({"file": name, "translation_m": [round(float(x), 5) for x in pose[:3, 3]],
-                        "rotation_deg": round(angle, 5)})
+                        "rotation_deg": round(angle, 5),
+                        "pose": [[round(float(x), 9) for x in row] for row in pose]})
         return out
 
 
