@@ -33,7 +33,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -49,10 +49,11 @@ from .orthoimage import (
     rasterize_median,
     wall_coordinates,
 )
+from .registration import apply_pose
 from .settings import DetectionSettings, OrthoimageSettings, SegmentationSettings
 from .types import Orthoimage, PointCloud, Wall, WallFrame
 
-__all__ = ["ScanPart", "WallIndex", "plan_parts", "sample_part", "partition_part", "assign_chunk",
+__all__ = ["ScanPart", "WallIndex", "plan_parts", "station_names", "sample_part", "partition_part", "assign_chunk",
            "band_rows", "wall_records", "wall_orthoimage", "drop_wall_partition", "scratch_dir", "worker_ready",
            "RECORD", "SampleBuffer"]
 
@@ -71,6 +72,15 @@ class ScanPart:
     stop: int | None
     first: int  # index over all files of the part's first point (for the regular sample)
     key: str  # unique name of the part (scratch file names)
+    station: int = 0  # the station it belongs to: its file, or its scan in a file of several (E57)
+    scan: int | None = None  # in a file of several scans, that scan (the whole part)
+    pose: tuple[tuple[float, ...], ...] | None = None  # 4x4 rows: the file's refined registration (None: as given)
+
+    def posed(self, pose: np.ndarray | None) -> ScanPart:
+        """This part with its file's refined registration (:mod:`sbsc_core.registration`)."""
+        if pose is None or np.allclose(pose, np.eye(4), rtol=0, atol=1e-12):
+            return replace(self, pose=None)
+        return replace(self, pose=tuple(tuple(float(x) for x in row) for row in np.asarray(pose)))
 
 
 @dataclass
@@ -112,7 +122,7 @@ def plan_parts(paths: Sequence[Path | str], part_points: int | None = None) -> t
     """
     part_points = part_points or PART_POINTS
     parts: list[ScanPart] = []
-    first = 0
+    first = station = 0
     for k, p in enumerate(paths):
         src = open_scan(p)
         path = str(Path(p).resolve())
@@ -120,11 +130,31 @@ def plan_parts(paths: Sequence[Path | str], part_points: int | None = None) -> t
         if src.seekable and src.count is not None and n > part_points:
             pieces = math.ceil(n / part_points)
             cuts = [n * j // pieces for j in range(pieces + 1)]
-            parts += [ScanPart(path, cuts[j], cuts[j + 1], first + cuts[j], f"f{k}-{j}") for j in range(pieces)]
+            parts += [ScanPart(path, cuts[j], cuts[j + 1], first + cuts[j], f"f{k}-{j}", station)
+                      for j in range(pieces)]
+        elif len(src.scans) > 1:  # one part per scan (station) of the file
+            at = first
+            for j, m in enumerate(src.scans):
+                if m:
+                    parts.append(ScanPart(path, 0, None, at, f"f{k}-s{j}", station, j))
+                    station += 1
+                at += m
+            first += n
+            continue
         else:
-            parts.append(ScanPart(path, 0, None, first, f"f{k}"))
+            parts.append(ScanPart(path, 0, None, first, f"f{k}", station))
+        station += 1
         first += n
     return parts, first
+
+
+def station_names(parts: Sequence[ScanPart]) -> list[str]:
+    """A name per station of :func:`plan_parts`' parts: its file's name, with ``#k`` for
+    scan ``k`` of a file of several."""
+    names: dict[int, str] = {}
+    for p in parts:
+        names.setdefault(p.station, Path(p.path).name + ("" if p.scan is None else f"#{p.scan}"))
+    return [names[k] for k in range(len(names))]
 
 
 def scan_origin(path: Path | str) -> np.ndarray:
@@ -133,10 +163,27 @@ def scan_origin(path: Path | str) -> np.ndarray:
 
 
 def part_chunks(part: ScanPart, origin: np.ndarray) -> Iterator[ScanChunk]:
-    """The chunks of one scan part, streamed from its file (its point range, or the whole file)."""
+    """The chunks of one scan part, streamed from its file (its point range, or the whole
+    file), moved by the part's refined registration when it has one."""
+    return _posed(part, _file_chunks(part, origin))
+
+
+def _file_chunks(part: ScanPart, origin: np.ndarray) -> Iterator[ScanChunk]:
+    """The chunks of one scan part as the file holds them."""
+    if part.scan is not None:
+        return iter_scan(part.path, origin, scan=part.scan)
     if part.stop is None:
         return iter_scan(part.path, origin)
     return iter_scan(part.path, origin, start=part.start, stop=part.stop)
+
+
+def _posed(part: ScanPart, chunks: Iterator[ScanChunk]) -> Iterator[ScanChunk]:
+    if part.pose is None:
+        yield from chunks
+        return
+    pose = np.asarray(part.pose)
+    for chunk in chunks:
+        yield ScanChunk(apply_pose(chunk.xyz, pose), chunk.rgb, chunk.origin, chunk.start)
 
 
 def _spill_paths(scratch: Path, part: ScanPart) -> tuple[Path, Path]:
@@ -147,9 +194,10 @@ def sample_part(part: ScanPart, origin: np.ndarray, step: int, scratch: str | No
     """Stream one part: its regular sample (every ``step``-th point over all files), and
     a spill of its points into ``scratch`` unless the file is seekable (binary PLY / PCD)."""
     src = open_scan(part.path)
+    pose = None if part.pose is None else np.asarray(part.pose)
     if src.seekable:  # fixed-size records: only the sampled points are converted
         xyz, rgb, n = sample_scan(src, origin, step, part.first, part.start, part.stop)
-        return PartSample(xyz, rgb, n, False)
+        return PartSample(apply_pose(xyz, pose), rgb, n, False)
     spill = scratch is not None
     xs, cs = [], []
     n = 0
@@ -158,10 +206,10 @@ def sample_part(part: ScanPart, origin: np.ndarray, step: int, scratch: str | No
         paths = _spill_paths(Path(scratch), part)
         files = (open(paths[0], "wb"), open(paths[1], "wb"))
     try:
-        for chunk in part_chunks(part, origin):
+        for chunk in _file_chunks(part, origin):  # the spill keeps the file's points (moved when read back)
             g0 = part.first + (chunk.start - part.start)  # global index of the chunk's first point
             i0 = (-g0) % step
-            xs.append(chunk.xyz[i0::step].copy())
+            xs.append(apply_pose(chunk.xyz[i0::step].copy(), pose))
             cs.append(chunk.rgb[i0::step].copy())
             n += len(chunk)
             if files is not None:
@@ -177,7 +225,12 @@ def sample_part(part: ScanPart, origin: np.ndarray, step: int, scratch: str | No
 
 
 def spilled_chunks(scratch: Path, part: ScanPart, origin: np.ndarray, points: int) -> Iterator[ScanChunk]:
-    """The chunks of a part whose ``points`` points were spilled to ``scratch`` while sampling."""
+    """The chunks of a part whose ``points`` points were spilled to ``scratch`` while sampling
+    (moved by the part's refined registration when it has one)."""
+    return _posed(part, _spilled(scratch, part, origin, points))
+
+
+def _spilled(scratch: Path, part: ScanPart, origin: np.ndarray, points: int) -> Iterator[ScanChunk]:
     pxyz, prgb = _spill_paths(scratch, part)
     for a in range(0, points, CHUNK_POINTS):
         m = min(CHUNK_POINTS, points - a)
@@ -527,6 +580,17 @@ class SampleBuffer:
         self.rgb[a:b] = smp.rgb
         self.copied.add(k)
         return PartSample(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8), smp.points, smp.spilled)
+
+    def move(self, k: int, samples: list[PartSample], pose: np.ndarray | None) -> None:
+        """Move part ``k``'s sample by its file's refined registration (before :meth:`cloud`)."""
+        if pose is None:
+            return
+        if k in self.copied:
+            a, b = self.at[k], self.at[k + 1]
+            self.xyz[a:b] = apply_pose(self.xyz[a:b], pose)
+        else:
+            smp = samples[k]
+            samples[k] = PartSample(apply_pose(smp.xyz, pose), smp.rgb, smp.points, smp.spilled)
 
     def cloud(self, samples: Sequence[PartSample], origin: np.ndarray, sources: Sequence[str], limit: int
               ) -> PointCloud:

@@ -75,10 +75,12 @@ from .partition import (
     sample_step,
     scan_origin,
     scratch_folder,
+    station_names,
     wall_orthoimage,
     worker_ready,
 )
 from .placement import place_hits
+from .registration import StationSamples, refine_registration
 from .segmentation import (
     StoreyPoints,
     find_scan_storeys,
@@ -127,6 +129,7 @@ class DetectionResult:
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
     classes: list[str] = field(default_factory=list)
     surfaces: list[dict] = field(default_factory=list)  # contract-4 surfaces beyond walls (ceiling tiles)
+    registration: list[dict] = field(default_factory=list)  # per scan file: how its registration was refined
 
     @property
     def openings(self):
@@ -718,11 +721,32 @@ def detect_scans(
     if workers > 1:  # this process waits while the workers read: it imports what segmentation needs meanwhile
         threading.Thread(target=importlib.import_module, args=("scipy.signal",), daemon=True).start()
     gathered = SampleBuffer(parts, step)  # each sample copied into the cloud while the others are read
+    names = station_names(parts)
+    refine = len(names) > 1 and s.registration.enabled
+    stations = StationSamples(len(names), 4 * s.registration.max_points,
+                              [sum(p.station == k for p in parts) for k in range(len(names))]) if refine else None
     for i, (k, smp) in enumerate(_as_done(executor, sample_jobs, sample_part, 2 * workers)):
+        if stations is not None:
+            stations.add(parts[k].station, smp.xyz)
         samples[k] = gathered.add(k, smp)
         progress("reading", (i + 1) / len(parts))
     points = sum(smp.points for smp in samples)
     sources = [str(p) for p in scans]
+    registration = None
+    if stations is not None:  # one file per station: their disagreement is removed first
+        t = time.perf_counter()
+        registration = refine_registration([stations.station(k) for k in range(len(names))],
+                                           settings=s.registration, log=log)
+        del stations
+        parts = [p.posed(registration.poses[p.station]) for p in parts]
+        for k, p in enumerate(parts):
+            gathered.move(k, samples, None if p.pose is None else np.asarray(p.pose))
+        timings["registration"] = time.perf_counter() - t
+        moved = [r for r in registration.records(names) if r["rotation_deg"] > 0 or any(r["translation_m"])]
+        log(f"registration refined in {timings['registration']:.1f} s: {len(registration.edges)} overlapping pairs "
+            f"of {len(names)} stations in {len(registration.groups)} group(s); "
+            + (f"largest move {max(np.linalg.norm(r['translation_m']) for r in moved) * 1000:.1f} mm"
+               if moved else "nothing moved"))
     cloud = gathered.cloud(samples, origin, sources, 2 * s.segmentation.fit_max_points)
     sample_meta = [(smp.points, smp.spilled) for smp in samples]
     samples.clear()
@@ -812,6 +836,8 @@ def detect_scans(
         templates, classes = {**beyond.templates, **templates}, sorted(set(classes) | set(beyond.classes))
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings, log)
     beyond.place(result)
+    if registration is not None:
+        result.registration = registration.records(names)
     timings["total"] = time.perf_counter() - t0
     return result, points
 
@@ -993,6 +1019,8 @@ def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dic
         fields["storeys"] = [st.to_dict() for st in seg.storeys]
     if result.surfaces:
         fields["surfaces"] = result.surfaces
+    if result.registration:  # several scan files: each one's refined registration
+        fields["registration"] = result.registration
     from .io.documents import detections_document
 
     doc = detections_document([(wall.id, wall.frame) for wall in seg.walls], result.openings,

@@ -319,7 +319,22 @@ class ColumnSettings:
 
 
 @dataclass
+class RegistrationSettings:
+    """Fine registration of the stations when they come as several files (:mod:`sbsc_core.registration`)."""
+
+    enabled: bool = True  # several scan files: refine how they fit together before anything is measured
+    voxel_m: float = 0.03  # each file's sample is thinned to one point per voxel of this size ...
+    max_points: int = 20_000  # ... and to at most this many points (more change nothing measurable)
+    max_distance_m: float = 0.10  # partners are searched this far (a few thinned points per 10 cm) ...
+    plane_tolerance_m: float = 0.015  # ... and count when this close to each other's plane (the errors are mm)
+    min_overlap: float = 0.05  # two files are paired when this share of the smaller one's points have a partner (a door
+    # between two rooms is enough: the pairs are weighed by their information, so few points count little)
+    max_shift_m: float = 0.05  # a refined pose that moves a file's points more than this is refused
+
+
+@dataclass
 class DetectionSettings:
+    registration: RegistrationSettings = field(default_factory=RegistrationSettings)
     segmentation: SegmentationSettings = field(default_factory=SegmentationSettings)
     orthoimage: OrthoimageSettings = field(default_factory=OrthoimageSettings)
     colour_prep: ColourPrepSettings = field(default_factory=ColourPrepSettings)

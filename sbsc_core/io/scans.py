@@ -59,6 +59,8 @@ class ScanSource:
     blocks: Callable[..., Iterator[RawBlock]]
     rgb_wide: bool = False
     seekable: bool = False
+    scans: tuple[int, ...] = ()  # a file of several scans (E57): each one's point count ...
+    scan_blocks: Callable[[int], Iterator[RawBlock]] | None = None  # ... and the raw blocks of scan k alone
 
 
 @dataclass
@@ -132,10 +134,12 @@ def scan_point_count(path: Path | str) -> int | None:
 
 
 def iter_scan(path: Path | str | ScanSource, origin: np.ndarray | None = None,
-              chunk_points: int = CHUNK_POINTS, start: int = 0, stop: int | None = None) -> Iterator[ScanChunk]:
+              chunk_points: int = CHUNK_POINTS, start: int = 0, stop: int | None = None,
+              scan: int | None = None) -> Iterator[ScanChunk]:
     """The points of one scan file as chunks of at most ``chunk_points`` points.
 
-    ``start`` / ``stop`` select a range of points of a ``seekable`` source (see :class:`ScanSource`).
+    ``start`` / ``stop`` select a range of points of a ``seekable`` source (see :class:`ScanSource`);
+    ``scan`` the points of one scan of a file of several (E57; ``start`` then counts from the scan's first point).
 
     ``origin`` fixes the recentring origin (several files sharing one); without it the
     origin is the rounded median of the first points of the file (a few stray points do not
@@ -148,12 +152,15 @@ def iter_scan(path: Path | str | ScanSource, origin: np.ndarray | None = None,
     ranged = start != 0 or stop is not None
     if ranged and not src.seekable:
         raise ValueError(f"{path}: a range of points can only be read from a format of fixed-size records")
+    if scan is not None and (src.scan_blocks is None or not 0 <= scan < len(src.scans)):
+        raise ValueError(f"{path}: has no scan {scan}")
+    blocks = src.scan_blocks(scan) if scan is not None else src.blocks(start, stop) if ranged else src.blocks()
     done = start
     with _guard(path):
         xyz = rgb = None
         fill = 0
         wide: bool | None = None
-        for x, y, z, colours in (src.blocks(start, stop) if ranged else src.blocks()):
+        for x, y, z, colours in blocks:
             n = len(x)
             if n == 0:
                 continue
@@ -182,7 +189,7 @@ def iter_scan(path: Path | str | ScanSource, origin: np.ndarray | None = None,
         if fill:
             yield ScanChunk(xyz[:fill], rgb[:fill], origin, done)
             done += fill
-    if done == start and not ranged:
+    if done == start and not ranged and scan is None:
         raise InputError(path, "no points")
 
 
@@ -714,9 +721,10 @@ def _read_e57(path: Path) -> ScanSource:
         n_scans = e57.scan_count
         if n_scans == 0:
             raise InputError(path, "no points (no scans in the file)")
-        total = sum(int(e57.get_header(i).point_count) for i in range(n_scans))
+        counts = tuple(int(e57.get_header(i).point_count) for i in range(n_scans))
     finally:
         e57.close()
+    total = sum(counts)
     if total == 0:
         raise InputError(path, "no points")
 
@@ -732,7 +740,18 @@ def _read_e57(path: Path) -> ScanSource:
         finally:
             e57.close()
 
-    return ScanSource(path, total, blocks, False)
+    def scan_blocks(i: int) -> Iterator[RawBlock]:
+        from pye57 import libe57
+
+        e57 = pye57.E57(str(path))
+        try:
+            h = e57.get_header(i)
+            if h.point_count:
+                yield from _e57_scan_blocks(path, e57, i, h, libe57)
+        finally:
+            e57.close()
+
+    return ScanSource(path, total, blocks, False, scans=counts, scan_blocks=scan_blocks)
 
 
 def _e57_scan_blocks(path: Path, e57, index: int, h, libe57) -> Iterator[RawBlock]:
