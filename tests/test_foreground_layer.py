@@ -7,6 +7,7 @@ socket; their relief filled the socket's correlation window and its isolation st
 """
 
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -19,37 +20,16 @@ from sbsc_core.depth_recognition import (
     match_depth,
     model_view,
 )
-from sbsc_core.io.models import load_model_library
 from sbsc_core.settings import DepthRecognitionSettings
-from sbsc_core.templates import make_templates
-from sbsc_core.types import Orthoimage, WallArea, WallFrame
+from tests.depth_crops import bundled_templates, depth_crop
 
 DATA = Path(__file__).parent / "data" / "furniture_sockets.npz"
-PIXEL_M = 0.005
+_crop = partial(depth_crop, DATA, at_key="socket")  # (orthoimage, wall area, pixel of the object)
 CROPS = {"desk_panel": "socket_x2", "desk_legs": "socket_x1", "bin": "socket_x1"}
 SOCKETS = ("socket_x1", "socket_x2", "socket_x4", "switch", "builtin_socket")
 
 
-@pytest.fixture(scope="module")
-def templates():
-    lib = load_model_library(Path(__file__).parents[1] / "sbsc_core" / "data" / "models")
-    return make_templates(lib, PIXEL_M)
-
-
-def _crop(name: str) -> tuple[Orthoimage, WallArea, tuple[float, float]]:
-    z = np.load(DATA)
-    q = z[f"{name}_depth_01mm"]
-    depth = np.where(q == -32768, np.nan, q * 1e-4).astype(np.float32)
-    h, w = depth.shape
-    mask = np.isfinite(depth)
-    frame = WallFrame(origin=np.zeros(3), axis_u=np.array([1.0, 0.0, 0.0]), axis_v=np.array([0.0, 0.0, 1.0]),
-                      normal=np.array([0.0, -1.0, 0.0]), width_m=w * PIXEL_M, height_m=h * PIXEL_M)
-    colour = np.where(mask[..., None], 200, 0).astype(np.uint8) * np.ones((1, 1, 3), np.uint8)
-    ortho = Orthoimage("W01", frame, PIXEL_M, colour, depth, mask)
-    area = WallArea(visible=z[f"{name}_visible"], openings=[], opening_mask=np.zeros((h, w), bool),
-                    wall_colour=np.array([200.0, 200.0, 200.0]))
-    r, c = z[f"{name}_socket"]
-    return ortho, area, (float(r), float(c))
+templates = pytest.fixture(scope="module")(bundled_templates)
 
 
 def _found(ortho, area, templates, s, cid, at, within_px: float = 3.0) -> list:

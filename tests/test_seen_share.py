@@ -9,42 +9,23 @@ least 0.84 and lies in a window seen at least 0.85 as densely as its wall.
 """
 
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from sbsc_core.depth_recognition import SeenShare, depth_rois, match_depth, seen_share
-from sbsc_core.io.models import load_model_library
 from sbsc_core.settings import DepthRecognitionSettings
-from sbsc_core.templates import make_templates
 from sbsc_core.types import Box, Orthoimage, WallArea, WallFrame
+from tests.depth_crops import PIXEL_M, bundled_templates, depth_crop
 
 DATA = Path(__file__).parent / "data" / "furniture_shadows.npz"
-PIXEL_M = 0.005
+_crop = partial(depth_crop, DATA, at_key="at")  # (orthoimage, wall area, pixel of the object)
 CROPS = {"shelf_switch": "switch", "bin_switch": "switch", "shelf_extinguisher": "fire_extinguisher"}
 
 
-@pytest.fixture(scope="module")
-def templates():
-    lib = load_model_library(Path(__file__).parents[1] / "sbsc_core" / "data" / "models")
-    return make_templates(lib, PIXEL_M)
-
-
-def _crop(name: str) -> tuple[Orthoimage, WallArea, tuple[float, float]]:
-    z = np.load(DATA)
-    q = z[f"{name}_depth_01mm"]
-    depth = np.where(q == -32768, np.nan, q * 1e-4).astype(np.float32)
-    h, w = depth.shape
-    mask = np.isfinite(depth)
-    frame = WallFrame(origin=np.zeros(3), axis_u=np.array([1.0, 0.0, 0.0]), axis_v=np.array([0.0, 0.0, 1.0]),
-                      normal=np.array([0.0, -1.0, 0.0]), width_m=w * PIXEL_M, height_m=h * PIXEL_M)
-    colour = np.where(mask[..., None], 200, 0).astype(np.uint8) * np.ones((1, 1, 3), np.uint8)
-    ortho = Orthoimage("W01", frame, PIXEL_M, colour, depth, mask)
-    area = WallArea(visible=z[f"{name}_visible"], openings=[], opening_mask=z[f"{name}_opening"],
-                    wall_colour=np.array([200.0, 200.0, 200.0]))
-    r, c = z[f"{name}_at"]
-    return ortho, area, (float(r), float(c))
+templates = pytest.fixture(scope="module")(bundled_templates)
 
 
 def _found(ortho, area, templates, s, cid, at, within_px: float = 6.0) -> list:
