@@ -37,7 +37,7 @@ from scipy.spatial import cKDTree
 
 from .settings import RegistrationSettings
 
-__all__ = ["StationSamples", "StationEdge", "Registration", "station_cloud", "pair_edges", "station_poses",
+__all__ = ["StationSamples", "station_points", "StationEdge", "Registration", "station_cloud", "pair_edges", "station_poses",
            "least_change", "plane_information", "refine_registration", "apply_pose"]
 
 
@@ -97,6 +97,12 @@ class Registration:
                         "rotation_deg": round(angle, 5),
                         "pose": [[round(float(x), 9) for x in row] for row in pose]})
         return out
+
+
+def station_points(n_stations: int, settings: RegistrationSettings) -> int:
+    """Points kept of each of ``n_stations`` stations: ``max_points``, fewer when there are so
+    many stations that all together would pass ``max_total_points`` (never under 2,000)."""
+    return max(2_000, min(settings.max_points, settings.max_total_points // max(1, n_stations)))
 
 
 def station_cloud(xyz: np.ndarray, *, voxel_m: float, max_points: int):
@@ -296,8 +302,8 @@ def refine_registration(samples: Sequence[np.ndarray], *, settings: Registration
         the connected groups.
     """
     say = log or (lambda msg: None)
-    clouds = [station_cloud(x, voxel_m=settings.voxel_m, max_points=settings.max_points) if len(x) else None
-              for x in samples]
+    each = station_points(len(samples), settings)
+    clouds = [station_cloud(x, voxel_m=settings.voxel_m, max_points=each) if len(x) else None for x in samples]
     usable = [k for k, c in enumerate(clouds) if c is not None]
     if len(usable) < 2:
         return Registration([np.eye(4) for _ in samples], [], [], [[k] for k in range(len(samples))])

@@ -324,7 +324,8 @@ class RegistrationSettings:
 
     enabled: bool = True  # several scan files: refine how they fit together before anything is measured
     voxel_m: float = 0.03  # each file's sample is thinned to one point per voxel of this size ...
-    max_points: int = 20_000  # ... and to at most this many points (more change nothing measurable)
+    max_points: int = 20_000  # ... and to at most this many points (more change nothing measurable) ...
+    max_total_points: int = 4_000_000  # ... and all stations together to this many (bounded memory)
     max_distance_m: float = 0.10  # partners are searched this far (a few thinned points per 10 cm) ...
     plane_tolerance_m: float = 0.015  # ... and count when this close to each other's plane (the errors are mm)
     min_overlap: float = 0.05  # two files are paired when this share of the smaller one's points have a partner (a door

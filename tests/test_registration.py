@@ -132,6 +132,15 @@ def test_a_posed_part_is_moved_wherever_it_is_read(tmp_path):
     assert isinstance(moved, ScanPart) and moved.station == 0 and moved.scan is None
 
 
+def test_many_stations_keep_fewer_points_each():
+    from sbsc_core.registration import station_points
+
+    s = RegistrationSettings()
+    assert station_points(29, s) == s.max_points
+    assert station_points(1000, s) == s.max_total_points // 1000
+    assert station_points(10**6, s) == 2_000
+
+
 @pytest.mark.parametrize("enabled", [True, False])
 def test_settings_file_turns_registration_off(enabled):
     from sbsc_core.settings import DetectionSettings
