@@ -80,7 +80,7 @@ from .partition import (
     worker_ready,
 )
 from .placement import place_hits
-from .registration import StationSamples, refine_registration, station_points
+from .registration import StationSamples, refine_registration, station_sample_points
 from .segmentation import (
     StoreyPoints,
     find_scan_storeys,
@@ -723,7 +723,7 @@ def detect_scans(
     gathered = SampleBuffer(parts, step)  # each sample copied into the cloud while the others are read
     names = station_names(parts)
     refine = len(names) > 1 and s.registration.enabled
-    stations = StationSamples(len(names), 4 * station_points(len(names), s.registration),
+    stations = StationSamples(len(names), station_sample_points(len(names), s.registration),
                               [sum(p.station == k for p in parts) for k in range(len(names))]) if refine else None
     for i, (k, smp) in enumerate(_as_done(executor, sample_jobs, sample_part, 2 * workers)):
         if stations is not None:

@@ -37,7 +37,7 @@ from scipy.spatial import cKDTree
 
 from .settings import RegistrationSettings
 
-__all__ = ["StationSamples", "station_points", "StationEdge", "Registration", "station_cloud", "pair_edges", "station_poses",
+__all__ = ["StationSamples", "station_points", "station_sample_points", "StationEdge", "Registration", "station_cloud", "pair_edges", "station_poses",
            "least_change", "plane_information", "refine_registration", "apply_pose"]
 
 
@@ -103,6 +103,12 @@ def station_points(n_stations: int, settings: RegistrationSettings) -> int:
     """Points kept of each of ``n_stations`` stations: ``max_points``, fewer when there are so
     many stations that all together would pass ``max_total_points`` (never under 2,000)."""
     return max(2_000, min(settings.max_points, settings.max_total_points // max(1, n_stations)))
+
+
+def station_sample_points(n_stations: int, settings: RegistrationSettings) -> int:
+    """Points of each station's share of the sample kept while it is read: ``sample_points``,
+    fewer when all together would pass four times ``max_total_points`` (bounded memory)."""
+    return max(4 * 2_000, min(settings.sample_points, 4 * settings.max_total_points // max(1, n_stations)))
 
 
 def station_cloud(xyz: np.ndarray, *, voxel_m: float, max_points: int):

@@ -133,12 +133,14 @@ def test_a_posed_part_is_moved_wherever_it_is_read(tmp_path):
 
 
 def test_many_stations_keep_fewer_points_each():
-    from sbsc_core.registration import station_points
+    from sbsc_core.registration import station_points, station_sample_points
 
     s = RegistrationSettings()
     assert station_points(29, s) == s.max_points
     assert station_points(1000, s) == s.max_total_points // 1000
     assert station_points(10**6, s) == 2_000
+    assert station_sample_points(29, s) == s.sample_points
+    assert station_sample_points(1000, s) == 4 * s.max_total_points // 1000
 
 
 @pytest.mark.parametrize("enabled", [True, False])
