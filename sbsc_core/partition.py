@@ -194,7 +194,7 @@ def sample_part(part: ScanPart, origin: np.ndarray, step: int, scratch: str | No
     """Stream one part: its regular sample (every ``step``-th point over all files), and
     a spill of its points into ``scratch`` unless the file is seekable (binary PLY / PCD)."""
     src = open_scan(part.path)
-    pose = None if part.pose is None else np.asarray(part.pose)
+    pose = part.pose
     if src.seekable:  # fixed-size records: only the sampled points are converted
         xyz, rgb, n = sample_scan(src, origin, step, part.first, part.start, part.stop)
         return PartSample(apply_pose(xyz, pose), rgb, n, False)
@@ -581,8 +581,9 @@ class SampleBuffer:
         self.copied.add(k)
         return PartSample(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8), smp.points, smp.spilled)
 
-    def move(self, k: int, samples: list[PartSample], pose: np.ndarray | None) -> None:
-        """Move part ``k``'s sample by its file's refined registration (before :meth:`cloud`)."""
+    def move(self, k: int, samples: list[PartSample], pose) -> None:
+        """Move part ``k``'s sample by its file's refined registration (a 4x4 array or
+        :attr:`ScanPart.pose`'s rows; None: as is), before :meth:`cloud`."""
         if pose is None:
             return
         if k in self.copied:

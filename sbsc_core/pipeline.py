@@ -732,7 +732,7 @@ def detect_scans(
         progress("reading", (i + 1) / len(parts))
     points = sum(smp.points for smp in samples)
     sources = [str(p) for p in scans]
-    registration = None
+    records: list[dict] = []
     if stations is not None:  # one file per station: their disagreement is removed first
         t = time.perf_counter()
         registration = refine_registration([stations.station(k) for k in range(len(names))],
@@ -740,9 +740,10 @@ def detect_scans(
         del stations
         parts = [p.posed(registration.poses[p.station]) for p in parts]
         for k, p in enumerate(parts):
-            gathered.move(k, samples, None if p.pose is None else np.asarray(p.pose))
+            gathered.move(k, samples, p.pose)
         timings["registration"] = time.perf_counter() - t
-        moved = [r for r in registration.records(names) if r["rotation_deg"] > 0 or any(r["translation_m"])]
+        records = registration.records(names)
+        moved = [r for r in records if r["rotation_deg"] > 0 or any(r["translation_m"])]
         log(f"registration refined in {timings['registration']:.1f} s: {len(registration.edges)} overlapping pairs "
             f"of {len(names)} stations in {len(registration.groups)} group(s); "
             + (f"largest move {max(np.linalg.norm(r['translation_m']) for r in moved) * 1000:.1f} mm"
@@ -836,8 +837,7 @@ def detect_scans(
         templates, classes = {**beyond.templates, **templates}, sorted(set(classes) | set(beyond.classes))
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings, log)
     beyond.place(result)
-    if registration is not None:
-        result.registration = registration.records(names)
+    result.registration = records
     timings["total"] = time.perf_counter() - t0
     return result, points
 

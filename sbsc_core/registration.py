@@ -37,8 +37,9 @@ from scipy.spatial import cKDTree
 
 from .settings import RegistrationSettings
 
-__all__ = ["StationSamples", "station_points", "station_sample_points", "StationEdge", "Registration", "station_cloud", "pair_edges", "station_poses",
-           "least_change", "plane_information", "refine_registration", "apply_pose"]
+__all__ = ["StationSamples", "station_points", "station_sample_points", "StationEdge", "Registration",
+           "station_cloud", "pair_edges", "station_poses", "least_change", "plane_information",
+           "refine_registration", "apply_pose"]
 
 
 class StationSamples:
@@ -331,8 +332,8 @@ def refine_registration(samples: Sequence[np.ndarray], *, settings: Registration
                         + [[k] for k in range(len(samples)) if clouds[k] is None])
 
 
-def apply_pose(xyz: np.ndarray, pose: np.ndarray | None) -> np.ndarray:
-    """``xyz`` (recentred, float32) moved by a station's ``pose`` (None or identity: as is)."""
+def apply_pose(xyz: np.ndarray, pose: np.ndarray | Sequence[Sequence[float]] | None) -> np.ndarray:
+    """``xyz`` (recentred, float32) moved by a station's 4x4 ``pose`` (None: as is)."""
     if pose is None:
         return xyz
     P = np.asarray(pose, np.float64)

@@ -729,16 +729,8 @@ def _read_e57(path: Path) -> ScanSource:
         raise InputError(path, "no points")
 
     def blocks() -> Iterator[RawBlock]:
-        from pye57 import libe57
-
-        e57 = pye57.E57(str(path))
-        try:
-            for i in range(e57.scan_count):
-                h = e57.get_header(i)
-                if h.point_count:
-                    yield from _e57_scan_blocks(path, e57, i, h, libe57)
-        finally:
-            e57.close()
+        for i in range(len(counts)):
+            yield from scan_blocks(i)
 
     def scan_blocks(i: int) -> Iterator[RawBlock]:
         from pye57 import libe57
