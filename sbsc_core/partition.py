@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from .io.scans import BLOCK_POINTS, CHUNK_POINTS, ScanChunk, iter_scan, open_scan, sample_scan
+from .merged_stations import station_label, station_runs
 from .occlusion import FrontLayers, stack_front
 from .orthoimage import (
     front_images,
@@ -72,8 +73,9 @@ class ScanPart:
     stop: int | None
     first: int  # index over all files of the part's first point (for the regular sample)
     key: str  # unique name of the part (scratch file names)
-    station: int = 0  # the station it belongs to: its file, or its scan in a file of several (E57)
+    station: int = 0  # the station it belongs to: its file, or its scan in a file of several (E57) ...
     scan: int | None = None  # in a file of several scans, that scan (the whole part)
+    label: str | None = None  # ... or its value of a merged file's station property (io.scans.STATION_FIELDS)
     pose: tuple[tuple[float, ...], ...] | None = None  # 4x4 rows: the file's refined registration (None: as given)
 
     def posed(self, pose: np.ndarray | None) -> ScanPart:
@@ -119,6 +121,13 @@ def plan_parts(paths: Sequence[Path | str], part_points: int | None = None) -> t
     A seekable (binary PLY / PCD) file is cut into ranges of about ``part_points`` (default
     ``PART_POINTS``). Every header is read here, so a file that cannot be opened is refused
     before any work.
+
+    A station is a file, or a scan of a file of several (E57), or in a seekable file merged
+    from several stations that keeps each point's station (a property of
+    :data:`~sbsc_core.io.scans.STATION_FIELDS`), the points of one value of the property:
+    the property is read once here (:func:`~sbsc_core.merged_stations.station_runs`) and the
+    file is cut along its runs (and within a long run at ``part_points``), every run of one
+    value being the same station, named ``file#value`` (:func:`station_names`).
     """
     part_points = part_points or PART_POINTS
     parts: list[ScanPart] = []
@@ -127,6 +136,22 @@ def plan_parts(paths: Sequence[Path | str], part_points: int | None = None) -> t
         src = open_scan(p)
         path = str(Path(p).resolve())
         n = src.count if src.count is not None else max(1, src.path.stat().st_size // _TEXT_BYTES_PER_POINT)
+        runs = station_runs(src) if src.seekable else None
+        if runs is not None:  # a merged file of several stations
+            of_value: dict = {}
+            j = 0
+            for run in runs:
+                st = of_value.setdefault(run.value, station + len(of_value))
+                m = run.stop - run.start
+                pieces = math.ceil(m / part_points)
+                cuts = [run.start + m * i // pieces for i in range(pieces + 1)]
+                for i in range(pieces):
+                    parts.append(ScanPart(path, cuts[i], cuts[i + 1], first + cuts[i], f"f{k}-{j}", st,
+                                          label=station_label(run.value)))
+                    j += 1
+            station += len(of_value)
+            first += n
+            continue
         if src.seekable and src.count is not None and n > part_points:
             pieces = math.ceil(n / part_points)
             cuts = [n * j // pieces for j in range(pieces + 1)]
@@ -150,10 +175,11 @@ def plan_parts(paths: Sequence[Path | str], part_points: int | None = None) -> t
 
 def station_names(parts: Sequence[ScanPart]) -> list[str]:
     """A name per station of :func:`plan_parts`' parts: its file's name, with ``#k`` for
-    scan ``k`` of a file of several."""
+    scan ``k`` of a file of several, or for value ``k`` of a merged file's station property."""
     names: dict[int, str] = {}
     for p in parts:
-        names.setdefault(p.station, Path(p.path).name + ("" if p.scan is None else f"#{p.scan}"))
+        tag = p.label if p.scan is None else str(p.scan)
+        names.setdefault(p.station, Path(p.path).name + ("" if tag is None else f"#{tag}"))
     return [names[k] for k in range(len(names))]
 
 

@@ -40,6 +40,10 @@ ORIGIN_SAMPLE = 100_000  # points of the first block whose median sets the origi
 RawBlock = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 """x, y, z (world coordinates, any float type) and (n, 3) colours (uint8, or uint16 when wide)."""
 
+STATION_FIELDS: tuple[str, ...] = ("original_cloud_index", "scan_index", "scan_id", "point_source_id", "station")
+"""Per-point properties naming a merged file's station (CloudCompare's "Original cloud index", LAS's
+point_source_id, ...), in order of preference, as :func:`station_field` compares them."""
+
 
 @dataclass
 class ScanSource:
@@ -52,6 +56,11 @@ class ScanSource:
     only, so a file can be split between workers. ``rgb_wide`` says the colours are
     stored in more than 8 bits: they are 8-bit values in wider integers, or use the full
     16-bit range when the first block holds a value above 255 (decided once per file).
+
+    A merged file that keeps which station each point came from (a binary PLY property
+    named as in :data:`STATION_FIELDS`, see :func:`station_field`) gives the property's
+    name as ``station_field`` and ``station_blocks(start, stop)``: the property's values
+    (1-D, any numeric type) for the points ``start:stop``, block by block.
     """
 
     path: Path
@@ -61,6 +70,8 @@ class ScanSource:
     seekable: bool = False
     scans: tuple[int, ...] = ()  # a file of several scans (E57): each one's point count ...
     scan_blocks: Callable[[int], Iterator[RawBlock]] | None = None  # ... and the raw blocks of scan k alone
+    station_field: str | None = None  # a merged file's per-point station property (its name in the file) ...
+    station_blocks: Callable[..., Iterator[np.ndarray]] | None = None  # ... its values, blocks of points start:stop
 
 
 @dataclass
@@ -431,6 +442,23 @@ def _ply_rgb(path: Path, rgb: np.ndarray, kind: str) -> np.ndarray:
 
 
 
+def _field_key(name: str) -> str:
+    """A property name as :data:`STATION_FIELDS` holds it: lower case, spaces / hyphens as
+    underscores, without CloudCompare's ``scalar_`` prefix."""
+    key = re.sub(r"[\s\-]+", "_", name.strip().lower())
+    return key[len("scalar_"):] if key.startswith("scalar_") else key
+
+
+def station_field(names: Sequence[str]) -> str | None:
+    """The property among ``names`` that gives each point's station (see :data:`STATION_FIELDS`), or None.
+
+    Names are compared case-insensitively after dropping a ``scalar_`` prefix, spaces and
+    underscores alike (``scalar_Original_cloud_index``, ``Scan ID``, ``point_source_id``).
+    """
+    keys = {_field_key(n): n for n in reversed(list(names))}  # the first of equal keys wins
+    return next((keys[k] for k in STATION_FIELDS if k in keys), None)
+
+
 def _read_ply(path: Path) -> ScanSource:
     with open(path, "rb") as fh:
         fmt, elements, header_len = _parse_ply_header(path, fh)
@@ -449,13 +477,20 @@ def _read_ply(path: Path) -> ScanSource:
     wide = rgb_kind != "u1" and rgb_kind[0] != "f"
     if fmt == "ascii":
         blocks = _ply_ascii_blocks(path, elements, vi, header_len, xyz_names, rgb_names, rgb_kind)
-    else:
-        blocks = _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names, rgb_kind)
-    return ScanSource(path, vertex.count, blocks, wide, seekable=fmt != "ascii")
+        return ScanSource(path, vertex.count, blocks, wide)
+    blocks, records = _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names, rgb_kind)
+    field = station_field([n for n in dict(vertex.props) if n not in (*xyz_names, *rgb_names)])
+    column = None
+    if field is not None:
+        def column(start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
+            for rec in records(start, stop):
+                yield rec[field]
+
+    return ScanSource(path, vertex.count, blocks, wide, seekable=True, station_field=field, station_blocks=column)
 
 
 def _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names, rgb_kind
-                       ) -> Callable[[], Iterator[RawBlock]]:
+                       ) -> tuple[Callable[..., Iterator[RawBlock]], Callable[..., Iterator[np.ndarray]]]:
     endian = "<" if fmt == "binary_little_endian" else ">"
     offset = header_len
     for e in elements[:vi]:
@@ -469,12 +504,15 @@ def _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names
     if size < need:
         raise InputError(path, f"truncated: {vertex.count} vertices need {need} bytes, file has {size}")
 
+    def records(start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
+        return _records(path, dtype, offset, vertex.count, start, stop)
+
     def blocks(start: int = 0, stop: int | None = None) -> Iterator[RawBlock]:
-        for rec in _records(path, dtype, offset, vertex.count, start, stop):
+        for rec in records(start, stop):
             rgb = np.stack([rec[c] for c in rgb_names], axis=1)
             yield rec[xyz_names[0]], rec[xyz_names[1]], rec[xyz_names[2]], _ply_rgb(path, rgb, rgb_kind)
 
-    return blocks
+    return blocks, records
 
 
 def _ply_ascii_blocks(path, elements, vi, header_len, xyz_names, rgb_names, rgb_kind

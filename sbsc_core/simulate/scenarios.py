@@ -146,7 +146,7 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
 
     rc = MeshRaycaster(building.mesh, chunk=int(settings.chunk_rays))
     scan = scan_mesh(building.mesh, building.stations, settings, seed=seed, log=log, raycaster=rc,
-                     effects=scene.effects)
+                     effects=scene.effects, keep_station=True)
     say(f"{len(scan):,} points from {scan.rays:,} rays; writing {out}")
     truth = building.truth_document()
     if scene.realistic:
@@ -166,9 +166,9 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
         truth = frame.truth(truth)
     with atomic_output_dir(out) as tmp:
         if frame is None:
-            write_ply(tmp / "scan.ply", scan.xyz, scan.rgb)
+            write_ply(tmp / "scan.ply", scan.xyz, scan.rgb, station=scan.station)
         else:
-            write_ply(tmp / "scan.ply", frame.points(scan.xyz), scan.rgb, double=True)
+            write_ply(tmp / "scan.ply", frame.points(scan.xyz), scan.rgb, double=True, station=scan.station)
         n_points, n_rays = len(scan), scan.rays
         del scan
         if design:
