@@ -3,7 +3,8 @@
 No stage holds the whole cloud (paper, Figure 2, run on a building instead of a floor):
 
 1. :func:`plan_parts` cuts the scan files into parts (a seekable (binary PLY / PCD) file into ranges of
-   ``part_points``, any other file whole) that workers read side by side.
+   ``part_points``, and along its stations when it keeps each point's station; any other file
+   whole, or per scan of an E57) that workers read side by side.
 2. :func:`sample_part` streams one part (:func:`~sbsc_core.io.scans.iter_scan`) and keeps
    a regular sample - the points whose index over all files is a multiple of ``step`` -
    for segmentation. A part of a format that cannot be re-read cheaply (LAS/LAZ, E57,
