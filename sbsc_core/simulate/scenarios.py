@@ -96,10 +96,12 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
                    design: bool = True, library_builder: ObjectBuilder | None = None,
                    realistic: bool = False, clutter: bool = False, furniture: bool = False,
                    survey_frame: bool = False, ceiling_objects: bool = False,
-                   columns: bool = False) -> SimulationSummary:
+                   columns: bool = False, station_index: bool | None = None) -> SimulationSummary:
     """Build the described floor, scan it and write contracts 1, 2, 3 and 5 into ``out``.
 
-    ``out`` receives ``scan.ply`` (float32 xyz, uchar colour), ``ground_truth.json``,
+    ``out`` receives ``scan.ply`` (float32 xyz, uchar colour; with ``station_index`` a
+    ``scan_index`` ushort, each point's station, the stations one after the other, as a
+    merging tool keeps it), ``ground_truth.json``,
     ``expected.json``, ``models/`` and, with ``design``, ``as_designed.ifc``: the as-designed
     model with a few objects deliberately moved, removed or added, listed in the ground truth
     under ``design_differences`` (for measuring ``sbsc compare``). Everything is written into a temporary directory
@@ -121,6 +123,12 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
     smoke detectors and exit lights on the ceilings and free-standing columns with objects
     on their faces (:mod:`surfaces`); the truth then gives each object's ``surface`` and
     lists ``surfaces`` and ``columns``. Off, nothing changes.
+
+    ``station_index`` None writes the stations when the scanner has a registration error
+    (the realistic scanner): then ``sbsc detect`` refines the merged file's registration
+    (:mod:`sbsc_core.merged_stations`). A scan without registration error is written as
+    before, so its detection does not spend the refinement's time on a registration that
+    has nothing to refine.
     """
     t0 = time.perf_counter()
     say = log or (lambda msg: None)
@@ -145,8 +153,11 @@ def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_ste
     from .raycast import MeshRaycaster
 
     rc = MeshRaycaster(building.mesh, chunk=int(settings.chunk_rays))
+    if station_index is None:
+        e = scene.effects
+        station_index = e is not None and (e.registration_translation_m > 0 or e.registration_rotation_deg > 0)
     scan = scan_mesh(building.mesh, building.stations, settings, seed=seed, log=log, raycaster=rc,
-                     effects=scene.effects, keep_station=True)
+                     effects=scene.effects, keep_station=station_index)
     say(f"{len(scan):,} points from {scan.rays:,} rays; writing {out}")
     truth = building.truth_document()
     if scene.realistic:
