@@ -73,6 +73,21 @@ def test_refine_registration_removes_the_stations_disagreement():
     assert np.linalg.norm(common[:3, 3]) < mean_shift + 0.002
 
 
+def test_stations_that_already_agree_are_kept_as_registered():
+    """Stations 0.3 mm apart agree within the refinement's own precision: nothing moves (the
+    given registration is as good), while the same stations are moved with the gate off."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(11)
+    errors = [np.eye(4)] + [_motion(rng, 0.0003, 0.0005) for _ in range(2)]
+    clouds = _stations(12, 40_000, errors)
+    reg = refine_registration(clouds, settings=RegistrationSettings())
+    assert all(np.array_equal(P, np.eye(4)) for P in reg.poses)
+    assert reg.kept_as_given == [0, 1, 2] and len(reg.edges) == 3
+    free = refine_registration(clouds, settings=replace(RegistrationSettings(), min_shift_m=0.0))
+    assert not free.kept_as_given and any(not np.array_equal(P, np.eye(4)) for P in free.poses)
+
+
 def test_stations_that_do_not_overlap_stay_as_given():
     rng = np.random.default_rng(5)
     errors = [np.eye(4), _motion(rng, 0.003, 0.01)]
