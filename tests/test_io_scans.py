@@ -33,7 +33,7 @@ def _check(cloud, xyz: np.ndarray, rgb: np.ndarray, tol: float = 1e-5) -> None:
 def _write_ply_struct(path: Path, rec: np.ndarray, fmt: str, extra_elements: str = "",
                       tail: bytes = b"") -> None:
     """Write any structured array as the vertex element of a PLY (ascii or binary)."""
-    names = {"f4": "float", "f8": "double", "u1": "uchar", "u2": "ushort", "i4": "int"}
+    names = {"f4": "float", "f8": "double", "u1": "uchar", "u2": "ushort", "i2": "short", "i4": "int", "u4": "uint"}
     props = "".join(f"property {names[rec.dtype[n].str[1:]]} {n}\n" for n in rec.dtype.names)
     header = f"ply\nformat {fmt} 1.0\ncomment test\nelement vertex {len(rec)}\n{props}{extra_elements}end_header\n"
     with open(path, "wb") as fh:

@@ -15,6 +15,7 @@ from sbsc_core.partition import part_chunks, plan_parts, sample_part, station_na
 from sbsc_core.registration import refine_registration
 from sbsc_core.settings import RegistrationSettings
 
+from .test_io_scans import _write_ply_struct
 from .test_registration import _disagreement_mm, _motion, _stations
 
 
@@ -25,7 +26,6 @@ def _grey(n: int) -> np.ndarray:
 def _write_fields(path: Path, xyz: np.ndarray, fields: dict[str, np.ndarray], fmt: str = "binary_little_endian"
                   ) -> None:
     """A PLY of ``xyz``, grey colours and the given extra per-point properties (any numeric type)."""
-    names = {"f4": "float", "f8": "double", "u1": "uchar", "u2": "ushort", "i2": "short", "i4": "int", "u4": "uint"}
     dtype = [("x", "f4"), ("y", "f4"), ("z", "f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
     dtype += [(k, v.dtype.str[1:]) for k, v in fields.items()]
     rec = np.empty(len(xyz), dtype)
@@ -33,15 +33,7 @@ def _write_fields(path: Path, xyz: np.ndarray, fields: dict[str, np.ndarray], fm
     rec["red"] = rec["green"] = rec["blue"] = 170
     for k, v in fields.items():
         rec[k] = v
-    props = "".join(f"property {names[rec.dtype[n].str[1:]]} {n}\n" for n in rec.dtype.names)
-    header = f"ply\nformat {fmt} 1.0\nelement vertex {len(rec)}\n{props}end_header\n"
-    with open(path, "wb") as fh:
-        fh.write(header.encode())
-        if fmt == "ascii":
-            for r in rec:
-                fh.write((" ".join(str(v) for v in r) + "\n").encode())
-        else:
-            rec.astype(rec.dtype.newbyteorder("<" if fmt == "binary_little_endian" else ">")).tofile(fh)
+    _write_ply_struct(path, rec, fmt)
 
 
 def _station_points(parts, origin) -> list[np.ndarray]:

@@ -84,7 +84,7 @@ def test_stations_that_already_agree_are_kept_as_registered():
     reg = refine_registration(clouds, settings=RegistrationSettings())
     assert all(np.array_equal(P, np.eye(4)) for P in reg.poses)
     assert reg.kept_as_given == [0, 1, 2] and len(reg.edges) == 3
-    free = refine_registration(clouds, settings=replace(RegistrationSettings(), min_shift_m=0.0))
+    free = refine_registration(clouds, settings=replace(RegistrationSettings(), min_disagreement_m=0.0))
     assert not free.kept_as_given and any(not np.array_equal(P, np.eye(4)) for P in free.poses)
 
 
