@@ -335,21 +335,21 @@ def refine_registration(samples: Sequence[np.ndarray], *, settings: Registration
         return Registration([np.eye(4) for _ in samples], [], [], [[k] for k in range(len(samples))])
     sub = [clouds[k] for k in usable]
     edges = pair_edges(sub, settings=settings)
-    found, groups = station_poses(sub, edges, settings=settings)
     poses = [np.eye(4) for _ in samples]
-    refused = []
-    moves = [_largest_move(found[n], sub[n]) for n in range(len(usable))]
-    for n, k in enumerate(usable):
-        if moves[n] > settings.max_shift_m:
-            refused.append(k)
-            say(f"station {k + 1}: its refined pose moves it more than {settings.max_shift_m * 1000:.0f} mm; "
-                "kept as registered")
-            continue
-        poses[k] = found[n]
+    refused: list[int] = []
     if edges and _disagreement(edges, sub) <= settings.min_disagreement_m:
         say(f"the stations agree within {settings.min_disagreement_m * 1000:.1f} mm: kept as registered")
-        refused = sorted(set(refused) | set(usable))
-        poses = [np.eye(4) for _ in samples]
+        groups = _groups(len(sub), edges)
+        refused = list(usable)
+    else:
+        found, groups = station_poses(sub, edges, settings=settings)
+        for n, k in enumerate(usable):
+            if _largest_move(found[n], sub[n]) > settings.max_shift_m:
+                refused.append(k)
+                say(f"station {k + 1}: its refined pose moves it more than {settings.max_shift_m * 1000:.0f} mm; "
+                    "kept as registered")
+                continue
+            poses[k] = found[n]
     edges = [StationEdge(usable[e.source], usable[e.target], e.transformation, e.information, e.fitness, e.rmse_m)
              for e in edges]
     return Registration(poses, edges, refused, [[usable[n] for n in g] for g in groups]
