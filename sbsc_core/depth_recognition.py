@@ -734,12 +734,16 @@ def match_depth(
                               min_known=settings.min_known_share, full_known=settings.full_known_share,
                               masked_pre=settings.masked_pre_threshold)
         reach = settings.template_pad_px + settings.isolation_gap_px + settings.isolation_width_px
-        if v.front is not None:  # beside an object in front, the isolation is unverified on that side
-            peaks = [m for m in peaks if m.score >= settings.foreground_mu_d
-                     or v.front_share(box_at((m.row, m.col), h + 2 * reach, w + 2 * reach)) == 0.0]
-        if seen is not None:  # in a shadow: relief and isolation read on interpolated data
-            peaks = [m for m in peaks if m.score >= settings.foreground_mu_d
-                     or seen.of(box_at((m.row, m.col), h + 2 * reach, w + 2 * reach)) >= settings.min_seen_share]
+
+        def verified(m) -> bool:
+            """Whether a match's window (with its side strips) reaches no object in front (that
+            side's isolation is unverified) and is seen as densely as its wall (in a shadow,
+            relief and isolation are read on interpolated data)."""
+            window = box_at((m.row, m.col), h + 2 * reach, w + 2 * reach)
+            return ((v.front is None or v.front_share(window) == 0.0)
+                    and (seen is None or seen.of(window) >= settings.min_seen_share))
+
+        peaks = [m for m in peaks if m.score >= settings.foreground_mu_d or verified(m)]
         found = [Candidate(cid, ortho.wall_id, "depth", box_at((m.row, m.col), h, w), (m.row, m.col), m.score,
                            m.roi, deg, gain=m.gain, relief_iou=overlap(m.row, m.col, m.gain)) for m in peaks]
         matched_model.update((id(c), rot) for c in found)

@@ -143,21 +143,15 @@ def plan_parts(paths: Sequence[Path | str], part_points: int | None = None) -> t
             j = 0
             for run in runs:
                 st = of_value.setdefault(run.value, station + len(of_value))
-                m = run.stop - run.start
-                pieces = math.ceil(m / part_points)
-                cuts = [run.start + m * i // pieces for i in range(pieces + 1)]
-                for i in range(pieces):
-                    parts.append(ScanPart(path, cuts[i], cuts[i + 1], first + cuts[i], f"f{k}-{j}", st,
-                                          label=station_label(run.value)))
+                for a, b in _ranges(run.start, run.stop, part_points):
+                    parts.append(ScanPart(path, a, b, first + a, f"f{k}-{j}", st, label=station_label(run.value)))
                     j += 1
             station += len(of_value)
             first += n
             continue
         if src.seekable and src.count is not None and n > part_points:
-            pieces = math.ceil(n / part_points)
-            cuts = [n * j // pieces for j in range(pieces + 1)]
-            parts += [ScanPart(path, cuts[j], cuts[j + 1], first + cuts[j], f"f{k}-{j}", station)
-                      for j in range(pieces)]
+            parts += [ScanPart(path, a, b, first + a, f"f{k}-{j}", station)
+                      for j, (a, b) in enumerate(_ranges(0, n, part_points))]
         elif len(src.scans) > 1:  # one part per scan (station) of the file
             at = first
             for j, m in enumerate(src.scans):
@@ -172,6 +166,13 @@ def plan_parts(paths: Sequence[Path | str], part_points: int | None = None) -> t
         station += 1
         first += n
     return parts, first
+
+
+def _ranges(start: int, stop: int, part_points: int) -> list[tuple[int, int]]:
+    """Points ``start:stop`` cut into as few equal ranges as keep each within ``part_points``."""
+    pieces = max(1, math.ceil((stop - start) / part_points))
+    cuts = [start + (stop - start) * j // pieces for j in range(pieces + 1)]
+    return list(zip(cuts[:-1], cuts[1:], strict=True))
 
 
 def station_names(parts: Sequence[ScanPart]) -> list[str]:

@@ -30,7 +30,7 @@ import os
 import shutil
 import threading
 import time
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import (
     FIRST_COMPLETED,
@@ -723,8 +723,9 @@ def detect_scans(
     gathered = SampleBuffer(parts, step)  # each sample copied into the cloud while the others are read
     names = station_names(parts)
     refine = len(names) > 1 and s.registration.enabled
+    per_station = Counter(p.station for p in parts)
     stations = StationSamples(len(names), station_sample_points(len(names), s.registration),
-                              [sum(p.station == k for p in parts) for k in range(len(names))]) if refine else None
+                              [per_station[k] for k in range(len(names))]) if refine else None
     for i, (k, smp) in enumerate(_as_done(executor, sample_jobs, sample_part, 2 * workers)):
         if stations is not None:
             stations.add(parts[k].station, smp.xyz)
