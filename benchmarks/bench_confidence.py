@@ -8,8 +8,9 @@ Usage (heavy: run under the shared lock)::
 
 Scenes: ``one_room.yaml`` for every realism VARIANT (as in ``bench_realism.py``: ``baseline``,
 ``clutter``, ``realistic``, ``acceptance``, ...), every pairing of scene and library design
-sets (``standard/standard``, ``alt/alt`` and the crosses, which give real mistakes to learn
-from), upright and with a share of the rotatable objects turned, at several seeds. The FIT
+sets (``standard/standard``, ``alt/alt`` and, by default, the crosses ``standard/alt`` and
+``alt/standard``: objects whose design differs from their model, as every real building's
+do, which give real mistakes and right hits with a misfit to learn from), upright and with a share of the rotatable objects turned, at several seeds. The FIT
 seeds and the EVALUATION seeds are disjoint; ``--eval-pairs`` may name other design sets
 for the evaluation only (the third family is never fitted on). Each scene is detected once
 (its candidates are kept in ``--work``) and its candidates go through consensus both with
@@ -22,12 +23,13 @@ printed for the EVALUATION scenes. ``--write`` stores the fitted model as
 The shipped calibration adds Scenario I scenes with the realistic scanner and clutter, where
 long walls are seen from far and obliquely (flat signs lost in depth, mixed-pixel trails),
 which one room does not show. It was made so (each scene is detected once, its candidates
-kept in it as ``candidates.pkl``)::
+kept in it as ``candidates.pkl`` with the commit that made them; the calibration records
+those commits as ``candidates_code``: refit it when recognition changes what it measures)::
 
     sbsc simulate --scenario I --realistic --clutter --designs alt --seed 2204 --out S/alt2204
     (likewise standard 2205, standard 2207, alt 2208 to fit; alt 2201, standard 2202, alt 2206
     to evaluate)
-    python benchmarks/bench_confidence.py --variants acceptance clutter baseline \
+    python benchmarks/bench_confidence.py --variants acceptance clutter baseline --work W \
         --fit-scenes S/alt2204 S/std2205 S/std2207 S/alt2208 \
         --eval-scenes S/alt2201 S/std2202 S/alt2206 --write
 """
@@ -37,6 +39,7 @@ from __future__ import annotations
 import argparse
 import json
 import pickle
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -69,7 +72,7 @@ from sbsc_core.types import Orthoimage  # noqa: E402
 
 FIT_SEEDS = (11, 12, 13)
 EVAL_SEEDS = (21, 22)
-PAIRS = ("standard/standard", "alt/alt")
+PAIRS = ("standard/standard", "alt/alt", "standard/alt", "alt/standard")
 VARIANTS: dict[str, dict[str, bool]] = {
     "baseline": {},
     "clutter": {"clutter": True},
@@ -89,6 +92,18 @@ def scene_file(work: Path, turned: float, seed: int) -> Path:
     return path
 
 
+def code_version() -> str:
+    """The commit of this working tree (``+changes`` when sbsc_core differs from it), or ``unknown``."""
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                             check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "sbsc_core"], cwd=ROOT, capture_output=True,
+                               text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return rev + ("+changes" if dirty else "")
+
+
 def candidates_of(scan: Path, settings: DetectionSettings) -> dict:
     """Depth and colour candidates, classes and wall frames of a detected scene (cached in the scene)."""
     cache = scan / "candidates.pkl"
@@ -98,14 +113,19 @@ def candidates_of(scan: Path, settings: DetectionSettings) -> dict:
     data = {"depth": [c for w in res.walls.values() for c in w.depth_candidates],
             "colour": [c for w in res.walls.values() for c in w.colour_candidates],
             "classes": res.classes,
-            "frames": {k: (w.ortho.frame, w.ortho.pixel_m) for k, w in res.walls.items()}}
+            "frames": {k: (w.ortho.frame, w.ortho.pixel_m) for k, w in res.walls.items()},
+            "code": code_version()}
     cache.write_bytes(pickle.dumps(data))
     return data
 
 
-def rows_of(scan: Path, settings: DetectionSettings, radius: float) -> list[tuple[np.ndarray, int]]:
-    """(features, right) of every hit, with and without the expected counts."""
+def rows_of(scan: Path, settings: DetectionSettings, radius: float,
+            codes: set[str] | None = None) -> list[tuple[np.ndarray, int]]:
+    """(features, right) of every hit, with and without the expected counts; the commit that
+    made the scene's candidates is added to ``codes``."""
     data = candidates_of(scan, settings)
+    if codes is not None:
+        codes.add(data.get("code", "unknown"))
     truth = json.loads((scan / "ground_truth.json").read_text())["objects"]
     expected = json.loads((scan / "expected.json").read_text())["counts"]
     depth, colour = data["depth"], data["colour"]
@@ -165,6 +185,7 @@ def main() -> int:
     settings = DetectionSettings()
     settings.confidence.enabled = False
     data: dict[str, list[tuple[np.ndarray, int]]] = {"fit": [], "eval": []}
+    codes: set[str] = set()
     t0 = time.perf_counter()
     plan = (("fit", args.fit_seeds, args.pairs), ("eval", args.eval_seeds, args.eval_pairs or args.pairs))
     for part, seeds, pairs in plan:
@@ -179,14 +200,14 @@ def main() -> int:
                                            angular_step_deg=args.step, design=False,
                                            object_builder=design_builder(scene_d),
                                            library_builder=design_builder(lib_d), **VARIANTS[variant])
-                        rows = rows_of(scan, settings, args.radius)
+                        rows = rows_of(scan, settings, args.radius, codes)
                         data[part].extend(rows)
                         n_right = sum(r for _, r in rows)
                         print(f"{part:4s} {scan.name:44s} hits {len(rows):3d} right {n_right:3d} "
                               f"({time.perf_counter() - t0:.0f} s)", flush=True)
     for part, scans in (("fit", args.fit_scenes), ("eval", args.eval_scenes)):
         for scan in scans:
-            rows = rows_of(scan, settings, args.radius)
+            rows = rows_of(scan, settings, args.radius, codes)
             data[part].extend(rows)
             print(f"{part:4s} {str(scan):44s} hits {len(rows):3d} right {sum(r for _, r in rows):3d} "
                   f"({time.perf_counter() - t0:.0f} s)", flush=True)
@@ -200,6 +221,7 @@ def main() -> int:
     print(f"\nfitted on {len(yf)} hits ({int(yf.sum())} right) of seeds {args.fit_seeds} {args.pairs}; "
           f"evaluated on {len(ye)} hits ({int(ye.sum())} right) of seeds {args.eval_seeds} "
           f"{args.eval_pairs or args.pairs}; variants {args.variants}")
+    print(f"candidates made by {', '.join(sorted(codes))}")
     print("coefficients: " + ", ".join(f"{n} {c:+.3f}" for n, c in zip(FEATURES, cal.coef, strict=True))
           + f", intercept {cal.intercept:+.3f}")
     print("\nreliability on the evaluation scenes")
@@ -213,7 +235,8 @@ def main() -> int:
                     "eval_pairs": list(args.eval_pairs or args.pairs), "turned": list(args.turned),
                     "radius_m": args.radius,
                     "fit_scenes": [p.name for p in args.fit_scenes], "eval_scenes": [p.name for p in args.eval_scenes],
-                    "fit_hits": int(len(yf)), "eval_hits": int(len(ye)), "eval_ece": round(ece, 4)}
+                    "fit_hits": int(len(yf)), "eval_hits": int(len(ye)), "eval_ece": round(ece, 4),
+                    "candidates_code": sorted(codes)}
         for path in [CALIBRATION_PATH] * args.write + [args.out] * (args.out is not None):
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(json.dumps(cal.to_dict(), indent=1) + "\n", encoding="utf-8")

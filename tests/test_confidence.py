@@ -70,6 +70,27 @@ def test_shipped_calibration_orders_strong_above_weak_evidence() -> None:
     assert ps[0] > 0.9 and ps[0] > ps[1]
 
 
+def test_shipped_calibration_refuses_room_controllers_and_keeps_switches_of_another_design() -> None:
+    """Features measured on a third-family floor (never fitted on; seed 9911): room controllers
+    taken for a one-gang socket (no other class matched there, the print hardly says socket,
+    the relief is deeper and wider than the socket's) and true switches whose design differs
+    from their model (relief 1.3x the model's). The shipped calibration must refuse the first
+    and keep the second at the default ``min_confidence``."""
+    cal = load_calibration()
+    assert cal is not None
+    names = ("in_depth", "in_colour", "rho_depth", "colour_goodness", "alpha", "class_margin",
+             "lookalike_margin", "gain_misfit", "relief_misfit", "unmatched_relief", "relief_margin",
+             "colour_only_print")
+    assert FEATURES == names  # the vectors below follow this order
+    controllers = np.array([[1, 0, .95, 0, .5, .3, -.04, .39, .22, 0, .3, 0],
+                            [1, 1, .95, .92, 1, .3, .05, .37, .20, 0, .3, 0]])
+    switches = np.array([[1, 0, .95, 0, .5, .12, .24, .31, .09, 0, .21, 0],
+                         [1, 0, .95, 0, .5, .12, .30, .28, .08, 0, .23, 0]])
+    threshold = ConfidenceSettings().min_confidence
+    assert (cal.predict(controllers) < threshold).all()
+    assert (cal.predict(switches) > threshold).all()
+
+
 def test_weak_hits_are_dropped_or_reported_as_unknown(tmp_path) -> None:
     ortho, _ = make_wall()
     templates = make_templates(synthetic_library(), ortho.pixel_m)
