@@ -156,10 +156,16 @@ def _add_detect(cmds: Commands) -> None:
                    help="run the per-wall work on an existing Dask cluster (e.g. tcp://10.0.0.5:8786); its "
                         "workers must see the scans and the output's folder at the same paths; default: "
                         "a local process pool")
-    d.add_argument("--ceilings", action="store_true",
-                   help="recognize objects on the ceilings too (classes whose model.json mount has 'ceiling')")
-    d.add_argument("--columns", action="store_true",
-                   help="find free-standing columns and recognize objects on them (mount 'column')")
+    d.add_argument("--no-ceilings", dest="ceilings", action="store_false", default=None,
+                   help="do not search the ceilings (by default they are, when a class's model.json mount "
+                        "has 'ceiling' or no mount)")
+    d.add_argument("--no-columns", dest="columns", action="store_false", default=None,
+                   help="do not look for free-standing columns (by default they are searched, when a "
+                        "class's mount has 'column' or no mount)")
+    d.add_argument("--ceilings", dest="ceilings", action="store_true",
+                   help="search the ceilings even when a settings file turns them off (the default otherwise)")
+    d.add_argument("--columns", dest="columns", action="store_true",
+                   help="search the columns even when a settings file turns them off (the default otherwise)")
     json_option(d)
 
 
@@ -440,12 +446,14 @@ def _cmd_detect(args: argparse.Namespace) -> int:
     con = console()
     out = output_parent(args.out)
     settings = None
-    if args.ceilings or args.columns:
+    if args.ceilings is not None or args.columns is not None:  # the flags override the settings file
         from .settings import load_settings
 
         settings = load_settings(Path(args.settings) if args.settings else None)
-        settings.ceilings.enabled = settings.ceilings.enabled or args.ceilings
-        settings.columns.enabled = settings.columns.enabled or args.columns
+        if args.ceilings is not None:
+            settings.ceilings.enabled = args.ceilings
+        if args.columns is not None:
+            settings.columns.enabled = args.columns
     summary = detect_to_dir(
         [Path(s) for s in args.scans], Path(args.models),
         expected=Path(args.expected) if args.expected else None,

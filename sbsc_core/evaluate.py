@@ -120,8 +120,38 @@ class DistractorFigures:
         return _pct(self.furniture_with_fp, self.furniture)
 
 
+def distractor_box(d: dict) -> dict:
+    """A distractor as a box: ``centre``, ``axis_u``, ``axis_v``, ``normal`` and ``size_m``
+    (extents along them), ``kind`` and ``furniture``.
+
+    Contract 5 gives a distractor by its footprint (``position`` on the wall plane, ``normal``,
+    ``width_m``, ``height_m``, ``depth_m`` out from the wall, optionally ``offset_m`` between
+    the wall and its back, ``kind`` ``wall`` or ``furniture``); this project's simulator writes
+    the box itself. Either is read; a missing field is a one-line error naming it.
+    """
+    try:
+        if "centre" in d:
+            box = {k: d[k] for k in ("centre", "axis_u", "axis_v", "normal", "size_m")}
+        else:
+            n = np.asarray(d["normal"], float)
+            n = n / max(float(np.linalg.norm(n)), 1e-12)
+            up = np.array([0.0, 0.0, 1.0]) if abs(n[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+            au = np.cross(up, n)
+            au /= float(np.linalg.norm(au))
+            av = np.cross(n, au)
+            depth, offset = float(d.get("depth_m", 0.0)), float(d.get("offset_m", 0.0))
+            centre = np.asarray(d["position"], float) + n * (offset + depth / 2.0)
+            box = {"centre": centre.tolist(), "axis_u": au.tolist(), "axis_v": av.tolist(), "normal": n.tolist(),
+                   "size_m": [float(d["width_m"]), float(d["height_m"]), depth + offset]}
+    except KeyError as e:
+        raise ValueError(f"distractor {d.get('id', d.get('class', '?'))}: no {e.args[0]!r} field") from None
+    furniture = bool(d.get("furniture", d.get("kind") == "furniture"))
+    kind = d.get("kind") or ("furniture" if furniture else "wall")
+    return {**box, "kind": kind, "furniture": furniture}
+
+
 def on_distractor(position: np.ndarray, d: dict, margin_m: float = DISTRACTOR_MARGIN_M) -> bool:
-    """Whether a point lies in a distractor's box (truth ``centre``, axes, ``size_m``) grown by ``margin_m``."""
+    """Whether a point lies in a distractor's box (:func:`distractor_box`) grown by ``margin_m``."""
     rel = np.asarray(position, float) - np.asarray(d["centre"], float)
     axes = np.array([d["axis_u"], d["axis_v"], d["normal"]], float)
     return bool(np.all(np.abs(axes @ rel) <= np.asarray(d["size_m"], float) / 2 + margin_m))
@@ -129,6 +159,7 @@ def on_distractor(position: np.ndarray, d: dict, margin_m: float = DISTRACTOR_MA
 
 def distractor_figures(false_positives: list[dict], distractors: list[dict]) -> DistractorFigures:
     """Count the false positives (detections) that fall on the ground truth's distractors."""
+    distractors = [distractor_box(d) for d in distractors]
     hit = np.zeros(len(distractors), bool)
     on = 0
     by_kind: dict[str, int] = {}

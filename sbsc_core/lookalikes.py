@@ -47,6 +47,15 @@ with the relief in it, the better class is taken at a smaller margin and level
 Its margin is then taken over ``min_evidence_relief`` as well as over the other classes: a
 room controller that fits the switch a little better than the socket, and both badly, has
 a small or negative margin (the confidence reads it).
+
+Depth is metric, so a look-alike decision never contradicts the relief's amplitude
+(:func:`amplitude_compatible`): a class whose depth model stands out more or less than the
+scene does at the candidate, by more than the depth recognizer's own ``gain_range``, is not
+one of the classes the candidate may be, whatever its print says. Both figures come from
+the given library and scan (how far each class's model stands out; how far the scene does
+there), so a library of a design never seen is served as well as ours: an outside design's
+tilted rocker switch (8-16 mm) is no longer taken for its flush built-in socket (2.5 mm) or
+its call point (45 mm) because their prints correlated better on a low-contrast wall.
 """
 
 from __future__ import annotations
@@ -218,6 +227,46 @@ def relief_score(relief: np.ndarray, model: np.ndarray, centre: tuple[float, flo
 
 
 _FLAT_M = 0.05  # a depth model varying by less than this share of its height inside its content is flat
+_AMPLITUDE_Q = 90.0  # a relief's amplitude: this percentile of how far it stands out (robust to noise and spikes)
+
+
+def relief_amplitude(relief: np.ndarray) -> float | None:
+    """How far a relief (metres, a model's or the scene's in a footprint) stands out: the
+    :data:`_AMPLITUDE_Q` percentile of its absolute value over its known pixels (None when
+    fewer than half are known)."""
+    r = np.abs(np.asarray(relief, np.float64))
+    ok = np.isfinite(r)
+    if r.size == 0 or ok.sum() < 0.5 * r.size:
+        return None
+    return float(np.percentile(r[ok], _AMPLITUDE_Q))
+
+
+def amplitude_compatible(relief: np.ndarray, models: dict[str, np.ndarray],
+                         centres: dict[str, tuple[float, float]], rotation_deg: float,
+                         gain_range: tuple[float, float]) -> dict[str, bool]:
+    """For each class of ``models``, whether the scene's relief in its footprint (at
+    ``centres[c]``, turned by ``rotation_deg``) stands out as far as its depth model does,
+    within ``gain_range`` (the depth recognizer's accepted scene / model amplitude ratio).
+
+    Depth is metric: an object whose relief stands out 16 mm is not a 2.5 mm flush socket
+    nor a 45 mm call point, however alike their outlines and prints (the library says how
+    far each class stands out; the depth recognizer says how much a scan may differ). A
+    class whose amplitude cannot be measured here counts as compatible.
+    """
+    out = {}
+    turned = abs(((float(rotation_deg) + 45.0) % 180.0) - 45.0) > 45.0  # nearer a quarter turn than upright
+    for c, m in models.items():
+        own = relief_amplitude(m)
+        h, w = m.shape[:2]
+        if turned:
+            h, w = w, h
+        b = box_at(centres[c], h, w)
+        seen = relief_amplitude(crop_padded(relief, b.r0, b.r1, b.c0, b.c1))
+        if own is None or seen is None or own <= 0:
+            out[c] = True
+            continue
+        out[c] = gain_range[0] <= seen / own <= gain_range[1]
+    return out
 
 
 def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[str, np.ndarray],
@@ -249,7 +298,8 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
                        offsets: dict[str, tuple[float, float]] | None = None,
                        relief: np.ndarray | None = None,
                        models: dict[str, np.ndarray] | None = None,
-                       model_offsets: dict[str, tuple[float, float]] | None = None) -> list[Candidate]:
+                       model_offsets: dict[str, tuple[float, float]] | None = None,
+                       gain_range: tuple[float, float] | None = None) -> list[Candidate]:
     """Candidates with every look-alike class decided by its print (see the module).
 
     ``diff`` is the wall's Lab difference to the local wall colour (0 off the foreground);
@@ -261,6 +311,10 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
     where the classes show no print on this wall. Candidates of a class outside every group,
     or whose group has fewer than two classes compared here, are kept as they are. Relabelled candidates that then coincide with another of the same
     class and source are folded (:func:`~sbsc_core.matching.nms`).
+
+    With ``gain_range`` and ``relief``, a look-alike whose depth model stands out much more or
+    much less than the scene does at the candidate (:func:`amplitude_compatible`) is not one
+    of the classes it may be: the library's depth models and the scan decide that, not the print.
     """
     if not groups or not cands:
         return cands
@@ -273,6 +327,12 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
     for cand in cands:
         g = group_of.get(cand.class_id)
         seen = sorted(c for c in (g or ()) if c in views or (relief is not None and c in (models or {})))
+        if gain_range is not None and relief is not None and len(seen) > 1 and cand.class_id in seen:
+            mods = {c: (models or {})[c] for c in seen if c in (models or {})}
+            fits = amplitude_compatible(relief, mods, {c: _shifted(cand.centre, (model_offsets or {}).get(c),
+                                                                   cand.rotation_deg) for c in mods},
+                                        cand.rotation_deg, gain_range)
+            seen = [c for c in seen if c == cand.class_id or fits.get(c, True)]
         scores, both = (None, False) if g is None or len(seen) < 2 or cand.class_id not in seen else _evidence(
             cand, seen, diff, views, offsets or {}, relief, models or {}, model_offsets or {}, settings.search_px)
         if scores is None:
@@ -369,14 +429,16 @@ def colour_confusable(protos: dict, templates: dict[str, ModelTemplate], setting
 
 def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: ColourImage,
                     prototypes: ColourPrototypes, settings: LookalikeSettings, *,
-                    relief: np.ndarray | None = None) -> tuple[list[Candidate], list[Candidate]]:
+                    relief: np.ndarray | None = None,
+                    gain_range: tuple[float, float] | None = None) -> tuple[list[Candidate], list[Candidate]]:
     """:func:`resolve_lookalikes` for one wall's depth and colour candidates.
 
     The look-alike sets are found once per library (cached on ``prototypes``) and joined by
     the pairs the colour classifier cannot tell apart on this wall (:func:`colour_confusable`,
     with ``settings.colour_confusable``); the views are the classes' front views as seen on
     this wall's colour. ``relief``: the wall's relief above its plane (metres, the
-    orthoimage's pixels), for the fine relief comparison.
+    orthoimage's pixels), for the fine relief comparison; ``gain_range`` (the depth
+    recognizer's), for the amplitude check (:func:`amplitude_compatible`).
     """
     if not settings.enabled:
         return depth, colour
@@ -402,6 +464,7 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
     models, model_offsets = prototypes._cache[mkey]  # type: ignore[misc]
     diff = np.ascontiguousarray(image.lab - image.background, dtype=np.float32)
     np.copyto(diff, 0.0, where=~image.foreground[..., None])  # in place: most of the image
-    kw = {"offsets": offsets, "relief": relief, "models": models, "model_offsets": model_offsets}
+    kw = {"offsets": offsets, "relief": relief, "models": models, "model_offsets": model_offsets,
+          "gain_range": gain_range if settings.amplitude_decides else None}
     return (resolve_lookalikes(depth, diff, views, groups, settings, **kw),
             resolve_lookalikes(colour, diff, views, groups, settings, **kw))

@@ -40,7 +40,7 @@ from concurrent.futures import (
     ThreadPoolExecutor,
     wait,
 )
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -174,7 +174,7 @@ def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], p
     c_rois = colour_rois(ortho, area, s.colour, c_img)
     c_cands = match_colour(ortho, area, c_rois, prototypes, s.colour, c_img)
     d_cands, c_cands = resolve_on_wall(d_cands, c_cands, c_img, prototypes, s.lookalikes,
-                                       relief=d_img.levelled)
+                                       relief=d_img.levelled, gain_range=s.depth.gain_range)
     t_stage["colour"] = time.perf_counter() - t
     return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
 
@@ -325,6 +325,23 @@ def _search_classes(library: ModelLibrary, expected: dict[str, int] | None, kind
     return library.classes_on(kind)
 
 
+def searched_surfaces(s: DetectionSettings, library: ModelLibrary, expected: ExpectedCounts | None) -> DetectionSettings:
+    """``s`` with ceilings and columns searched only where they may hold a searched class.
+
+    Every kind of surface is searched by default (contract 6): ``settings.ceilings.enabled``
+    and ``settings.columns.enabled`` say that the user allows it (``--no-ceilings`` and
+    ``--no-columns`` do not); a kind is then searched when a class searched for (expected, or
+    every class of the library) may be mounted there (its ``model.json`` ``mount``, every
+    surface when it has none).
+    """
+    counts = None if expected is None else expected.counts
+    ceilings = s.ceilings.enabled and bool(_search_classes(library, counts, "ceiling"))
+    columns = s.columns.enabled and bool(_search_classes(library, counts, "column"))
+    if (ceilings, columns) == (s.ceilings.enabled, s.columns.enabled):
+        return s
+    return replace(s, ceilings=replace(s.ceilings, enabled=ceilings), columns=replace(s.columns, enabled=columns))
+
+
 def _collect_walls(results: Iterator[tuple[str, WallResult, dict[str, float]]], n_walls: int, progress: Progress,
                    timings: dict[str, float]) -> dict[str, WallResult]:
     t = time.perf_counter()
@@ -429,6 +446,7 @@ def detect(
     progress = progress or _noop_progress
     timings: dict[str, float] = {}
     expected = _as_expected(expected)
+    s = searched_surfaces(s, library, expected)
     classes = _search_classes(library, None if expected is None else expected.counts)
 
     t0 = time.perf_counter()
@@ -708,6 +726,7 @@ def detect_scans(
     log = log or (lambda msg: None)
     timings: dict[str, float] = {}
     expected = _as_expected(expected)
+    s = searched_surfaces(s, library, expected)
     classes = _search_classes(library, None if expected is None else expected.counts)
     workers = max(1, _worker_count(s))
     t0 = time.perf_counter()

@@ -262,6 +262,8 @@ class LookalikeSettings:
     min_evidence_relief: float = 0.3  # ... and this level
     relief_decides: bool = True  # same size and colour with reliefs to compare: look-alikes whatever their depth NCC
     colour_confusable: bool = True  # same-size classes the colour classifier cannot tell apart on a wall too
+    amplitude_decides: bool = True  # a look-alike whose model stands out more or less than the scene there, beyond
+    # the depth recognizer's gain_range, is not a class the candidate may be (lookalikes.amplitude_compatible)
 
 
 @dataclass
@@ -290,9 +292,10 @@ class ConfidenceSettings:
 
 @dataclass
 class CeilingSettings:
-    """Objects on ceilings (issue 11; :mod:`sbsc_core.ceilings`): off by default."""
+    """Objects on ceilings (issue 11; :mod:`sbsc_core.ceilings`): searched by default when a
+    searched class may be mounted there (:func:`~sbsc_core.pipeline.searched_surfaces`)."""
 
-    enabled: bool = False  # recognize objects on the ceilings too (``sbsc detect --ceilings``)
+    enabled: bool = True  # ceilings may be searched (``sbsc detect --no-ceilings``: not)
     tile_m: float = 6.0  # a storey's ceiling is cut into tiles at most this big each way
     overlap_m: float = 0.3  # ... each grown by this on every side (more than half an object)
     wall_clear_m: float = 0.05  # points this close to a wall's plane are the wall's, not the ceiling's
@@ -305,9 +308,10 @@ class CeilingSettings:
 
 @dataclass
 class ColumnSettings:
-    """Objects on free-standing columns (issue 11; :mod:`sbsc_core.columns`): off by default."""
+    """Objects on free-standing columns (issue 11; :mod:`sbsc_core.columns`): searched by
+    default when a searched class may be mounted there (:func:`~sbsc_core.pipeline.searched_surfaces`)."""
 
-    enabled: bool = False  # find columns and recognize objects on their faces (``sbsc detect --columns``)
+    enabled: bool = True  # columns may be found and searched (``sbsc detect --no-columns``: not)
     cell_m: float = 0.05  # plan cells of the column search
     band_m: float = 0.2  # height bands: a cell is tall when its points fill ...
     min_cover: float = 0.8  # ... at least this share of the bands between floor and ceiling (0.3 m off each)

@@ -84,7 +84,7 @@ def test_detect_ceilings_finds_the_smoke_detector_on_the_ceiling(tmp_path):
     sim, det = tmp_path / "sim", tmp_path / "det"
     assert main(["-q", "simulate", "--scene", "one_room", "--ceiling-objects", "--out", str(sim)]) == 0
     assert main(["-q", "detect", str(sim / "scan.ply"), "--models", str(sim / "models"), "--expected",
-                 str(sim / "expected.json"), "--ceilings", "--out", str(det)]) == 0
+                 str(sim / "expected.json"), "--out", str(det)]) == 0  # every surface by default
     doc = json.loads((det / "detections.json").read_text())
     read_detections(det / "detections.json")  # the document validates (surfaces, detections on them)
     assert [s["kind"] for s in doc["surfaces"]] == ["ceiling"]
@@ -193,3 +193,33 @@ def test_surfaces_without_points_are_left_out(tmp_path):
     finally:
         pl.park_wall, pl._templates_job = saved
     assert list(kept) == [0, 7, 0] and ran == [1] and results == {"B": "result"}
+
+
+def test_surfaces_are_searched_where_the_library_mounts_a_searched_class():
+    from sbsc_core.io.documents import ExpectedCounts
+    from sbsc_core.io.models import load_model_library
+    from sbsc_core.paths import bundled_models_dir
+    from sbsc_core.pipeline import searched_surfaces
+    from sbsc_core.settings import DetectionSettings
+
+    lib = load_model_library(bundled_models_dir())
+    s = DetectionSettings()
+    both = searched_surfaces(s, lib, None)  # the bundled smoke detector may be on a ceiling, a switch on a column
+    assert both.ceilings.enabled and both.columns.enabled
+    walls_only = searched_surfaces(s, lib, ExpectedCounts({"radiator": 2, "switch": 0}))
+    assert not walls_only.ceilings.enabled and not walls_only.columns.enabled
+    ceiling = searched_surfaces(s, lib, ExpectedCounts({"smoke_detector": 1}))
+    assert ceiling.ceilings.enabled and not ceiling.columns.enabled
+    s.ceilings.enabled = False  # --no-ceilings
+    assert not searched_surfaces(s, lib, ExpectedCounts({"smoke_detector": 1})).ceilings.enabled
+
+
+def test_detect_no_ceilings_leaves_the_ceiling_unsearched(tmp_path):
+    from sbsc_core.cli import main
+
+    sim, det = tmp_path / "sim", tmp_path / "det"
+    assert main(["-q", "simulate", "--scene", "one_room", "--ceiling-objects", "--out", str(sim)]) == 0
+    assert main(["-q", "detect", str(sim / "scan.ply"), "--models", str(sim / "models"), "--expected",
+                 str(sim / "expected.json"), "--no-ceilings", "--out", str(det)]) == 0
+    doc = json.loads((det / "detections.json").read_text())
+    assert not doc.get("surfaces") and not any(d.get("surface") == "ceiling" for d in doc["detections"])

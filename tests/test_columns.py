@@ -93,7 +93,7 @@ def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
     assert main(["-q", "simulate", "--scene", str(tmp_path / "hall.yaml"), "--ceiling-objects", "--columns",
                  "--out", str(sim)]) == 0
     assert main(["-q", "detect", str(sim / "scan.ply"), "--models", str(sim / "models"), "--expected",
-                 str(sim / "expected.json"), "--ceilings", "--columns", "--out", str(det)]) == 0
+                 str(sim / "expected.json"), "--out", str(det)]) == 0  # every surface by default
     doc = read_detections(det / "detections.json")
     kinds = {s["id"]: s["kind"] for s in doc["surfaces"]}
     assert sorted(k for k in kinds if kinds[k] == "column") == ["COL1-E", "COL1-N", "COL1-S", "COL1-W"]
@@ -111,8 +111,7 @@ def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
     from sbsc_core.pipeline import detect
     from sbsc_core.settings import DetectionSettings
 
-    settings = DetectionSettings()
-    settings.ceilings.enabled = settings.columns.enabled = True
+    settings = DetectionSettings()  # ceilings and columns searched by default
     res = detect(read_scan(sim / "scan.ply"), load_model_library(sim / "models"),
                  read_expected_counts(sim / "expected.json"), settings)
     assert [sf["id"] for sf in res.surfaces] == [sf["id"] for sf in doc["surfaces"]]
@@ -121,9 +120,11 @@ def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
     by_key = {(d["class"], d["wall"]): d["position"] for d in doc["detections"]}
     for d in res.detections:
         assert np.linalg.norm(np.subtract(d.position, by_key[(d.class_id, d.wall_id)])) < 0.002
-    # the walls keep their ids and frames without the options
+    # the walls keep their ids and frames with ceilings and columns turned off
+    off = DetectionSettings()
+    off.ceilings.enabled = off.columns.enabled = False
     plain = detect(read_scan(sim / "scan.ply"), load_model_library(sim / "models"),
-                   read_expected_counts(sim / "expected.json"), DetectionSettings())
+                   read_expected_counts(sim / "expected.json"), off)
     assert not plain.surfaces and all(d.surface is None for d in plain.detections)
     assert [(w.id, list(np.round(w.frame.origin, 4))) for w in plain.segmentation.walls] == \
         [(w["id"], list(np.round(w["origin"], 4))) for w in doc["walls"]]

@@ -21,7 +21,7 @@ from sbsc_core.depth_recognition import depth_rois, match_depth
 from sbsc_core.lookalikes import content_box, lookalike_sets, resolve_on_wall
 from sbsc_core.settings import DetectionSettings
 from sbsc_core.templates import make_templates
-from sbsc_core.types import Candidate, ModelLibrary, ObjectModel, Orthoimage, WallArea
+from sbsc_core.types import Box, Candidate, ModelLibrary, ObjectModel, Orthoimage, WallArea
 from tests.recognition_synth import _rgba, make_model, make_wall, paste, socket_like
 
 RED, WHITE = (200, 30, 35), (250, 250, 250)
@@ -290,3 +290,43 @@ def test_a_box_found_in_depth_only_takes_the_class_its_colour_shows(depth_alikes
     d2, _ = resolve_on_wall(w.depth, [], w.image, w.protos, s.lookalikes)
     for cid, p in places.items():
         assert _near(d2, p) == {cid}
+
+
+# --------------------------------------------------------------------------- depth is metric
+
+
+def _rocker(px: int = 16) -> np.ndarray:
+    """A plate 8 mm proud with a rocker tilted from 8 to 16 mm in its middle (metres)."""
+    d = np.full((px, px), 0.008, np.float32)
+    d[4:-4, 4:-4] = np.linspace(0.008, 0.016, px - 8, dtype=np.float32)[None, :]
+    return d
+
+
+def test_a_lookalike_that_stands_out_otherwise_than_the_scene_is_not_taken() -> None:
+    """The print of a flush 2.5 mm plate matches a candidate perfectly, but the relief there
+    stands out 8-16 mm: the flush plate's model cannot be it (gain 6, beyond the depth
+    recognizer's range), so the candidate keeps its class; a 12 mm plate of the same print
+    may still take it."""
+    from sbsc_core.lookalikes import amplitude_compatible, resolve_lookalikes
+    from sbsc_core.settings import LookalikeSettings
+
+    rng = np.random.default_rng(3)
+    relief = rng.normal(0.0, 0.0005, (80, 80)).astype(np.float32)
+    relief[32:48, 32:48] += _rocker()
+    flush = np.full((16, 16), 0.0025, np.float32)
+    proud = np.full((16, 16), 0.012, np.float32)
+    models = {"switch": _rocker(), "flush": flush, "proud": proud}
+    fits = amplitude_compatible(relief, models, dict.fromkeys(models, (39.5, 39.5)), 0.0, (0.5, 2.0))
+    assert fits == {"switch": True, "flush": False, "proud": True}
+    print_of = {c: rng.normal(0.0, 10.0, (16, 16, 3)).astype(np.float32) for c in ("switch", "flush", "proud")}
+    diff = np.zeros((80, 80, 3), np.float32)
+    cand = Candidate("switch", "W1", "depth", Box(32, 32, 48, 48), (39.5, 39.5), 0.8)
+    s = LookalikeSettings()
+    for target in ("flush", "proud"):
+        diff[32:48, 32:48] = print_of[target]  # the scene shows the target's print exactly
+        group = [frozenset({"switch", target})]
+        kw = {"relief": relief, "models": models}
+        (blind,) = resolve_lookalikes([cand], diff, print_of, group, s, **kw)
+        (metric,) = resolve_lookalikes([cand], diff, print_of, group, s, gain_range=(0.5, 2.0), **kw)
+        assert blind.class_id == target  # the print alone relabels it
+        assert metric.class_id == ("switch" if target == "flush" else "proud")
