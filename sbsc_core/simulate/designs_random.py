@@ -203,10 +203,10 @@ def _draw_socket(n: int) -> Callable[[np.random.Generator, _Series], Design]:
         w, h = n * s.gang_m + 2 * s.frame_m, s.gang_m + 2 * s.frame_m
         d = _u(rng, 0.008, 0.016)
         kind = ("recessed cup", "square well", "flat face")[int(rng.choice(3, p=[0.5, 0.25, 0.25]))]
-        frame_z = d * _u(rng, 0.25, 0.6)
+        frame_z = d * _u(rng, 0.2, 0.5)
         insert = _pick(rng, ((s.plate, 3.0), ((110, 110, 108), 1.0), ((222, 220, 212), 1.0)), jitter=2)
         cup_r = _u(rng, 0.015, 0.021)
-        floor_z = _u(rng, 0.001, max(0.0015, frame_z - 0.001))
+        floor_z = frame_z + _u(rng, 0.0005, d - frame_z - 0.003)  # the recess floor stands on the frame
         spec = _spec(cls, w, h, d)
 
         def build() -> ColouredMesh:
@@ -221,7 +221,7 @@ def _draw_socket(n: int) -> Callable[[np.random.Generator, _Series], Design]:
                 elif kind == "square well":
                     a = 2 * min(cup_r, half - 0.004)
                     parts += _ring(x - half, x + half, -half, half, a, frame_z, d, s.plate)
-                    parts.append(_span(x - a / 2, x + a / 2, -a / 2, a / 2, 0.0, floor_z, insert))
+                    parts.append(_span(x - a / 2, x + a / 2, -a / 2, a / 2, frame_z, floor_z, insert))
                     parts.append(_front(a, a, floor_z + EPS, _face(a, a, insert, ((0.33, 0.5, 0.07), (0.67, 0.5, 0.07))),
                                         (x, 0.0)))
                 else:
