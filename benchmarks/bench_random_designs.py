@@ -149,11 +149,11 @@ def main(argv: list[str] | None = None) -> int:
         if r.confusions:
             print("taken for another class: " + ", ".join(f"{a} -> {b} x{n}" for (a, b), n in sorted(r.confusions.items())))
         sys.stdout.flush()
-    print(f"\n{'family':>8} {'inst':>5} {'TP%':>5} {'FP%':>5} {'FN':>3} {'FP':>3}  reliefs")
+    print(f"\n{'family':>8} {'inst':>5} {'TP%':>5} {'FP%':>5} {'FN':>3} {'FP':>3} {'on distr.':>9}  reliefs")
     for r in results:
-        t = r.table.total
-        print(f"{r.family:>8} {t.instances:>5} {_pct(t.tp_pct)} {_pct(t.fp_pct)} {t.fn:>3} {t.fp:>3}  {r.relief}"
-              f"  ({r.seconds:.0f} s)")
+        t, d = r.table.total, r.table.distractors
+        print(f"{r.family:>8} {t.instances:>5} {_pct(t.tp_pct)} {_pct(t.fp_pct)} {t.fn:>3} {t.fp:>3} "
+              f"{'-' if d is None else d.fp_on_distractors:>9}  {r.relief}  ({r.seconds:.0f} s)")
     tp = np.array([r.table.total.tp_pct or 0.0 for r in results])
     fp = np.array([r.table.total.fp_pct or 0.0 for r in results])
     print(f"\n{len(results)} families: TP mean {tp.mean():.1f} %, worst {tp.min():.1f} % (family "
