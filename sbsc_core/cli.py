@@ -125,10 +125,15 @@ def _add_simulate(cmds: Commands) -> None:
     s.add_argument("--seed", type=int, default=0, help="random seed of the scanner noise and the design changes (default: 0)")
     s.add_argument("--step", type=float, default=None, metavar="DEG",
                    help="scanner angular step in degrees (default: the scene's)")
-    s.add_argument("--designs", choices=["standard", "alt", "third"], default="standard",
-                   help="design set the objects are built with (default: standard; third: for testing only)")
-    s.add_argument("--library-designs", choices=["standard", "alt", "third"], default=None,
+    s.add_argument("--designs", choices=["standard", "alt", "third", "random"], default="standard",
+                   help="design set the objects are built with (default: standard; third: for testing only; "
+                        "random: a new family for --design-seed)")
+    s.add_argument("--library-designs", choices=["standard", "alt", "third", "random"], default=None,
                    help="design set of the model library (default: the same as --designs)")
+    s.add_argument("--design-seed", type=int, default=None, metavar="N",
+                   help="--designs random: the family's seed (default: --seed)")
+    s.add_argument("--library-design-seed", type=int, default=None, metavar="N",
+                   help="--library-designs random: the library family's seed (default: the scene's family seed)")
     s.add_argument("--realistic", action="store_true",
                    help="realistic scanner: mixed pixels, range noise growing with range and incidence, "
                         "dropouts, registration error, per-station exposure, highlights")
@@ -412,8 +417,10 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         raise InputError("--scenario", "give either --scenario or --scene")
     con = console()
     out = output_parent(args.out)
-    builder = design_builder(args.designs)
-    library = design_builder(args.library_designs) if args.library_designs else builder
+    design_seed = args.seed if args.design_seed is None else args.design_seed
+    library_seed = design_seed if args.library_design_seed is None else args.library_design_seed
+    builder = design_builder(args.designs, design_seed)
+    library = design_builder(args.library_designs, library_seed) if args.library_designs else builder
     everything = args.all_realism
     realism = {"realistic": args.realistic or everything, "clutter": args.clutter or everything,
                "furniture": args.furniture or everything, "survey_frame": args.survey_frame or everything}

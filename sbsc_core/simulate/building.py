@@ -9,14 +9,15 @@ index as triangle label; the building carries -1.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import dataclasses
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..types import WallFrame
 from . import mesh as M
-from .catalogue import CATALOGUE, CLASS_ORDER
+from .catalogue import CATALOGUE, CLASS_ORDER, ObjectSpec
 from .mesh import ColouredMesh
 from .realism import CLASS_GLOSS
 from .scene import (
@@ -119,6 +120,7 @@ def build_building(scene: SceneDescription, object_builder: ObjectBuilder | None
     """
     if object_builder is None:
         from .objects import build_object as object_builder
+    scene = sized_for(scene, object_builder)
     layout = validate_scene(scene)
     parts: list[ColouredMesh] = [_slabs(scene)]
     for wall in layout.walls.values():
@@ -133,7 +135,7 @@ def build_building(scene: SceneDescription, object_builder: ObjectBuilder | None
     objects = []
     for p in scene.objects:
         wall = layout.walls[p.wall]
-        spec = CATALOGUE[p.class_id]
+        spec = scene.specs[p.class_id]
         local = object_builder(p.class_id)
         local = local.glossy(CLASS_GLOSS.get(p.class_id, 0.0))
         turn = _rotation(wall.frame) @ _in_plane(p.rotation_deg)
@@ -144,6 +146,22 @@ def build_building(scene: SceneDescription, object_builder: ObjectBuilder | None
     surfaces, columns = add_surface_objects(scene, layout, stations, object_builder, parts, objects)
     distractors = add_distractors(scene, layout, stations, seed, parts)
     return Building(scene, layout, M.merge(parts), objects, stations, distractors, surfaces, columns)
+
+
+def sized_for(scene: SceneDescription, object_builder: ObjectBuilder | None) -> SceneDescription:
+    """``scene`` with the object sizes of ``object_builder``'s design family.
+
+    A builder whose designs have sizes of their own (a random family,
+    :mod:`~sbsc_core.simulate.designs_random`) carries them as ``specs``; the fixed design
+    sets build every class in its catalogue footprint, and their scenes keep the catalogue.
+    """
+    specs = builder_specs(object_builder)
+    return scene if specs is scene.specs else dataclasses.replace(scene, specs=specs)
+
+
+def builder_specs(object_builder: ObjectBuilder | None) -> Mapping[str, ObjectSpec]:
+    """The sizes of ``object_builder``'s designs: its ``specs`` if it has any, else the catalogue."""
+    return getattr(object_builder, "specs", CATALOGUE)
 
 
 def add_distractors(scene: SceneDescription, layout: Layout, stations: np.ndarray, seed: int | tuple[int, ...],
@@ -182,7 +200,7 @@ def add_surface_objects(scene: SceneDescription, layout: Layout, stations: np.nd
     parts += [c.mesh() for c in plan.columns]
     index = max((o.index for o in objects), default=-1) + 1
     for k, so in enumerate(plan.objects):
-        spec = CATALOGUE[so.class_id]
+        spec = scene.specs[so.class_id]
         local = object_builder(so.class_id).glossy(CLASS_GLOSS.get(so.class_id, 0.0))
         turn = _rotation(so.frame) @ _in_plane(so.rotation_deg)
         where = so.frame.to_world(so.u, so.v)

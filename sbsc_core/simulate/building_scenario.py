@@ -52,10 +52,11 @@ from .building import (
     _rotation,
     add_distractors,
     add_surface_objects,
+    sized_for,
     station_positions,
     wall_face_mesh,
 )
-from .catalogue import CATALOGUE, CLASS_ORDER
+from .catalogue import CLASS_ORDER
 from .mesh import ColouredMesh
 from .raycast import MeshRaycaster
 from .realism import CLASS_GLOSS, pose_error_record, station_pose_error
@@ -162,7 +163,7 @@ def build_storey(plan: StoreyPlan, object_builder: ObjectBuilder | None = None, 
     """
     if object_builder is None:
         from .objects import build_object as object_builder
-    scene = plan.scene
+    scene = sized_for(plan.scene, object_builder)
     layout = validate_scene(scene)
     for wid, wall in list(layout.walls.items()):
         if wall.room in plan.room_ceilings:
@@ -180,7 +181,7 @@ def build_storey(plan: StoreyPlan, object_builder: ObjectBuilder | None = None, 
     objects = []
     for p in scene.objects:
         wall = layout.walls[p.wall]
-        spec = CATALOGUE[p.class_id]
+        spec = scene.specs[p.class_id]
         if p.v + spec.height_m / 2 > wall.frame.height_m:
             raise InputError(scene.source, f"object {p.class_id} on {p.wall} is above its room's ceiling")
         local = object_builder(p.class_id).glossy(CLASS_GLOSS.get(p.class_id, 0.0))  # gloss: realistic scanner only

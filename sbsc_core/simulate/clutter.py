@@ -104,7 +104,7 @@ def _blocked(scene: SceneDescription, layout: Layout, wall: str, box, placed: li
     for o in layout.openings_on(wall):
         if _overlap(box, (o.u_min - fw, o.u_max + fw, o.v_min - fw, o.v_max + fw), margin):
             return True
-    if objects and any(p.wall == wall and _overlap(box, footprint(p), margin) for p in scene.objects):
+    if objects and any(p.wall == wall and _overlap(box, footprint(p, scene.specs), margin) for p in scene.objects):
         return True
     return any(d.wall == wall and _overlap(box, d.box(), margin) for d in placed)
 
@@ -153,8 +153,6 @@ def place_furniture(scene: SceneDescription, layout: Layout, stations: np.ndarra
     pieces (cabinets, shelves) stand only where no object is behind them, so an object is
     at most partly hidden.
     """
-    from .catalogue import CATALOGUE
-
     rng = np.random.default_rng([*_key(seed), 0xF0F0])
     kinds = list(FURNITURE_KINDS)
     weights = np.array([FURNITURE_KINDS[k][0] for k in kinds])
@@ -173,8 +171,8 @@ def place_furniture(scene: SceneDescription, layout: Layout, stations: np.ndarra
                 box = (u - w / 2, u + w / 2, 0.0, h)
                 if _furniture_blocked(layout, wid, box, h, scene, kind):
                     continue
-                behind = [CATALOGUE[p.class_id].depth_m for p in scene.objects
-                          if p.wall == wid and _overlap(box, footprint(p))]
+                behind = [scene.specs[p.class_id].depth_m for p in scene.objects
+                          if p.wall == wid and _overlap(box, footprint(p, scene.specs))]
                 behind += [d.depth_m for d in others if d.wall == wid and _overlap(box, d.box())]
                 gap = max(behind, default=0.0) + 0.01
                 corners = np.array([fr.to_world(uu, 0.0, dd) for uu in box[:2] for dd in (gap, gap + depth)])
@@ -203,7 +201,7 @@ def _furniture_blocked(layout: Layout, wall: str, box, h: float, scene: SceneDes
             if _overlap(box, (o.u_min - fw - 0.1, o.u_max + fw + 0.1, 0.0, o.v_max), 0.0):
                 return True
     if h > 1.2:  # tall: nothing of the classes behind it
-        if any(p.wall == wall and _overlap((box[0], box[1], 0.0, 99.0), footprint(p), MARGIN_M)
+        if any(p.wall == wall and _overlap((box[0], box[1], 0.0, 99.0), footprint(p, scene.specs), MARGIN_M)
                for p in scene.objects):
             return True
     return False

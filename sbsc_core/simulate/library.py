@@ -11,7 +11,7 @@ colour noise and illumination, like separate scans.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,8 +19,8 @@ import cv2
 import numpy as np
 
 from ..io.atomic import atomic_output_dir
-from .building import ObjectBuilder
-from .catalogue import CATALOGUE, CLASS_ORDER
+from .building import ObjectBuilder, builder_specs
+from .catalogue import CATALOGUE, CLASS_ORDER, ObjectSpec
 from .objects import build_object
 from .raycast import MeshRaycaster
 
@@ -38,9 +38,10 @@ def render_model(class_id: str, pixel_m: float = 0.002, seed: int = 0, n_views: 
     """Scan one object of ``class_id`` straight on; see the module docstring.
 
     ``object_builder`` is the design set the object is built with (default: the standard
-    :func:`~sbsc_core.simulate.objects.build_object`; see :mod:`designs`).
+    :func:`~sbsc_core.simulate.objects.build_object`; see :mod:`designs`); the footprint is
+    the catalogue's, or the builder's own ``specs`` (a random family).
     """
-    spec = CATALOGUE[class_id]
+    spec = builder_specs(object_builder)[class_id]
     mesh = (object_builder or build_object)(class_id)
     caster = MeshRaycaster(mesh)
     w_px = max(1, round(spec.width_m / pixel_m))
@@ -78,8 +79,9 @@ def render_model(class_id: str, pixel_m: float = 0.002, seed: int = 0, n_views: 
     return RenderedModel(views, depth.astype(np.float32))
 
 
-def model_json(class_id: str) -> dict:
-    spec = CATALOGUE[class_id]
+def model_json(class_id: str, specs: Mapping[str, ObjectSpec] = CATALOGUE) -> dict:
+    """``model.json`` of ``class_id`` (contract 2) with the size of its design in ``specs``."""
+    spec = specs[class_id]
     doc = {"name": spec.name, "ifc_class": spec.ifc_class, "predefined_type": spec.predefined_type,
            "width_m": spec.width_m, "height_m": spec.height_m, "depth_m": spec.depth_m,
            "order": CLASS_ORDER.index(class_id) + 1,  # the library's order (contract 2): the paper's
@@ -104,7 +106,7 @@ def write_model_library(out_dir: Path, classes: Sequence[str] = CLASS_ORDER, see
                                  object_builder=object_builder)
             d = tmp / cls
             d.mkdir()
-            (d / "model.json").write_text(json.dumps(model_json(cls), indent=2) + "\n")
+            (d / "model.json").write_text(json.dumps(model_json(cls, builder_specs(object_builder)), indent=2) + "\n")
             for i, view in enumerate(model.colour_views):
                 name = "colour.png" if i == 0 else f"colour_{i}.png"
                 cv2.imwrite(str(d / name), cv2.cvtColor(view, cv2.COLOR_RGBA2BGRA))

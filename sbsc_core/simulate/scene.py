@@ -55,7 +55,7 @@ import yaml
 
 from ..errors import InputError
 from ..types import WallFrame
-from .catalogue import CATALOGUE
+from .catalogue import CATALOGUE, ObjectSpec
 from .realism import ScanEffects
 from .scanner import ScannerSettings
 
@@ -164,6 +164,8 @@ class SceneDescription:
     survey_frame: SurveyFrameSpec | None = None  # write scan and truth in a survey frame
     ceiling_objects: bool = False  # smoke detectors and exit lights on the ceilings (surfaces.py)
     columns: bool = False  # free-standing columns with objects on them (surfaces.py)
+    # sizes of the objects' designs: the design family's (see building.sized_for), the catalogue's by default
+    specs: Mapping[str, ObjectSpec] = field(default_factory=lambda: CATALOGUE)
 
     @property
     def realistic(self) -> bool:
@@ -398,9 +400,12 @@ def build_layout(scene: SceneDescription) -> Layout:
     return Layout(walls, openings)
 
 
-def footprint(p: ObjectPlacement) -> tuple[float, float, float, float]:
-    """(u_min, u_max, v_min, v_max) of an object's footprint on its wall (of its turned outline)."""
-    spec = CATALOGUE[p.class_id]
+def footprint(p: ObjectPlacement, specs: Mapping[str, ObjectSpec] = CATALOGUE) -> tuple[float, float, float, float]:
+    """(u_min, u_max, v_min, v_max) of an object's footprint on its wall (of its turned outline).
+
+    ``specs`` gives the sizes of the objects' designs (a scene's ``specs``).
+    """
+    spec = specs[p.class_id]
     a = np.deg2rad(p.rotation_deg)
     ca, sa = abs(np.cos(a)), abs(np.sin(a))
     w, h = spec.width_m * ca + spec.height_m * sa, spec.height_m * ca + spec.width_m * sa
@@ -473,7 +478,7 @@ def _check_objects(scene: SceneDescription, layout: Layout) -> None:
         if p.wall not in layout.walls:
             raise InputError(where, f"unknown wall {p.wall!r}")
         wall = layout.walls[p.wall]
-        u0, u1, v0, v1 = footprint(p)
+        u0, u1, v0, v1 = footprint(p, scene.specs)
         W, H = wall.frame.width_m, wall.frame.height_m
         if u0 < -_EPS or u1 > W + _EPS or v0 < -_EPS or v1 > H + _EPS:
             raise InputError(where, f"does not fit on its wall: footprint u {u0:.3f}-{u1:.3f}, "
@@ -484,9 +489,9 @@ def _check_objects(scene: SceneDescription, layout: Layout) -> None:
                                  f"(u {o.u_min:.3f}-{o.u_max:.3f}, v {o.v_min:.3f}-{o.v_max:.3f} m, "
                                  f"frame {fw:.3f} m)")
         for q, _, _ in boxes:
-            if q.wall == p.wall and _overlap((u0, u1, v0, v1), footprint(q)):
+            if q.wall == p.wall and _overlap((u0, u1, v0, v1), footprint(q, scene.specs)):
                 raise InputError(where, f"does not fit on its wall: overlaps objects[{q.index}] ({q.class_id})")
-        depth = CATALOGUE[p.class_id].depth_m
+        depth = scene.specs[p.class_id].depth_m
         corners = wall.frame.to_world(np.array([u0, u1, u0, u1]), np.array([v0, v0, v1, v1]))
         corners = np.vstack([corners, corners + depth * wall.frame.normal])
         lo, hi = corners.min(axis=0), corners.max(axis=0)

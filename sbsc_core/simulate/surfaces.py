@@ -29,13 +29,14 @@ Objects keep the class's footprint and model: ``width_m`` along the surface's ``
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..types import Surface, WallFrame
 from . import mesh as M
-from .catalogue import CATALOGUE
+from .catalogue import ObjectSpec
 from .mesh import ColouredMesh
 from .scene import Layout, RoomSpec, SceneDescription, point_in_outline
 
@@ -169,7 +170,7 @@ def _plan_ceilings(scene: SceneDescription, layout: Layout, stations: np.ndarray
                 for y in _axis_positions(y0, y1, SMOKE_SPACING_M, CEILING_MARGIN_M + 0.5):
                     xy = _away_from_stations(np.array([x, y]), stations, room, (x0, y0, x1, y1), plan.columns)
                     if xy is not None:
-                        _try_ceiling(plan, taken, room, frame, "smoke_detector", xy, 0.0)
+                        _try_ceiling(plan, taken, room, frame, "smoke_detector", xy, 0.0, scene.specs)
     doors = [o for o in layout.openings if o.kind == "door"]
     n_doors: dict[str, int] = {}
     for o in doors:
@@ -188,7 +189,8 @@ def _plan_ceilings(scene: SceneDescription, layout: Layout, stations: np.ndarray
         fr = wall.frame
         centre = fr.to_world((o.u_min + o.u_max) / 2, 0.0, EXIT_OFFSET_M)[:2]
         turn = math.degrees(math.atan2(-fr.axis_u[1], fr.axis_u[0]))  # wall's u in the ceiling's (u, v)
-        _try_ceiling(plan, taken, rooms[wall.room], frames[wall.room], "exit_light", centre, round(turn, 6))
+        _try_ceiling(plan, taken, rooms[wall.room], frames[wall.room], "exit_light", centre, round(turn, 6),
+                     scene.specs)
 
 
 def _away_from_stations(xy: np.ndarray, stations: np.ndarray, room: RoomSpec,
@@ -215,9 +217,9 @@ def _away_from_stations(xy: np.ndarray, stations: np.ndarray, room: RoomSpec,
 
 
 def _try_ceiling(plan: SurfacePlan, taken: list, room: RoomSpec, frame: WallFrame, class_id: str,
-                 xy: np.ndarray, rotation_deg: float) -> bool:
-    """Add a ceiling object at plan position ``xy`` if its footprint fits the room and is free."""
-    spec = CATALOGUE[class_id]
+                 xy: np.ndarray, rotation_deg: float, specs: Mapping[str, ObjectSpec]) -> bool:
+    """Add a ceiling object at plan position ``xy`` if its footprint (``specs``' size) fits the room and is free."""
+    spec = specs[class_id]
     a = math.radians(rotation_deg)
     ca, sa = abs(math.cos(a)), abs(math.sin(a))
     half = np.array([spec.width_m * ca + spec.height_m * sa, spec.width_m * sa + spec.height_m * ca]) / 2

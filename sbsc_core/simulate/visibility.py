@@ -17,7 +17,6 @@ import math
 import numpy as np
 
 from .building import Building
-from .catalogue import CATALOGUE
 from .raycast import MeshRaycaster
 from .scanner import ScannerSettings
 
@@ -38,7 +37,7 @@ def visible_fractions(building: Building, settings: ScannerSettings, raycaster: 
         gu, gv = np.meshgrid(us, vs)
         # probe from just in front of the object's deepest point: furniture always stands
         # further out (its back clears the objects), so the probe meets the object first
-        starts = fr.to_world(gu.ravel(), gv.ravel(), CATALOGUE[o.class_id].depth_m + 0.002)
+        starts = fr.to_world(gu.ravel(), gv.ravel(), building.scene.specs[o.class_id].depth_m + 0.002)
         probe = rc.cast(starts, np.tile(-fr.normal, (len(starts), 1)).astype(np.float32))
         own = (probe.label == o.index) & np.isfinite(probe.t)
         surface = starts - np.where(own, probe.t, 0.0)[:, None] * fr.normal
