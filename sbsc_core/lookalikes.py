@@ -65,6 +65,8 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
+from .amplitude import amplitude_compatible
+from .amplitude import shifted_centre as _shifted
 from .colour_recognition import ColourImage, ColourPrototypes, prototype_distance
 from .matching import box_at, crop_padded, ncc_map, nms, padded_template, rotate_template
 from .settings import LookalikeSettings
@@ -227,46 +229,6 @@ def relief_score(relief: np.ndarray, model: np.ndarray, centre: tuple[float, flo
 
 
 _FLAT_M = 0.05  # a depth model varying by less than this share of its height inside its content is flat
-_AMPLITUDE_Q = 90.0  # a relief's amplitude: this percentile of how far it stands out (robust to noise and spikes)
-
-
-def relief_amplitude(relief: np.ndarray) -> float | None:
-    """How far a relief (metres, a model's or the scene's in a footprint) stands out: the
-    :data:`_AMPLITUDE_Q` percentile of its absolute value over its known pixels (None when
-    fewer than half are known)."""
-    r = np.abs(np.asarray(relief, np.float64))
-    ok = np.isfinite(r)
-    if r.size == 0 or ok.sum() < 0.5 * r.size:
-        return None
-    return float(np.percentile(r[ok], _AMPLITUDE_Q))
-
-
-def amplitude_compatible(relief: np.ndarray, models: dict[str, np.ndarray],
-                         centres: dict[str, tuple[float, float]], rotation_deg: float,
-                         gain_range: tuple[float, float]) -> dict[str, bool]:
-    """For each class of ``models``, whether the scene's relief in its footprint (at
-    ``centres[c]``, turned by ``rotation_deg``) stands out as far as its depth model does,
-    within ``gain_range`` (the depth recognizer's accepted scene / model amplitude ratio).
-
-    Depth is metric: an object whose relief stands out 16 mm is not a 2.5 mm flush socket
-    nor a 45 mm call point, however alike their outlines and prints (the library says how
-    far each class stands out; the depth recognizer says how much a scan may differ). A
-    class whose amplitude cannot be measured here counts as compatible.
-    """
-    out = {}
-    turned = abs(((float(rotation_deg) + 45.0) % 180.0) - 45.0) > 45.0  # nearer a quarter turn than upright
-    for c, m in models.items():
-        own = relief_amplitude(m)
-        h, w = m.shape[:2]
-        if turned:
-            h, w = w, h
-        b = box_at(centres[c], h, w)
-        seen = relief_amplitude(crop_padded(relief, b.r0, b.r1, b.c0, b.c1))
-        if own is None or seen is None or own <= 0:
-            out[c] = True
-            continue
-        out[c] = gain_range[0] <= seen / own <= gain_range[1]
-    return out
 
 
 def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[str, np.ndarray],
@@ -355,15 +317,6 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
         same = [c for c in out if c.source == source]
         folded.extend(nms(same, 0.5, higher_is_better=source == "depth"))
     return folded
-
-
-def _shifted(centre: tuple[float, float], offset: tuple[float, float] | None,
-             rotation_deg: float) -> tuple[float, float]:
-    if offset is None or (offset[0] == 0 and offset[1] == 0):
-        return centre
-    a = np.deg2rad(float(rotation_deg))
-    dr, dc = offset
-    return (centre[0] + dr * np.cos(a) - dc * np.sin(a), centre[1] + dr * np.sin(a) + dc * np.cos(a))
 
 
 def print_views(protos: dict, templates: dict[str, ModelTemplate]

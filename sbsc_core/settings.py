@@ -242,6 +242,8 @@ class ColourRecognitionSettings:
     rotations: tuple[float, ...] = (0, 90, 180, 270)  # in-plane rotations always tried when placing
     rotation_margin: float = 0.05  # a rotated placement must correlate this much better
     free_rotation: bool = True  # a RoI whose foreground is turned is also placed with turned views
+    relief_must_allow: bool = True  # a colour match where the relief stands out less than gain_range's low end
+    # times its class's depth model is refused (amplitude.colour_where_relief_allows)
     min_turn_deg: float = 3.0  # ... when turned by at least this from the image axes
     turn_refine_deg: tuple[float, ...] = (-2.0, -1.0, 1.0, 2.0)  # ... refined around the best turn
 
