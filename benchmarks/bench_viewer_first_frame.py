@@ -94,7 +94,7 @@ def synthetic_floor(where: Path, points: int) -> tuple[Path, Path]:
     from app.viewer.synthetic import write_synthetic_project
     from sbsc_core.io.scans import iter_scan
 
-    out, big = where / "scenario_like" / "out", where / f"scan_{points}.ply"
+    out, big = where / "scenario_like", where / f"scan_{points}.ply"
     if not (out / "detections.json").is_file():
         write_synthetic_project(where / "scenario_like", rooms=6, columns=3, walls_per_room=4,
                                 objects_per_wall=5, points=2_000_000, room_size=(7.6, 9.7), height_m=3.0)
