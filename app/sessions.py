@@ -128,7 +128,7 @@ def same_origin(method: str, headers: dict[str, str] | object, host: str | None)
     ``Origin`` (else ``Referer``) naming this very host. A request naming neither is refused."""
     if method.upper() in SAFE_METHODS:
         return True
-    get = getattr(headers, "get")
+    get = headers.get
     source = get("origin") or get("referer")
     if not source or source == "null" or not host:
         return False

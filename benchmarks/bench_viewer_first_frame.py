@@ -105,9 +105,9 @@ def synthetic_floor(where: Path, points: int) -> tuple[Path, Path]:
     dtype = [("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
     tmp = big.with_suffix(".part")
     with open(tmp, "wb") as fh:
-        fh.write(("ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty double x\n"
+        fh.write((f"ply\nformat binary_little_endian 1.0\nelement vertex {points}\nproperty double x\n"
                   "property double y\nproperty double z\nproperty uchar red\nproperty uchar green\n"
-                  "property uchar blue\nend_header\n" % points).encode())
+                  "property uchar blue\nend_header\n").encode())
         left = points
         while left:
             for chunk in iter_scan(base):

@@ -40,7 +40,7 @@ def test_one_login_serves_every_tab_until_logout(browser, site) -> None:  # noqa
         ctx.close()
 
 
-def _login(page, site) -> None:  # noqa: ANN001
+def _login(page, site) -> None:  # noqa: ANN001, F811
     page.goto(site.url + "/index.html")
     page.fill("#token", site.token)
     page.click("#login-form button[type=submit]")
@@ -129,7 +129,7 @@ def test_relabel_in_the_gallery_accepts_and_says_so(browser, site) -> None:  # n
         page.click("#b-relabel")
         page.wait_for_selector("#toast.show")
         assert page.locator("#toast").inner_text() == f"{ref} relabelled as {name} and accepted."
-        assert page.locator(f".det[data-status='accepted']", has_text=ref).count() == 1
+        assert page.locator(".det[data-status='accepted']", has_text=ref).count() == 1
         assert "(relabelled)" in page.locator("#p-facts").inner_text()
     finally:
         page.close()

@@ -107,9 +107,10 @@ def test_snap_moves_a_click_onto_the_relief_of_the_model():
 def test_add_a_missed_object_and_bulk_accept_by_filter(c, srv):
     pid, doc = project(c, srv, "add_bulk")
     rita = auth(srv.tokens["rita"])
-    # add: 201, source reviewer, pending until confirmed, in the series of references, audited
+    # add as the pages do: 201, source reviewer, pending until confirmed, in the series of references, audited
     r = c.post(f"/api/projects/{pid}/detections", headers=rita,
-               json={"class": "switch", "wall": "W01", "u": 2.2, "v": 1.4, "note": "behind the door"})
+               json={"class": "switch", "wall": "W01", "u": 2.2, "v": 1.4, "note": "behind the door",
+                     "status": "pending"})
     assert r.status_code == 201, r.text
     added = r.json()
     assert added["source"] == "reviewer" and added["class"] == "switch" and added["wall"] == "W01"
@@ -198,6 +199,7 @@ def test_a_second_job_keeps_decisions_cancel_and_cap(c, srv):
     assert r.status_code == 200
     added = c.post(f"/api/projects/{pid}/detections", headers=rita,
                    json={"class": "switch", "wall": "W02", "u": 2.7, "v": 2.0, "snap": False}).json()
+    assert added["review"]["status"] == "accepted"  # a script's addition (contract 7): accepted at once
     # a reviewer may not replace reviewed results; a manager may
     assert c.post(f"/api/projects/{pid}/jobs", json={}, headers=rita).status_code == 403
     fake_control(srv.data_dir, delay_s=2.0, detections=8)
@@ -225,10 +227,10 @@ def test_a_second_job_keeps_decisions_cancel_and_cap(c, srv):
     relabelled = by_ref[dets[4]["ref"]]
     assert relabelled["class"] == "socket_x4" and relabelled["review"]["status"] == "accepted"
     kept = [d for d in new["detections"] if d["source"] == "reviewer"]
-    assert len(kept) == 1 and kept[0]["u"] == added["u"] and kept[0]["review"]["status"] == "pending"
+    assert len(kept) == 1 and kept[0]["u"] == added["u"] and kept[0]["review"]["status"] == "accepted"
     assert len({d["ref"] for d in new["detections"]}) == len(new["detections"])  # references stay unique
     pending = [d for d in new["detections"] if d["review"]["status"] == "pending"]
-    assert len(pending) == 8 - 5 + 1  # and the added object, still to be confirmed
+    assert len(pending) == 8 - 5
     hist = c.get(f"/api/detections/{relabelled['id']}/history", headers=rita).json()
     assert [h["action"] for h in hist] == ["carry"]
     events = c.get(f"/api/projects/{pid}/events", headers=rita).json()

@@ -11,6 +11,7 @@ from app.models import User
 from app.server import create_app
 from app.sessions import COOKIE, SessionKeeper
 
+
 def _app(tmp_path):
     settings = AppSettings(data_dir=tmp_path / "d", viewer=False)
     return create_app(settings, start_jobs=False)

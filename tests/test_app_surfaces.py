@@ -122,7 +122,7 @@ def test_adding_a_missed_object_on_a_ceiling_and_a_column(project, client) -> No
     assert r.status_code == 201, r.text
     added = r.json()
     assert added["surface"] == "ceiling" and added["source"] == "reviewer"
-    assert added["review"]["status"] == "pending"  # until a reviewer confirms it
+    assert added["review"]["status"] == "accepted"
     assert added["position"] == pytest.approx([3.2, 2.2, 2.5])  # on the ceiling plane
     r = client.post(f"/api/projects/{pid}/detections", headers=h,
                     json={"class": "fire_extinguisher", "wall": "COL1-E", "u": 0.2, "v": 0.6})

@@ -31,7 +31,6 @@ def test_demo_runs_simulate_detect_evaluate_into_a_new_runs_folder(tmp_path) -> 
     # --no-serve keeps the review project: a later `sbsc serve` opens on it
     from app.config import AppSettings
     from app.sample import find_sample_project
-    from app.server import start_page
 
     settings = AppSettings(data_dir=tmp_path / "data")
     pid = find_sample_project(settings, "Sample: one_room")
