@@ -133,3 +133,34 @@ def test_relabel_in_the_gallery_accepts_and_says_so(browser, site) -> None:  # n
         assert "(relabelled)" in page.locator("#p-facts").inner_text()
     finally:
         page.close()
+
+
+def test_project_page_puts_results_first_and_locks_after_signoff(browser, site) -> None:  # noqa: F811
+    import httpx
+
+    from .test_app_support import auth
+
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    try:
+        _login(page, site)
+        page.goto(f"{site.url}/project.html?id={site.pid}")
+        page.wait_for_selector("#counts:has-text('detections from job')")
+        headings = page.locator("main section h2").all_inner_texts()
+        assert headings[0] == "Results"
+        assert page.locator("#to-review").bounding_box()["y"] < 800  # in the first screen
+        assert page.locator("#expected").is_enabled()
+        name = "Signed off here"
+        p2 = httpx.post(f"{site.url}/api/projects", json={"name": name}, headers=auth(site.token)).json()["id"]
+        from app.db import Database  # sign it off as the server would (no results needed for the lock)
+        from app.models import Project
+
+        db = Database(f"sqlite:///{site.data_dir / 'sbsc.db'}")
+        with db.write() as s:
+            s.get(Project, p2).status = "signed_off"
+        db.dispose()
+        page.goto(f"{site.url}/project.html?id={p2}")
+        page.wait_for_selector(f"#title:has-text('{name}')")
+        page.wait_for_function("document.getElementById('expected').disabled")
+        assert page.locator("#run-job").is_disabled()
+    finally:
+        page.close()
