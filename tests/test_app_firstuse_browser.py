@@ -151,7 +151,9 @@ def test_project_page_puts_results_first_and_locks_after_signoff(browser, site) 
         assert page.locator("#expected").is_enabled()
         name = "Signed off here"
         p2 = httpx.post(f"{site.url}/api/projects", json={"name": name}, headers=auth(site.token)).json()["id"]
-        from app.db import Database  # sign it off as the server would (no results needed for the lock)
+        from app.db import (
+            Database,  # sign it off as the server would (no results needed for the lock)
+        )
         from app.models import Project
 
         db = Database(f"sqlite:///{site.data_dir / 'sbsc.db'}")
