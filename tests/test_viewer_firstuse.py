@@ -59,3 +59,15 @@ def test_scene_of_a_floor_stacks_wall_names_and_sizes_spots(tmp_path) -> None:
         assert "on 2026-11-28 12:34 UTC" in text and "🔒" not in text
     finally:
         manager.stop_all()
+
+
+def test_spot_labels_use_the_librarys_names() -> None:
+    from app.viewer.scene import class_names, spot_label
+    from sbsc_core.paths import bundled_models_dir
+
+    names = class_names(bundled_models_dir())
+    assert names["fire_alarm_switch_sign"] == "Fire alarm switch sign"
+    det = {"class": "socket_x1", "confidence": 0.93}
+    assert spot_label(det, names) == "Socket x1 0.93"
+    assert spot_label({"class": "mystery", "alpha": 0.5}, names) == "mystery α 0.50"  # unknown: its id
+    assert class_names(None) == {}

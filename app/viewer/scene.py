@@ -43,6 +43,7 @@ import threading
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -201,10 +202,25 @@ def spread_labels(points: dict[str, np.ndarray], gap_m: float, step_m: float) ->
     return placed
 
 
-def spot_label(det: dict) -> str:
+def spot_label(det: dict, names: dict[str, str] | None = None) -> str:
+    """An object's label: the library's name of its class (``names``, from model.json) and its score."""
+    name = (names or {}).get(det["class"], det["class"])
     if det.get("confidence") is not None:
-        return f"{det['class']} {_fmt(det['confidence'])}"
-    return f"{det['class']} α {_fmt(det.get('alpha'))}"
+        return f"{name} {_fmt(det['confidence'])}"
+    return f"{name} α {_fmt(det.get('alpha'))}"
+
+
+def class_names(models_dir: Path | None) -> dict[str, str]:
+    """Class id -> display name from the library's model.json files ({} when unreadable)."""
+    if models_dir is None:
+        return {}
+    from sbsc_core.errors import SbscError
+    from sbsc_core.io.models import read_library_metadata
+
+    try:
+        return {cid: str(m.get("name") or cid) for cid, m in read_library_metadata(models_dir).items()}
+    except (SbscError, OSError, ValueError):
+        return {}
 
 
 def review_score(det: dict) -> float:
@@ -388,6 +404,7 @@ class ProjectScene:
         self.centre = np.zeros(3)
         self.spot_radius = self.s.spot_radius_m
         self.label_at: dict[str, np.ndarray] = {}  # wall id -> its label's anchor (stacked near corners)
+        self.class_names: dict[str, str] = {}  # class id -> the library's name (model.json)
         self.lod: ScanLod | None = None
         self.frames: dict[str, WallFrame] = {}  # the walls
         self.surfaces: dict[str, dict] = {}  # contract 4's surfaces (ceilings, column faces) by id
@@ -566,6 +583,7 @@ class ProjectScene:
         self.nodes.clear()
         self.data, self.lod, self.revision = data, lod, data.revision
         self.locked, self.signoff = bool(data.locked), data.signoff
+        self.class_names = class_names(data.models_dir)
         doc = data.detections
         self.frames = {w["id"]: WallFrame.from_dict(w) for w in doc.get("walls", [])}
         self.surfaces = {sf["id"]: sf for sf in doc.get("surfaces") or []}  # contract 4: ceilings, columns
@@ -792,7 +810,7 @@ class ProjectScene:
         spot.on_click(lambda ev, did=did: self._on_spot_click(ev, did))
         self.spots[did] = spot
         self.spot_labels[did] = self.server.scene.add_label(
-            f"/spot_labels/{did}", spot_label(d), position=pos + self.label_lift(d), anchor="bottom-center",
+            f"/spot_labels/{did}", spot_label(d, self.class_names), position=pos + self.label_lift(d), anchor="bottom-center",
             font_screen_scale=0.8, depth_test=False)
 
     def _extent(self) -> float:
@@ -841,7 +859,7 @@ class ProjectScene:
                 spot.color = STATUS_RGB.get(det["review"]["status"], STATUS_RGB["pending"])
             label = self.spot_labels.get(did)
             if label is not None:
-                label.text = spot_label(det)
+                label.text = spot_label(det, self.class_names)
             self._refresh_status()
             sessions = list(self.sessions.values())
         for session in sessions:
@@ -1258,7 +1276,7 @@ class ReviewSession:
             spot = sc.spots.get(did)
             if det is None or spot is None:
                 continue
-            text = spot_label(det) + (f" · {det['review']['status']}" if did == self.selected else "")
+            text = spot_label(det, sc.class_names) + (f" · {det['review']['status']}" if did == self.selected else "")
             node = self.labels.get(did)
             if node is not None:
                 node.text = text
