@@ -1,4 +1,4 @@
-"""The review app's commands of ``sbsc``: ``serve`` and ``user``.
+"""The review app's commands of ``sbsc``: ``serve``, ``user`` and ``import``.
 
 They reach the command line through the entry-point group ``sbsc.commands`` (see
 ``pyproject.toml``), so the library ``sbsc_core`` never imports the web layer. Without
@@ -8,6 +8,7 @@ installed metadata (a bare source tree), ``python -m app`` runs the same command
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from sbsc_core.cli import Commands
 
@@ -24,6 +25,34 @@ def _cmd_user_add(args: argparse.Namespace) -> int:
 
     print(add_user_cli(args.name, args.role))
     return 0
+
+
+def _cmd_import(args: argparse.Namespace) -> int:
+    from .config import AppSettings
+    from .sample import import_detect_output
+
+    settings = AppSettings()
+    pid, made = import_detect_output(Path(args.detect_out), scans=[Path(p) for p in args.scan],
+                                     models=Path(args.models) if args.models else None,
+                                     name=args.name or f"{Path(args.detect_out).resolve().name}",
+                                     design=Path(args.design) if args.design else None,
+                                     settings=settings, say=print)
+    what = "made" if made else "already there (kept as it is)"
+    print(f"project {pid} {what}: {args.name or Path(args.detect_out).resolve().name} "
+          f"(data: {settings.data_dir}); sbsc serve shows it")
+    return 0
+
+
+def register_import(cmds: Commands) -> None:
+    """``sbsc import DETECT_OUT [--scan SCAN ...] [--name NAME] [--models DIR] [--design IFC]``."""
+    v = cmds.add("import", func=_cmd_import, help="make a review project from a detect output (in $SBSC_DATA_DIR)")
+    v.add_argument("detect_out", metavar="DETECT_OUT", help="the output folder of sbsc detect")
+    v.add_argument("--scan", nargs="+", default=[], metavar="SCAN",
+                   help="the scan file(s) it was run on (for the 3D scene; prepared now)")
+    v.add_argument("--name", help="the project's name (default: the folder's name); "
+                                  "a project of that name with results is kept as it is")
+    v.add_argument("--models", help="the model library it was run with (default: the bundled one)")
+    v.add_argument("--design", help="as-designed IFC to compare with (default: as_designed.ifc beside the scan)")
 
 
 def register_serve(cmds: Commands) -> None:
@@ -47,4 +76,4 @@ def register_user(cmds: Commands) -> None:
     ua.set_defaults(func=_cmd_user_add)
 
 
-REGISTRARS = (register_serve, register_user)
+REGISTRARS = (register_serve, register_user, register_import)

@@ -74,6 +74,9 @@ class AppSettings(BaseSettings):
     viewer_host: str = "127.0.0.1"
     viewer_idle_s: float = 900.0  # a project scene no tab has been on for this long is stopped
 
+    # exports: the organisation named in the header of IFC files (SBSC_ORGANISATION)
+    organisation: str = ""
+
     # first run
     create_admin_on_first_run: bool = True
 

@@ -34,6 +34,7 @@ import traceback
 import uuid
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from sqlalchemy import select, update
 
@@ -309,25 +310,27 @@ def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
 
 
 def _prepare_viewer(settings: AppSettings, project_id: int, scans: list[Path],
-                    say: Callable[[str], None]) -> None:
-    """Compute the 3D scene's scan level of detail now, so the first view opens in seconds."""
+                    say: Callable[[str], None]) -> Any:
+    """Compute the 3D scene's scan level of detail now (reading the scans in chunks), so the
+    first view opens in seconds; returns it (a ``ScanLod``), or None when not prepared."""
     if not settings.viewer:
-        return
+        return None
     t = time.monotonic()
     try:
         from .viewer.lod import scan_lod
         from .viewer.scene import SceneSettings
 
         ss = SceneSettings()
-        scan_lod(scans, ss.max_points, settings.projects_dir / str(project_id) / "viewer",
-                 ss.overview_points)
+        lod = scan_lod(scans, ss.max_points, settings.projects_dir / str(project_id) / "viewer",
+                       ss.overview_points)
     except ImportError as exc:
         say(f"3D view not prepared ({exc})")
-        return
+        return None
     except (SbscError, OSError, ValueError) as exc:  # the results matter more than the 3D view
         say(f"3D view not prepared: {exc}")
-        return
+        return None
     say(f"3D view prepared in {time.monotonic() - t:.1f} s")
+    return lod
 
 
 def _finish_succeeded(db: Database, settings: AppSettings, job_id: int, owner: str, out: Path) -> None:

@@ -49,6 +49,7 @@ from .surfaces import point_on
 ACTIONS = {"accepted": "accept", "rejected": "reject", "pending": "reset"}
 CARRY_TOLERANCE_M = 0.10  # a new detection within this of an old one (or half its size) is the same
 BULK_MAX = 100_000
+RELABELLED = "relabelled by a reviewer: decided one by one, never in bulk"
 
 
 ServiceError = ReviewError  # the name the REST routes use
@@ -188,6 +189,9 @@ def decide(s: Session, did: int, change: Change, user: Principal, *, pid: int | 
         d.width_m = float(classes[change.class_]["width_m"])
         d.height_m = float(classes[change.class_]["height_m"])
         actions.append("relabel")
+        if change.status is None and d.status == "pending":  # relabel = "it is a <class>": accepted as that
+            d.status = "accepted"
+            actions.append(ACTIONS["accepted"])
     if change.u is not None or change.v is not None:
         wall = _wall(s, d.job_id, d.wall_key)
         u = d.u if change.u is None else float(change.u)
@@ -287,6 +291,8 @@ def bulk_decide(s: Session, pid: int, status: str, user: Principal, *,
                 skipped.append({"id": str(did), "reason": "replaced by a newer job"})
             elif d.status == status:
                 skipped.append({"id": str(did), "reason": f"already {status}"})
+            elif d.class_id != d.detected_class:
+                skipped.append({"id": str(did), "reason": RELABELLED})
             else:
                 rows.append(d)
     else:
@@ -294,6 +300,8 @@ def bulk_decide(s: Session, pid: int, status: str, user: Principal, *,
         if flt.review not in REVIEW_STATUSES:
             raise Invalid(f"filter.review: must be one of {', '.join(REVIEW_STATUSES)}")
         rows = [d for d in select_detections(s, p, flt) if d.status != status]
+        skipped += [{"id": str(d.id), "reason": RELABELLED} for d in rows if d.class_id != d.detected_class]
+        rows = [d for d in rows if d.class_id == d.detected_class]
     if expect is not None and expect != len(rows):
         raise Conflict(f"the selection changed: {len(rows)} detection(s) match now, not {expect}; "
                        "look again and confirm")
@@ -319,9 +327,12 @@ def bulk_decide(s: Session, pid: int, status: str, user: Principal, *,
 
 def add_object(s: Session, pid: int, class_id: str, wall_key: str, u: float, v: float,
                user: Principal, data_dir: Path, *, note: str | None = None, snap: bool = True,
-               action: str = "add", extra: dict | None = None) -> dict:
-    """An object recognition missed, placed by a reviewer (``source: reviewer``, accepted).
+               action: str = "add", extra: dict | None = None, status: str = "pending") -> dict:
+    """An object recognition missed, placed by a reviewer (``source: reviewer``).
 
+    It is ``pending`` until someone confirms it (accept; rejecting it undoes the addition),
+    except when ``status`` says otherwise (a promoted suggestion is accepted at once). Its
+    reference continues the series of the job's detections (``D0121`` after ``D0120``).
     With ``snap`` the click moves to where the class's depth model matches the wall's
     relief within a few centimetres (:mod:`app.snap`).
     """
@@ -342,10 +353,10 @@ def add_object(s: Session, pid: int, class_id: str, wall_key: str, u: float, v: 
         where = _snap(s, job, wall, class_id, where, data_dir)
     w_m, h_m = float(classes[class_id]["width_m"]), float(classes[class_id]["height_m"])
     now = utcnow()
-    d = DetectionRow(project_id=pid, job_id=job.id, ref=f"R{uuid.uuid4().hex[:8]}", class_id=class_id,
+    d = DetectionRow(project_id=pid, job_id=job.id, ref=_next_ref(s, job.id), class_id=class_id,
                      detected_class=class_id, wall_key=wall.key, position=_position(wall, where.u, where.v),
                      u=where.u, v=where.v, width_m=w_m, height_m=h_m, alpha=None,
-                     rho_depth=where.rho, rho_colour=None, source="reviewer", status="accepted",
+                     rho_depth=where.rho, rho_colour=None, source="reviewer", status=status,
                      version=1, reviewed_by=user.name, reviewed_at=now, note=note,
                      extra={**({"surface": wall.kind} if wall.kind else {}),  # contract 4: on a surface
                             "clicked": [float(u), float(v)], "snapped": where.snapped, **(extra or {})})
@@ -354,6 +365,14 @@ def add_object(s: Session, pid: int, class_id: str, wall_key: str, u: float, v: 
     _audit(s, d, user, action, 0, {}, note)
     s.flush()
     return detection_dict(d)
+
+
+def _next_ref(s: Session, job_id: int) -> str:
+    """The next reference of the job's series (``D0121`` after ``D0120``; the job's rows are
+    locked by the project's lock that every addition takes)."""
+    refs = s.scalars(select(DetectionRow.ref).where(DetectionRow.job_id == job_id))
+    numbers = [int(r[1:]) for r in refs if len(r) > 1 and r[0] == "D" and r[1:].isdigit()]
+    return f"D{max(numbers, default=0) + 1:04d}"
 
 
 def _snap(s: Session, job: Job, wall: WallRow, class_id: str, where: Snap, data_dir: Path) -> Snap:
@@ -381,7 +400,7 @@ def promote(s: Session, sid: int, user: Principal, data_dir: Path, *, pid: int |
     if sg.promoted_id is not None:
         raise Conflict(f"suggestion {sid} was already promoted (detection {sg.promoted_id})")
     det = add_object(s, sg.project_id, sg.class_id, sg.wall_key, sg.u, sg.v, user, data_dir,
-                     snap=False, action="promote",
+                     snap=False, action="promote", status="accepted",
                      note=f"suggestion {sid} ({sg.source}, {sg.reason})",
                      extra={"suggestion": sid, "suggested_by": sg.source, "score": sg.score})
     sg.promoted_id = int(det["id"])
@@ -549,7 +568,9 @@ def carry_over(s: Session, old_job_id: int | None, new_job: Job,
             if not (0.0 <= o.u <= w.width_m and 0.0 <= o.v <= w.height_m):
                 out["not_found"] += 1
                 continue
-            n = DetectionRow(project_id=o.project_id, job_id=new_job.id, ref=o.ref, class_id=o.class_id,
+            taken = o.ref in {d.ref for d in new}  # the new run's series may have reached it
+            n = DetectionRow(project_id=o.project_id, job_id=new_job.id,
+                             ref=_next_ref(s, new_job.id) if taken else o.ref, class_id=o.class_id,
                              detected_class=o.detected_class, wall_key=o.wall_key,
                              position=_position(w, o.u, o.v), u=o.u, v=o.v, width_m=o.width_m,
                              height_m=o.height_m, alpha=None, rho_depth=o.rho_depth, rho_colour=None,

@@ -1,8 +1,11 @@
-"""A sample project made from a finished ``sbsc detect`` run, so ``sbsc serve`` opens on results.
+"""Review projects made from a finished ``sbsc detect`` run, so ``sbsc serve`` opens on results.
 
-``ensure_sample_project(scan, detections_dir)`` copies the scan and the output directory
-into the data dir and records them as a project with one succeeded job, without running
-detection again. It is idempotent: a project of that name with results is reused.
+``import_detect_output(detections_dir, scans=...)`` (``sbsc import``) copies the scans and the
+output directory into the data dir and records them as a project with one succeeded job,
+without running detection again, then prepares the 3D scene's level of detail (as a job
+does when it ends) so the scene's first open reads no scan. It is idempotent: a project of
+that name with results is reused. ``ensure_sample_project(scan, detections_dir)`` is the
+same for one scan, under the sample's name by default.
 
     python -m app.sample SCAN DETECTIONS_DIR [--models DIR] [--name NAME]
 """
@@ -15,6 +18,7 @@ import os
 import shutil
 import sys
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 
 from sqlalchemy import select
@@ -23,7 +27,7 @@ from sbsc_core.errors import InputError, SbscError
 
 from .config import AppSettings
 from .db import Database, upgrade
-from .jobs import job_dir
+from .jobs import _prepare_viewer, job_dir
 from .models import DesignRow, Job, ModelLibraryRow, Project, Scan, utcnow
 from .results import import_results
 from .storage import sha256_file
@@ -57,23 +61,44 @@ def ensure_sample_project(scan: Path, detections_dir: Path, *, models: Path | No
                           points: int | None = None, design: Path | None = None) -> int:
     """Create (once) a project from ``scan`` and a finished output dir; returns its id.
 
-    ``detections_dir`` holds ``detections.json`` and ``orthoimages/`` as written by
-    ``sbsc detect``; ``models`` is the library it was run with (default: the bundled one).
-    ``points`` saves reading the scan to count them. ``design`` is the as-designed IFC to
-    compare with; by default the simulator's ``as_designed.ifc`` beside the scan, if any.
+    See :func:`import_detect_output`; ``points`` saves counting the scan's points.
     """
-    settings = settings or AppSettings()
-    scan, detections_dir = Path(scan), Path(detections_dir)
+    scan = Path(scan)
     if not scan.is_file():
         raise InputError(scan, "no such scan file")
+    return import_detect_output(detections_dir, scans=[scan], models=models, name=name,
+                                settings=settings, points=points, design=design)[0]
+
+
+def import_detect_output(detections_dir: Path, *, scans: list[Path] | tuple[Path, ...] = (),
+                         models: Path | None = None, name: str = SAMPLE_NAME,
+                         settings: AppSettings | None = None, points: int | None = None,
+                         design: Path | None = None,
+                         say: Callable[[str], None] = lambda _m: None) -> tuple[int, bool]:
+    """Create (once) a review project from a finished output dir; returns (its id, made now).
+
+    ``detections_dir`` holds ``detections.json`` and ``orthoimages/`` as written by
+    ``sbsc detect``; ``scans`` the scan files it was run on (none: the project has no scan,
+    its 3D scene no point cloud); ``models`` is the library it was run with (default: the
+    bundled one). ``points`` (one scan) saves counting its points. ``design`` is the
+    as-designed IFC to compare with; by default the simulator's ``as_designed.ifc`` beside
+    the first scan, if any. A project of that name with results is returned as it is.
+    """
+    settings = settings or AppSettings()
+    scans = [Path(p) for p in scans]
+    detections_dir = Path(detections_dir)
+    for scan in scans:
+        if not scan.is_file():
+            raise InputError(scan, "no such scan file")
     if not (detections_dir / "detections.json").is_file():
         raise InputError(detections_dir, "no detections.json here (run sbsc detect first)")
     existing = find_sample_project(settings, name)
     if existing is not None:
-        return existing
-    design = Path(design) if design is not None else scan.parent / "as_designed.ifc"
+        return existing, False
+    if design is None and scans:
+        design = scans[0].parent / "as_designed.ifc"
     designed = None
-    if design.is_file():
+    if design is not None and Path(design).is_file():
         from sbsc_core.bim.design import read_as_designed
         from sbsc_core.io.models import load_model_library
         from sbsc_core.paths import bundled_models_dir
@@ -86,26 +111,28 @@ def ensure_sample_project(scan: Path, detections_dir: Path, *, models: Path | No
         from .storage import library_summary
 
         library_classes = library_summary(load_model_library(models))
-    if points is None:
-        from sbsc_core.io.scans import read_scan
+    from sbsc_core.io.scans import scan_point_count
 
-        points = len(read_scan(scan))
+    counts = [points if points is not None and len(scans) == 1 else scan_point_count(p) for p in scans]
     settings.ensure_dirs()
     db = Database(settings.db_url)
     created: list[Path] = []
+    copies: list[Path] = []
     try:
         with db.write() as s:
             project = Project(name=name, status="open", created_by="sample")
             s.add(project)
             s.flush()
             pdir = settings.projects_dir / str(project.id)
-            scan_dest = pdir / "scans" / f"{uuid.uuid4().hex[:12]}_{scan.name}"
             created.append(pdir)
-            _link_or_copy(scan, scan_dest)
-            s.add(Scan(project_id=project.id, filename=scan.name,
-                       path=scan_dest.relative_to(settings.data_dir).as_posix(),
-                       size_bytes=scan.stat().st_size, sha256=sha256_file(scan), points=int(points),
-                       uploaded_by="sample"))
+            for scan, count in zip(scans, counts, strict=True):
+                scan_dest = pdir / "scans" / f"{uuid.uuid4().hex[:12]}_{scan.name}"
+                _link_or_copy(scan, scan_dest)
+                copies.append(scan_dest)
+                s.add(Scan(project_id=project.id, filename=scan.name,
+                           path=scan_dest.relative_to(settings.data_dir).as_posix(),
+                           size_bytes=scan.stat().st_size, sha256=sha256_file(scan), points=int(count or 0),
+                           uploaded_by="sample"))
             models_id = None
             if models is not None:
                 lib_dest = pdir / "models" / uuid.uuid4().hex[:12]
@@ -118,6 +145,7 @@ def ensure_sample_project(scan: Path, detections_dir: Path, *, models: Path | No
                 s.flush()
                 models_id = project.models_id = row.id
             if designed is not None:
+                design = Path(design)
                 design_dest = pdir / "design" / f"{uuid.uuid4().hex[:12]}_{design.name}"
                 _link_or_copy(design, design_dest)
                 s.add(DesignRow(project_id=project.id, filename=design.name,
@@ -144,7 +172,22 @@ def ensure_sample_project(scan: Path, detections_dir: Path, *, models: Path | No
         raise
     finally:
         db.dispose()
-    return pid
+    if copies:  # the 3D scene's level of detail, read from the scans in chunks, as a job's end does
+        lod = _prepare_viewer(settings, pid, copies, say)
+        if lod is not None and None in counts and len(copies) == 1:
+            _set_points(settings, pid, lod.source_points)
+    return pid, True
+
+
+def _set_points(settings: AppSettings, pid: int, points: int) -> None:
+    """Record the point count of a project's only scan (a text file has none in its header)."""
+    db = Database(settings.db_url)
+    try:
+        with db.write() as s:
+            for row in s.scalars(select(Scan).where(Scan.project_id == pid)):
+                row.points = int(points)
+    finally:
+        db.dispose()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -121,9 +121,9 @@ def create_app(settings: AppSettings | None = None, *, start_jobs: bool = True) 
     app.add_middleware(BoundsMiddleware, max_body=settings.max_json_body_bytes,
                        max_depth=settings.max_json_depth, max_keys=settings.max_json_keys)
 
-    from .api import design, export, jobs, projects, review, uploads
+    from .api import design, export, jobs, projects, review, session, uploads
 
-    for module in (projects, uploads, jobs, review, export, design):
+    for module in (projects, uploads, jobs, review, export, design, session):
         app.include_router(module.router)
 
     if settings.viewer:

@@ -20,6 +20,7 @@ share of distractors, wall clutter and furniture separately, that carry at least
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -287,21 +288,24 @@ def surface_rows(truth: TruthDocument, matches: list[Match], false_positives: li
     return rows
 
 
-_COLUMNS = (  # header, attribute, width, decimals
-    ("Object", "name", 24, None),
-    ("Instances", "instances", 9, 0),
-    ("TP (%)", "tp_pct", 7, 1),
-    ("FN (%)", "fn_pct", 7, 1),
-    ("FP (%)", "fp_pct", 7, 1),
-    ("TP a>0.9 (%)", "tp_alpha_high_pct", 12, 1),
-    ("mean dh (mm)", "h_mean_mm", 12, 1),
-    ("mean dv (mm)", "v_mean_mm", 12, 1),
-    ("max dh (mm)", "h_max_mm", 11, 1),
-    ("max dv (mm)", "v_max_mm", 11, 1),
-    ("TP", "tp", 5, 0),
-    ("FN", "fn", 5, 0),
-    ("FP", "fp", 5, 0),
+_COLUMNS = (  # header, attribute, width, decimals (one space between columns: 100 wide)
+    ("Object", "name", 23, None),
+    ("Inst", "instances", 5, 0),
+    ("TP%", "tp_pct", 6, 1),
+    ("FN%", "fn_pct", 6, 1),
+    ("FP%", "fp_pct", 6, 1),
+    ("a>.9%", "tp_alpha_high_pct", 6, 1),
+    ("dh", "h_mean_mm", 6, 1),
+    ("dv", "v_mean_mm", 6, 1),
+    ("dh max", "h_max_mm", 6, 1),
+    ("dv max", "v_max_mm", 6, 1),
+    ("TP", "tp", 4, 0),
+    ("FN", "fn", 4, 0),
+    ("FP", "fp", 4, 0),
 )
+_LEGEND = ("Inst: instances in the ground truth; a>.9%: share of the TP with coherence alpha > 0.9;\n"
+           "dh, dv (max): mean (max) horizontal, vertical position error of the TP in mm; TP, FN, FP: counts")
+TABLE_WIDTH = 100  # the table and its notes fit a terminal this wide
 
 
 def _cell(value, width: int, decimals: int | None) -> str:
@@ -315,31 +319,33 @@ def _cell(value, width: int, decimals: int | None) -> str:
 
 def format_table(table: EvaluationTable) -> str:
     """Table 1 as fixed-width text, with a header, one line per class and a TOTAL line."""
-    header = "  ".join(h.ljust(w) if d is None else h.rjust(w) for h, _, w, d in _COLUMNS)
+    header = " ".join(h.ljust(w) if d is None else h.rjust(w) for h, _, w, d in _COLUMNS)
     rule = "-" * len(header)
     lines = [header, rule]
     for row in [*table.rows, None, table.total]:
         if row is None:
             lines.append(rule)
             continue
-        lines.append("  ".join(_cell(getattr(row, a), w, d) for _, a, w, d in _COLUMNS))
+        lines.append(" ".join(_cell(getattr(row, a), w, d) for _, a, w, d in _COLUMNS))
     lines.append(rule)
     for row in table.surfaces or []:
-        lines.append("  ".join(_cell(getattr(row, a), w, d) for _, a, w, d in _COLUMNS))
+        lines.append(" ".join(_cell(getattr(row, a), w, d) for _, a, w, d in _COLUMNS))
     if table.surfaces:
         lines.append(rule)
     note = f"match radius {table.max_distance_m * 1000:.0f} mm"
     if table.unknown_class_detections:
         note += f"; {table.unknown_class_detections} detection(s) of classes absent from the ground truth (counted as FP)"
-    lines.append(note)
+    lines.extend(textwrap.wrap(note, TABLE_WIDTH))
+    lines.extend(_LEGEND.splitlines())
     f = table.distractors
     if f is not None:
         pct = lambda v: "-" if v is None else f"{v:.1f} %"  # noqa: E731
         kinds = ", ".join(f"{k} {n}" for k, n in sorted(f.fp_by_kind.items()))
-        lines.append(f"false positives on distractors: {f.fp_on_distractors}"
-                     + (f" ({kinds})" if kinds else "")
-                     + f"; clutter items with a FP: {f.clutter_with_fp}/{f.clutter} ({pct(f.clutter_with_fp_pct)})"
-                     + f"; furniture with a FP: {f.furniture_with_fp}/{f.furniture} ({pct(f.furniture_with_fp_pct)})")
+        lines.extend(textwrap.wrap(
+            f"false positives on distractors: {f.fp_on_distractors}" + (f" ({kinds})" if kinds else "")
+            + f"; clutter items with a FP: {f.clutter_with_fp}/{f.clutter} ({pct(f.clutter_with_fp_pct)})"
+            + f"; furniture with a FP: {f.furniture_with_fp}/{f.furniture} ({pct(f.furniture_with_fp_pct)})",
+            TABLE_WIDTH))
     return "\n".join(lines)
 
 

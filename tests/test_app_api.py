@@ -289,7 +289,7 @@ def test_review_concurrency_audit_signoff_and_lock(client, srv):
     r = client.patch(f"/api/detections/{d2['id']}", json={"u": 99.0, "version": 3}, headers=rita)
     assert r.status_code == 422 and "outside wall" in r.json()["detail"]
     hist = client.get(f"/api/detections/{d2['id']}/history", headers=rita).json()
-    assert [h["action"] for h in hist] == ["relabel", "move"]
+    assert [h["action"] for h in hist] == ["relabel+accept", "move"]  # relabel: it is a socket_x4, accepted
     assert hist[0]["before"]["class"] == d2["class"] and hist[0]["after"]["class"] == "socket_x4"
     # the audit trail cannot be rewritten, not even in the database itself
     with pytest.raises(sqlite3.DatabaseError, match="append-only"):

@@ -130,3 +130,69 @@ def test_design_upload_and_comparison(env):
     with c.app.state.db.read() as s:
         assert s.query(DesignRow).count() == 1
     assert len(_stored(env)) == 1
+
+
+def test_exports_keep_their_globalids_and_every_bcf_topic_selects_an_element(env, tmp_path):
+    """Issue 29: two exports of the same reviewed project give the same GlobalIds; every BCF
+    topic selects an element of the as-designed or of the as-is IFC, named in its header;
+    topic types come from the BCF's extension list; dates carry a time zone."""
+    import ifcopenshell
+    from lxml import etree
+
+    c, pid, h = env["client"], env["pid"], env["h"]
+    if c.get(f"/api/projects/{pid}/comparison", headers=h).status_code == 404:
+        assert _upload(env, "as_designed.ifc", env["design"].read_bytes()).status_code == 201
+    with c.app.state.db.write() as s:  # the test before left it signed off by hand, with pending objects
+        s.get(Project, pid).status = "open"
+    r = c.post(f"/api/projects/{pid}/decisions", json={"status": "accepted", "filter": {"review": "pending"}},
+               headers=h)
+    assert r.status_code == 200, r.text
+    files = []
+    for k in range(2):
+        r = c.get(f"/api/projects/{pid}/export.ifc", headers=h)
+        assert r.status_code == 200
+        assert r.headers["content-disposition"] == f'attachment; filename="Room-{pid}.ifc"'
+        (tmp_path / f"asis{k}.ifc").write_bytes(r.content)
+        files.append(ifcopenshell.open(str(tmp_path / f"asis{k}.ifc")))
+    first, second = ({e.Tag: e.GlobalId for e in f.by_type("IfcElement") if e.Tag} for f in files)
+    assert first and first == second  # the same object, the same GlobalId
+    assert {e.GlobalId for e in files[0].by_type("IfcRoot")} == {e.GlobalId for e in files[1].by_type("IfcRoot")}
+    assert len({e.GlobalId for e in files[0].by_type("IfcRoot")}) == len(files[0].by_type("IfcRoot"))
+    asis = files[0]
+    assert asis.by_type("IfcProject")[0].Name == "Room"
+    header = asis.header.file_name
+    assert header.name == f"Room-{pid}.ifc" and header.author == ("rita",) and "sbsc" in header.originating_system
+    design = ifcopenshell.open(str(env["design"]))
+    held = {f"Room-{pid}.ifc": {e.GlobalId for e in asis.by_type("IfcRoot")},
+            "as_designed.ifc": {e.GlobalId for e in design.by_type("IfcRoot")}}
+    r = c.get(f"/api/projects/{pid}/comparison.bcf", headers=h)
+    assert r.status_code == 200
+    with zipfile.ZipFile(io.BytesIO(r.content)) as z:
+        names = z.namelist()
+        project = etree.fromstring(z.read("project.bcfp"))
+        xsd_name = project.findtext("ExtensionSchema")
+        assert xsd_name in names
+        types = etree.fromstring(z.read(xsd_name)).xpath(
+            "//xs:simpleType[@name='TopicType']//xs:enumeration/@value",
+            namespaces={"xs": "http://www.w3.org/2001/XMLSchema"})
+        assert sorted(types) == ["Displaced", "Missing", "Unexpected"]
+        kinds = set()
+        for name in (n for n in names if n.endswith("markup.bcf")):
+            markup = etree.fromstring(z.read(name))
+            topic = markup.find("Topic")
+            kind = topic.get("TopicType")
+            assert kind in types
+            kinds.add(kind)
+            date = topic.findtext("CreationDate")
+            assert date.endswith(("Z", "+00:00")), date  # with its time zone
+            header_files = [f.findtext("Filename") for f in markup.findall("Header/File")]
+            assert header_files and all(f in held for f in header_files)
+            vp = markup.findtext("Viewpoints/Viewpoint")
+            viewpoint = etree.fromstring(z.read(name.replace("markup.bcf", vp)))
+            selected = [comp.get("IfcGuid") for comp in viewpoint.findall("Components/Selection/Component")]
+            assert selected, f"{kind} topic selects nothing"
+            for guid in selected:  # each selected element is in a file the topic names
+                assert any(guid in held[f] for f in header_files), (kind, guid, header_files)
+            if kind == "Unexpected":
+                assert header_files == [f"Room-{pid}.ifc"]
+    assert kinds == {"Missing", "Displaced", "Unexpected"}

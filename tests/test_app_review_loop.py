@@ -107,20 +107,26 @@ def test_snap_moves_a_click_onto_the_relief_of_the_model():
 def test_add_a_missed_object_and_bulk_accept_by_filter(c, srv):
     pid, doc = project(c, srv, "add_bulk")
     rita = auth(srv.tokens["rita"])
-    # add: 201, source reviewer, accepted by the caller, audited
+    # add as the pages do: 201, source reviewer, pending until confirmed, in the series of references, audited
     r = c.post(f"/api/projects/{pid}/detections", headers=rita,
-               json={"class": "switch", "wall": "W01", "u": 2.2, "v": 1.4, "note": "behind the door"})
+               json={"class": "switch", "wall": "W01", "u": 2.2, "v": 1.4, "note": "behind the door",
+                     "status": "pending"})
     assert r.status_code == 201, r.text
     added = r.json()
     assert added["source"] == "reviewer" and added["class"] == "switch" and added["wall"] == "W01"
-    assert added["review"]["status"] == "accepted" and added["review"]["by"] == "rita"
+    assert added["review"]["status"] == "pending" and added["review"]["by"] == "rita"
+    refs = sorted(d["ref"] for d in doc["detections"])
+    assert added["ref"] == f"D{int(refs[-1][1:]) + 1:04d}", (added["ref"], refs[-1])
+    r = c.patch(f"/api/detections/{added['id']}", headers=rita,
+                json={"status": "accepted", "version": added["review"]["version"]})  # confirmed
+    assert r.status_code == 200 and r.json()["review"]["status"] == "accepted"
     assert added["note"] == "behind the door" and added["alpha"] is None
     wall = next(w for w in doc["walls"] if w["id"] == "W01")
     expect = [o + added["u"] * a + added["v"] * b
               for o, a, b in zip(wall["origin"], wall["axis_u"], wall["axis_v"], strict=True)]
     assert added["position"] == pytest.approx(expect)
     hist = c.get(f"/api/detections/{added['id']}/history", headers=rita).json()
-    assert [h["action"] for h in hist] == ["add"] and hist[0]["by"] == "rita"
+    assert [h["action"] for h in hist] == ["add", "accept"] and hist[0]["by"] == "rita"
     for bad, word in (({"class": "nope", "wall": "W01", "u": 1, "v": 1}, "class"),
                       ({"class": "switch", "wall": "W99", "u": 1, "v": 1}, "wall"),
                       ({"class": "switch", "wall": "W01", "u": 40, "v": 1}, "outside")):
@@ -145,8 +151,9 @@ def test_add_a_missed_object_and_bulk_accept_by_filter(c, srv):
     accepted = [d for d in after if d["source"] != "reviewer" and d["review"]["status"] == "accepted"]
     assert len(accepted) == n and all(d["alpha"] >= threshold for d in accepted)
     trail = c.get(f"/api/projects/{pid}/decisions", headers=rita).json()
-    assert sum(t["action"] == "accept" for t in trail) == n
-    assert {d["id"] for d in accepted} == {t["detection"] for t in trail if t["action"] == "accept"}
+    assert sum(t["action"] == "accept" and t["detection"] != added["id"] for t in trail) == n
+    assert {d["id"] for d in accepted} == {t["detection"] for t in trail
+                                           if t["action"] == "accept" and t["detection"] != added["id"]}
     # bulk by ids: already decided ones are skipped with a reason
     pending = [d["id"] for d in after if d["review"]["status"] == "pending"]
     r = c.post(f"/api/projects/{pid}/decisions", headers=rita,
@@ -157,7 +164,7 @@ def test_add_a_missed_object_and_bulk_accept_by_filter(c, srv):
     # the summary
     summ = c.get(f"/api/projects/{pid}/summary", headers=rita).json()
     assert summ["added"] == 1 and summ["bulk"] == n + 1 and summ["bulk_batches"] == 2
-    assert summ["single"] == 1 and summ["decisions"] == n + 2 and summ["per_minute"] > 0
+    assert summ["single"] == 2 and summ["decisions"] == n + 3 and summ["per_minute"] > 0
     assert batch
 
 
@@ -192,6 +199,7 @@ def test_a_second_job_keeps_decisions_cancel_and_cap(c, srv):
     assert r.status_code == 200
     added = c.post(f"/api/projects/{pid}/detections", headers=rita,
                    json={"class": "switch", "wall": "W02", "u": 2.7, "v": 2.0, "snap": False}).json()
+    assert added["review"]["status"] == "accepted"  # a script's addition (contract 7): accepted at once
     # a reviewer may not replace reviewed results; a manager may
     assert c.post(f"/api/projects/{pid}/jobs", json={}, headers=rita).status_code == 403
     fake_control(srv.data_dir, delay_s=2.0, detections=8)
@@ -220,6 +228,7 @@ def test_a_second_job_keeps_decisions_cancel_and_cap(c, srv):
     assert relabelled["class"] == "socket_x4" and relabelled["review"]["status"] == "accepted"
     kept = [d for d in new["detections"] if d["source"] == "reviewer"]
     assert len(kept) == 1 and kept[0]["u"] == added["u"] and kept[0]["review"]["status"] == "accepted"
+    assert len({d["ref"] for d in new["detections"]}) == len(new["detections"])  # references stay unique
     pending = [d for d in new["detections"] if d["review"]["status"] == "pending"]
     assert len(pending) == 8 - 5
     hist = c.get(f"/api/detections/{relabelled['id']}/history", headers=rita).json()
@@ -308,3 +317,26 @@ def test_learn_exemplars_from_decisions(c, srv, tmp_path):
     assert len(lib.models["switch"].extra_depths) == 1  # read as a further depth model
     # the next job uses the learnt library
     assert c.get(f"/api/projects/{pid}", headers=rita).json()["models"]["id"] == r.json()["library"]
+
+
+def test_relabel_means_accept_as_the_new_class_and_bulk_skips_relabelled(c, srv):
+    """Issue 29: relabel is the same decision from every page (the gallery, the 3D scene, a
+    script): the object is accepted as the new class; bulk decisions leave relabelled ones alone."""
+    pid, doc = project(c, srv, "relabel")
+    rita = auth(srv.tokens["rita"])
+    det = doc["detections"][0]
+    other = next(k for k in ("socket_x4", "switch", "socket_x1") if k != det["class"])
+    r = c.patch(f"/api/detections/{det['id']}", headers=rita, json={"class": other, "version": 1})
+    assert r.status_code == 200 and r.json()["class"] == other and r.json()["review"]["status"] == "accepted"
+    hist = c.get(f"/api/detections/{det['id']}/history", headers=rita).json()
+    assert [h["action"] for h in hist] == ["relabel+accept"]
+    # reject everything accepted in bulk: the relabelled object is skipped, with its reason
+    r = c.post(f"/api/projects/{pid}/decisions", headers=rita,
+               json={"status": "rejected", "filter": {"review": "accepted"}})
+    assert r.status_code == 200 and r.json()["changed"] == 0
+    assert r.json()["skipped"] == [{"id": det["id"], "reason": "relabelled by a reviewer: decided one by one, "
+                                                              "never in bulk"}]
+    r = c.post(f"/api/projects/{pid}/decisions", headers=rita, json={"status": "rejected", "ids": [det["id"]]})
+    assert r.json()["changed"] == 0 and "relabelled" in r.json()["skipped"][0]["reason"]
+    now = c.get(f"/api/detections/{det['id']}", headers=rita).json()
+    assert now["review"]["status"] == "accepted" and now["class"] == other

@@ -111,7 +111,7 @@ def test_compare_to_dir_writes_json_report_and_bcf(tmp_path):
     assert json.loads((out / "expected.json").read_text())["counts"] == comp.design.expected_counts()
 
     html = (out / "report.html").read_text()
-    walls_drawn = re.findall(r"<h2>Wall (W\d)</h2>", html)
+    walls_drawn = re.findall(r"<h2 id=.wall-W\d.>Wall (W\d)</h2>", html)
     images = _decode_images(html)
     assert len(images) == len(walls_drawn) >= 2
     for wid, img in zip(walls_drawn, images, strict=True):
@@ -150,3 +150,50 @@ def test_compare_refuses_bad_tolerance_and_documents(tmp_path):
     bad["detections"][3]["position"] = [1.0, "x", 2.0]
     with pytest.raises(InputError, match=r"detections\[3\]\.position"):
         compare(design, bad)
+
+
+def test_report_lists_the_findings_first_and_labels_never_overlap(tmp_path):
+    """Issue 29: the findings come first, each linked to its wall; the header says what was
+    compared (never "None"); on the pictures no label covers a box or another label."""
+    from sbsc_core.bim.report import _Labels, _overlaps, render_report
+
+    path, _ = _design(tmp_path, n_moved=2, n_removed=2, n_added=2)
+    comp = compare(read_as_designed(path, typings=TYPINGS), detections_document(noise_m=0.01, seed=0),
+                   tolerance_m=0.10)
+    html = render_report(comp)
+    findings = html.index("<h2>Findings (6)</h2>")
+    assert findings < html.index("<h2 id='wall-")  # before any wall
+    assert "Detections: <code>the review project" in html and "None" not in html
+    n = comp.summary()
+    assert f"({n['found'] + n['displaced'] + n['unexpected']} compared)" in html
+    items = re.findall(r"<li><b class='(\w+)'>", html[findings:])
+    assert sorted(items) == sorted(["missing"] * 2 + ["displaced"] * 2 + ["unexpected"] * 2)
+    for anchor in set(re.findall(r"href='#(wall-[^']+)'", html)):
+        assert f"<h2 id='{anchor}'>" in html
+    # crowded boxes: five objects side by side, each with a long label
+    img = np.full((300, 600, 3), 255, np.uint8)
+    labels = _Labels()
+    for k in range(5):
+        p0, p1 = (200 + 30 * k, 140), (220 + 30 * k, 160)
+        labels.box(p0, p1)
+        labels.add(f"unexpected fire_alarm_switch_sign {k}", p0, p1, (200, 40, 200))
+    placed: list = []
+    real_rect = cv2.rectangle
+
+    def spy(im, a, b, colour, thickness, *args):  # noqa: ANN001, ANN202
+        if thickness == -1:
+            placed.append((a[0], a[1], b[0] + 1, b[1] + 1))
+        return real_rect(im, a, b, colour, thickness, *args)
+
+    import sbsc_core.bim.report as rep
+
+    old = rep.cv2.rectangle
+    rep.cv2.rectangle = spy
+    try:
+        labels.draw(img)
+    finally:
+        rep.cv2.rectangle = old
+    assert len(placed) == 5
+    for i, a in enumerate(placed):
+        assert not any(_overlaps(a, b) for b in labels.boxes), a
+        assert not any(_overlaps(a, b) for b in placed[i + 1:]), a

@@ -377,10 +377,11 @@ def test_the_library_never_imports_the_web_layer() -> None:
 def test_web_commands_register_through_the_entry_point_group() -> None:
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     assert project["entry-points"]["sbsc.commands"] == {"serve": "app.cli:register_serve",
-                                                         "user": "app.cli:register_user"}
+                                                         "user": "app.cli:register_user",
+                                                         "import": "app.cli:register_import"}
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     res = subprocess.run([sys.executable, "-m", "app", "--help"], capture_output=True, text=True, env=env)
-    assert res.returncode == 0 and "serve" in res.stdout and "user" in res.stdout
+    assert res.returncode == 0 and "serve" in res.stdout and "user" in res.stdout and "import" in res.stdout
     res = subprocess.run([sys.executable, "-m", "app", "user", "add", "x"], capture_output=True, text=True, env=env)
     assert res.returncode == 2 and "--role" in res.stderr
 

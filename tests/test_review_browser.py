@@ -98,9 +98,15 @@ def test_gallery_add_promote_and_bulk_accept(browser, srv):
         page.wait_for_function("document.querySelector('#wall-img').naturalWidth > 0")
         box = page.locator("#wall-img").bounding_box()
         page.locator("#wall-img").click(position={"x": box["width"] * 0.55, "y": box["height"] * 0.5})
-        page.wait_for_selector("#add-msg:has-text('Added switch on W01')")
+        page.wait_for_selector("#add-msg:has-text('Switch on W01')")  # the library's name
+        assert "pending until you confirm it" in page.locator("#add-msg").inner_text()
+        added = [d for d in detections(srv, pid) if d["source"] == "reviewer"]
+        assert len(added) == 1 and added[0]["review"]["status"] == "pending"
+        page.click("#add-ok")  # confirmed
+        page.wait_for_selector("#add-confirm", state="hidden")
         added = [d for d in detections(srv, pid) if d["source"] == "reviewer"]
         assert len(added) == 1 and added[0]["wall"] == "W01" and added[0]["review"]["by"] == "rita"
+        assert added[0]["review"]["status"] == "accepted"
         assert added[0]["u"] == pytest.approx(0.55 * 4.0, abs=0.15)
         assert added[0]["v"] == pytest.approx(1.25, abs=0.15)
         assert page.locator(".det").count() == 9
@@ -122,7 +128,7 @@ def test_gallery_add_promote_and_bulk_accept(browser, srv):
         final = detections(srv, pid)
         assert all(d["review"]["status"] == "accepted" for d in final)
         trail = httpx.get(f"{srv.url}/api/projects/{pid}/decisions", headers=auth(srv.token)).json()
-        assert sum(t["action"] == "accept" for t in trail) == n_pending  # each audited
+        assert sum(t["action"] == "accept" for t in trail) == n_pending + 1  # each audited (and the confirmation)
     finally:
         page.close()
 

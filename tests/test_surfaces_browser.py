@@ -89,7 +89,7 @@ def test_ceiling_object_reviewed_and_added_in_the_gallery(browser, srv):  # noqa
         page.wait_for_function("document.querySelector('#wall-img').naturalWidth > 0")
         box = page.locator("#wall-img").bounding_box()
         page.locator("#wall-img").click(position={"x": box["width"] * 0.25, "y": box["height"] * 0.5})
-        page.wait_for_selector("#add-msg:has-text('Added smoke_detector on C01')")
+        page.wait_for_selector("#add-msg:has-text('Smoke detector on C01')")  # the library's name
         added = [x for x in detections(srv, pid) if x["source"] == "reviewer"]
         assert len(added) == 1 and added[0]["surface"] == "ceiling" and added[0]["wall"] == "C01"
         assert added[0]["u"] == pytest.approx(1.0, abs=0.15) and added[0]["v"] == pytest.approx(1.5, abs=0.15)

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 import app.viewer.lod as lod_mod
-from app.viewer.lod import downsample, scan_lod
+from app.viewer.lod import downsample, scan_lod, stream_downsample
 from sbsc_core.io.ply import write_ply
+from sbsc_core.io.scans import ScanChunk
 
 
 def _room_points(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -52,12 +53,41 @@ def test_scan_lod_recentres_and_caches(tmp_path, monkeypatch):
     assert np.abs(lod.xyz).max() < 6.0  # recentred on the bounding box
     assert list((tmp_path / "cache").glob("viewer_lod_*.npz"))
 
-    def no_reading(_paths):
+    def no_reading(*_args, **_kw):
         raise AssertionError("the cache should have been used")
 
-    monkeypatch.setattr(lod_mod, "read_scans", no_reading)
+    monkeypatch.setattr(lod_mod, "iter_scan", no_reading)
     again = scan_lod([scan], max_points=10_000, cache_dir=tmp_path / "cache", overview_points=3_000)
     assert np.array_equal(again.xyz, lod.xyz) and np.array_equal(again.centre, lod.centre)
     assert np.array_equal(again.overview.xyz, lod.overview.xyz)
     with pytest.raises(AssertionError):  # another level of detail is another cache entry
         scan_lod([scan], max_points=5_000, cache_dir=tmp_path / "cache")
+
+
+def test_stream_downsample_never_holds_the_whole_scan(monkeypatch):
+    """A scan of 40 chunks: at most keep_factor x max_points points kept plus one chunk, and
+    the result spreads over the whole floor like a downsampling of the whole cloud."""
+    rng = np.random.default_rng(3)
+    xyz, rgb = _room_points(400_000, rng)
+    order = np.argsort(xyz[:, 0])  # a scan sweeps the floor: chunks cover different parts
+    xyz, rgb = xyz[order].astype(np.float32), rgb[order]
+    origin = np.array([100.0, 200.0, 0.0])
+    chunks = (ScanChunk(xyz[i:i + 10_000], rgb[i:i + 10_000], origin, i) for i in range(0, 400_000, 10_000))
+    sizes: list[int] = []
+    watched = {}
+    for name in ("_grid_down",):
+        real = getattr(lod_mod, name)
+        watched[name] = lambda p, c, voxel, real=real: sizes.append(len(p)) or real(p, c, voxel)
+        monkeypatch.setattr(lod_mod, name, watched[name])
+    out, col, voxel, n, org = stream_downsample(chunks, 20_000, keep_factor=2)
+    assert n == 400_000 and np.array_equal(org, origin) and voxel > 0
+    assert 8_000 < len(out) <= 20_000 and col.shape == out.shape
+    assert max(sizes) <= 2 * 20_000 + 10_000  # never the 400 000 points at once
+    assert np.allclose(out.min(axis=0), xyz.min(axis=0), atol=2 * voxel)
+    assert np.allclose(out.max(axis=0), xyz.max(axis=0), atol=2 * voxel)
+    # spread over the floor as a downsampling of the whole cloud at once is (the end bands
+    # also hold the walls at x = 0 and x = 10, whose share depends on where the voxels fall)
+    whole, _, _ = downsample(xyz, rgb, 20_000)
+    share = np.histogram(out[:, 0], bins=10, range=(0, 10))[0] / len(out)
+    ref = np.histogram(whole[:, 0], bins=10, range=(0, 10))[0] / len(whole)
+    assert np.abs(share - ref)[1:-1].max() < 0.01 and np.abs(share - ref).max() < 0.06, (share, ref)

@@ -17,6 +17,8 @@ from ..db import Database
 from ..jobs import JobManager
 from ..models import ROLES, Project
 from ..review_service import bundled_classes
+from ..sessions import COOKIE as SESSION_COOKIE
+from ..sessions import principal_of, same_origin
 from ..thumbnails import ImageCache
 
 
@@ -81,13 +83,16 @@ def _unauthorized(detail: str) -> HTTPException:
 
 
 async def current_user(request: Request, db: DB) -> Principal:
-    """The caller named by ``Authorization: Bearer TOKEN``; 401 without a valid token.
+    """The caller named by ``Authorization: Bearer TOKEN``, else by the browser's session
+    cookie (:mod:`app.sessions`); 401 without a valid token or session.
 
     Valid tokens are remembered for a few seconds (``app.state.auth_cache``) so that a
     busy reviewer does not cost a user lookup per request.
     """
     header = request.headers.get("authorization", "")
     scheme, _, token = header.partition(" ")
+    if not header and request.cookies.get(SESSION_COOKIE):
+        return await _session_user(request, db)
     if not header:
         raise _unauthorized("missing API token (send 'Authorization: Bearer TOKEN')")
     if scheme.lower() != "bearer" or not token.strip():
@@ -99,6 +104,26 @@ async def current_user(request: Request, db: DB) -> Principal:
         if user is None:
             raise _unauthorized("invalid or revoked API token")
         cache.put(token.strip(), user)
+    return user
+
+
+async def _session_user(request: Request, db: Database) -> Principal:
+    """The caller of a request that came with the session cookie alone (see app.sessions)."""
+    from .session import keeper
+
+    ticket = keeper(request).check(request.cookies[SESSION_COOKIE])
+    if ticket is None:
+        raise _unauthorized("session expired or ended: log in again")
+    if not same_origin(request.method, request.headers, request.headers.get("host")):
+        raise HTTPException(403, "a change made with the session cookie must come from this app's pages")
+
+    def lookup() -> Principal | None:
+        with db.read() as s:
+            return principal_of(s, ticket)
+
+    user = await run_in_threadpool(lookup)
+    if user is None:
+        raise _unauthorized("session no longer valid (user disabled or token replaced): log in again")
     return user
 
 

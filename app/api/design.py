@@ -126,16 +126,21 @@ def get_comparison_report(pid: int, _: Reviewer, s: ReadSession, settings: Setti
 
 @router.get("/projects/{pid}/comparison.bcf", response_class=Response,
             responses={200: {"content": {"application/octet-stream": {}}}})
-def get_comparison_bcf(pid: int, _: Reviewer, s: ReadSession, settings: Settings) -> Response:
-    """The findings (missing, displaced, unexpected) as a BCF 2.1 zip."""
-    from sbsc_core.bim.bcf import write_bcf
+def get_comparison_bcf(pid: int, user: Reviewer, s: ReadSession, settings: Settings) -> Response:
+    """The findings (missing, displaced, unexpected) as a BCF 2.1 zip: missing objects select
+    their element of the as-designed IFC, unexpected ones theirs of the as-is IFC (the
+    project's ``export.ifc``), displaced ones both."""
+    from sbsc_core.bim.bcf import AsIs, write_bcf
+
+    from .export import asis_file
 
     p, comp, image_dir = _comparison(s, settings, pid)
+    asis = AsIs(*asis_file(p))
     settings.tmp_dir.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix="comparison-", suffix=".bcf", dir=settings.tmp_dir)
     os.close(fd)
     try:
-        write_bcf(comp, Path(tmp), image_dir)
+        write_bcf(comp, Path(tmp), image_dir, project_name=p.name, asis=asis, author=user.name)
         data = Path(tmp).read_bytes()
     finally:
         with contextlib.suppress(FileNotFoundError):

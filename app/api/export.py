@@ -10,7 +10,7 @@ from fastapi.responses import JSONResponse, Response
 
 from sbsc_core.errors import SbscError
 
-from ..models import Job, ModelLibraryRow
+from ..models import Job, ModelLibraryRow, Project
 from ..results import project_document
 from ..review_service import current_signoff
 from .deps import ReadSession, Reviewer, Settings, get_project
@@ -32,9 +32,18 @@ def _library(settings, s, models_id):  # noqa: ANN001, ANN202
         return None  # the export falls back to its own class table
 
 
+def asis_file(p: Project) -> tuple[str, str]:
+    """(file name, GlobalId seed) of the project's as-is IFC: what its export writes and what
+    the comparison's BCF names and selects in. The seed is the project's own (id and creation
+    time): the same object keeps its GlobalId across exports and re-runs."""
+    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in p.name)[:60] or "project"
+    created = p.created_at.replace(tzinfo=None).isoformat(timespec="seconds") if p.created_at else ""
+    return f"{safe}-{p.id}.ifc", f"sbsc-project/{p.id}/{created}"
+
+
 @router.get("/projects/{pid}/export.ifc", response_class=Response,
             responses={200: {"content": {"application/x-step": {}}}})
-def export_ifc_file(pid: int, _: Reviewer, s: ReadSession, settings: Settings) -> Response:
+def export_ifc_file(pid: int, user: Reviewer, s: ReadSession, settings: Settings) -> Response:
     """IFC4: the walls, openings and the accepted objects of the project's current results."""
     p = get_project(s, pid)
     if p.current_job_id is None:
@@ -48,9 +57,11 @@ def export_ifc_file(pid: int, _: Reviewer, s: ReadSession, settings: Settings) -
     doc["project_name"] = p.name
     so = current_signoff(s, pid) if p.status != "open" else None
     library = _library(settings, s, s.get(Job, p.current_job_id).models_id)
+    name, seed = asis_file(p)
     try:
         model = export_ifc(doc, library=library, schema="IFC4", accepted_only=True,
-                           signoff=signoff_dict(so))
+                           signoff=signoff_dict(so), project_name=p.name, author=user.name,
+                           organisation=settings.organisation, file_name=name, guid_seed=seed)
     except SbscError as exc:
         raise HTTPException(422, str(exc)) from None
     settings.tmp_dir.mkdir(parents=True, exist_ok=True)
@@ -62,9 +73,8 @@ def export_ifc_file(pid: int, _: Reviewer, s: ReadSession, settings: Settings) -
             data = fh.read()
     finally:
         os.unlink(tmp)
-    safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in p.name)[:60] or "project"
     return Response(data, media_type="application/x-step",
-                    headers={"Content-Disposition": f'attachment; filename="{safe}-{pid}.ifc"'})
+                    headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
 @router.get("/projects/{pid}/export.json")

@@ -67,6 +67,7 @@ class NewObject(BaseModel):
     v: float = Field(allow_inf_nan=False)
     note: str | None = Field(default=None, max_length=2000)
     snap: bool = True  # move to where the class's depth model matches nearby
+    status: Literal["accepted", "pending"] = "accepted"  # pending: until a reviewer confirms it (the pages)
 
 
 class BulkFilter(BaseModel):
@@ -162,13 +163,15 @@ def review_detection(did: int, body: Change, user: Reviewer, db: DB):
 
 @router.post("/projects/{pid}/detections", status_code=201, responses=ERRORS)
 def add_detection(pid: int, body: NewObject, user: Reviewer, db: DB, settings: Settings):
-    """Add an object recognition missed: ``source: reviewer``, accepted by the caller, audited.
+    """Add an object recognition missed: ``source: reviewer``, accepted by the caller (or, with
+    ``"status": "pending"``, as the pages add it: pending until confirmed), audited.
 
     The object snaps to where its class's depth model matches the wall's relief within a
     few centimetres of (u, v) (``"snap": false`` keeps the click).
     """
     return run(db, lambda s: svc.add_object(s, pid, body.class_, body.wall, body.u, body.v, user,
-                                            settings.data_dir, note=body.note, snap=body.snap))
+                                            settings.data_dir, note=body.note, snap=body.snap,
+                                            status=body.status))
 
 
 @router.post("/projects/{pid}/decisions", responses=ERRORS)

@@ -3,14 +3,18 @@
 "use strict";
 
 const SBSC = (() => {
-  const KEY = "sbsc_token";
-
-  function token() { return sessionStorage.getItem(KEY); }
-  function setToken(t) { sessionStorage.setItem(KEY, t); }
-  function logout() { sessionStorage.removeItem(KEY); sessionStorage.removeItem("sbsc_user"); location.href = "/index.html"; }
+  // One login per browser: the token is sent once (POST /api/session), then the server's
+  // HttpOnly session cookie signs in every tab and the 3D scene until logout or expiry.
+  // The token itself is never stored; only the signed-in user is remembered per tab.
+  function token() { return null; }
+  function forget() { sessionStorage.removeItem("sbsc_user"); }
+  async function logout() {
+    try { await fetch("/api/session", { method: "DELETE" }); } catch { /* gone anyway */ }
+    forget(); location.href = "/index.html";
+  }
   // To the login page, coming back here afterwards; never resolves (the page is going away).
   function toLogin() {
-    sessionStorage.removeItem(KEY); sessionStorage.removeItem("sbsc_user");
+    forget();
     location.href = "/index.html?next=" + encodeURIComponent(location.pathname + location.search);
     return new Promise(() => {});
   }
@@ -21,8 +25,8 @@ const SBSC = (() => {
   }
 
   async function api(path, { method = "GET", body, raw = false } = {}) {
-    const headers = { "Authorization": "Bearer " + (token() || "") };
-    const opts = { method, headers };
+    const headers = {};
+    const opts = { method, headers, credentials: "same-origin" };
     if (body !== undefined) { headers["Content-Type"] = "application/json"; opts.body = JSON.stringify(body); }
     const res = await fetch(path, opts);
     if (res.status === 401 && !path.endsWith("/api/me")) return toLogin();
@@ -55,7 +59,6 @@ const SBSC = (() => {
     return new Promise((resolve, reject) => {
       const xhr = new XMLHttpRequest();
       xhr.open("POST", path);
-      xhr.setRequestHeader("Authorization", "Bearer " + token());
       xhr.upload.onprogress = (e) => { if (e.lengthComputable) onProgress(e.loaded / e.total); };
       xhr.onload = () => {
         let data = null;
@@ -91,9 +94,8 @@ const SBSC = (() => {
     clearTimeout(box._t); box._t = setTimeout(() => box.classList.remove("show"), 4000);
   }
 
-  // Every page but the login page: require a token and fill in the header.
+  // Every page but the login page: require a session and fill in the header.
   async function guard() {
-    if (!token()) return toLogin();
     let me = user();
     if (!me) {
       try { me = await api("/api/me"); } catch (e) { if (e.status === 401) return toLogin(); throw e; }
@@ -106,12 +108,21 @@ const SBSC = (() => {
   }
 
   async function login(t) {
-    setToken(t.trim());
-    try {
-      const me = await api("/api/me");
-      sessionStorage.setItem("sbsc_user", JSON.stringify(me));
-      return me;
-    } catch (e) { sessionStorage.removeItem(KEY); throw e; }
+    const res = await fetch("/api/session", { method: "POST", headers: { "Authorization": "Bearer " + t.trim() } });
+    let data = null;
+    try { data = await res.json(); } catch { /* not JSON */ }
+    if (!res.ok) throw new ApiError(res.status, (data && data.detail) || res.statusText, data);
+    const me = { id: data.id, name: data.name, role: data.role };
+    sessionStorage.setItem("sbsc_user", JSON.stringify(me));
+    return me;
+  }
+  // Whether this browser has a session (a tab opened after the login elsewhere).
+  async function signedIn() {
+    if (user()) return true;
+    const res = await fetch("/api/me", { credentials: "same-origin" });
+    if (!res.ok) return false;
+    sessionStorage.setItem("sbsc_user", JSON.stringify(await res.json()));
+    return true;
   }
 
   function fmtBytes(n) {
@@ -121,6 +132,6 @@ const SBSC = (() => {
   }
   function fmtTime(iso) { return iso ? new Date(iso).toLocaleString() : ""; }
 
-  return { api, blobUrl, download, upload, el, param, toast, guard, login, logout, token, user,
+  return { api, blobUrl, download, upload, el, param, toast, guard, login, logout, token, user, signedIn,
            fmtBytes, fmtTime, ApiError };
 })();

@@ -43,6 +43,7 @@ import threading
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -101,7 +102,10 @@ class SceneSettings:
     colour_roi_offset_m: float = 0.012
     roi_thickness_px: float = 3.0
     wall_thickness_px: float = 2.5
-    spot_radius_m: float = 0.05
+    spot_radius_m: float = 0.05  # at least; a big floor gets bigger spots (spot_extent_share)
+    spot_extent_share: float = 0.004  # spot radius = this x the floor's larger side, when larger
+    label_gap_m: float = 1.6  # wall labels closer than this in plan are stacked ...
+    label_step_m: float = 0.35  # ... this much above each other
     label_lift_m: float = 0.06
     poll_s: float = 0.25  # change feed polling period
     scan_delay_s: float = 1.5  # a new tab gets the scan this long after the rest of the scene
@@ -171,10 +175,52 @@ def wall_label(wid: str, f: WallFrame, storey: str | None = None) -> str:
     return f"{wid}{named}  {f.width_m:.2f} m"
 
 
-def spot_label(det: dict) -> str:
+def readable_time(iso: Any) -> str:
+    """An ISO time as people read it: ``2026-11-28 12:34 UTC`` (unchanged when not ISO)."""
+    import datetime as _dt
+
+    try:
+        t = _dt.datetime.fromisoformat(str(iso).replace("Z", "+00:00"))
+    except ValueError:
+        return str(iso)
+    if t.tzinfo is not None:
+        t = t.astimezone(_dt.UTC)
+    return t.strftime("%Y-%m-%d %H:%M") + (" UTC" if t.tzinfo is not None else "")
+
+
+def spread_labels(points: dict[str, np.ndarray], gap_m: float, step_m: float) -> dict[str, np.ndarray]:
+    """Label anchors lifted so that no two closer than ``gap_m`` in plan share a height:
+    each one, in order, rises by ``step_m`` until no label placed before it is within
+    ``gap_m`` in plan and ``step_m`` in height (short walls at a corner stack their names)."""
+    placed: dict[str, np.ndarray] = {}
+    for key, p in points.items():
+        q = np.asarray(p, float).copy()
+        while any(np.hypot(*(q[:2] - o[:2])) < gap_m and abs(q[2] - o[2]) < step_m * 0.99
+                  for o in placed.values()):
+            q[2] += step_m
+        placed[key] = q
+    return placed
+
+
+def spot_label(det: dict, names: dict[str, str] | None = None) -> str:
+    """An object's label: the library's name of its class (``names``, from model.json) and its score."""
+    name = (names or {}).get(det["class"], det["class"])
     if det.get("confidence") is not None:
-        return f"{det['class']} {_fmt(det['confidence'])}"
-    return f"{det['class']} α {_fmt(det.get('alpha'))}"
+        return f"{name} {_fmt(det['confidence'])}"
+    return f"{name} α {_fmt(det.get('alpha'))}"
+
+
+def class_names(models_dir: Path | None) -> dict[str, str]:
+    """Class id -> display name from the library's model.json files ({} when unreadable)."""
+    if models_dir is None:
+        return {}
+    from sbsc_core.errors import SbscError
+    from sbsc_core.io.models import read_library_metadata
+
+    try:
+        return {cid: str(m.get("name") or cid) for cid, m in read_library_metadata(models_dir).items()}
+    except (SbscError, OSError, ValueError):
+        return {}
 
 
 def review_score(det: dict) -> float:
@@ -356,6 +402,9 @@ class ProjectScene:
         self.s = settings or SceneSettings()
         self.data: ProjectData | None = None
         self.centre = np.zeros(3)
+        self.spot_radius = self.s.spot_radius_m
+        self.label_at: dict[str, np.ndarray] = {}  # wall id -> its label's anchor (stacked near corners)
+        self.class_names: dict[str, str] = {}  # class id -> the library's name (model.json)
         self.lod: ScanLod | None = None
         self.frames: dict[str, WallFrame] = {}  # the walls
         self.surfaces: dict[str, dict] = {}  # contract 4's surfaces (ceilings, column faces) by id
@@ -446,7 +495,7 @@ class ProjectScene:
                          f"or {len(self.lod):,} (full).")
         if self.locked:
             so = self.signoff or {}
-            lines.append(f"🔒 **Signed off** by {so.get('by', '?')} on {so.get('at', '?')}: "
+            lines.append(f"**Signed off** by {so.get('by', '?')} on {readable_time(so.get('at', '?'))}: "
                          "this scene is **read-only**.")
         return "\n\n".join(lines)
 
@@ -475,9 +524,9 @@ class ProjectScene:
         """Where an object's label stands from its spot: above it, or below a ceiling object."""
         n = self.normal_at(det)
         if n is not None and n[2] < -0.7:  # on a ceiling: below the spot
-            return n * (self.s.spot_radius_m + self.s.label_lift_m)
+            return n * (self.spot_radius + self.s.label_lift_m)
         lift = np.array([0.0, 0.0, self.s.label_lift_m])
-        return lift if n is None else lift + n * self.s.spot_radius_m
+        return lift if n is None else lift + n * self.spot_radius
 
     def planar_frames(self) -> dict[str, WallFrame]:
         """Walls, ceilings and the faces of rectangular columns: what a ray can hit as a plane."""
@@ -534,6 +583,7 @@ class ProjectScene:
         self.nodes.clear()
         self.data, self.lod, self.revision = data, lod, data.revision
         self.locked, self.signoff = bool(data.locked), data.signoff
+        self.class_names = class_names(data.models_dir)
         doc = data.detections
         self.frames = {w["id"]: WallFrame.from_dict(w) for w in doc.get("walls", [])}
         self.surfaces = {sf["id"]: sf for sf in doc.get("surfaces") or []}  # contract 4: ceilings, columns
@@ -552,6 +602,10 @@ class ProjectScene:
             self.groups[name] = scene.add_frame(f"/{name}", show_axes=False,
                                                 visible=self._layer_visible(name))
         self.scan_tiles = self._scan_layers(lod) if lod is not None else {}
+        ext = self._extent()
+        self.spot_radius = max(self.s.spot_radius_m, self.s.spot_extent_share * ext)
+        tops = {wid: f.to_world(f.width_m / 2.0, f.height_m, 0.05) - self.centre for wid, f in self.frames.items()}
+        self.label_at = spread_labels(tops, self.s.label_gap_m, self.s.label_step_m)
         for wid, frame in self.frames.items():
             self._add_wall(wid, frame)
         for sid, sf in self.surfaces.items():
@@ -622,7 +676,9 @@ class ProjectScene:
         self.nodes[f"walls/{wid}/outline"] = scene.add_line_segments(
             f"/walls/{wid}/outline", seg, WALL_RGB, thickness=self.s.wall_thickness_px,
             thickness_units="screen")
-        top = f.to_world(f.width_m / 2.0, f.height_m, 0.05) - self.centre
+        top = self.label_at.get(wid)
+        if top is None:
+            top = f.to_world(f.width_m / 2.0, f.height_m, 0.05) - self.centre
         self.nodes[f"walls/{wid}/label"] = scene.add_label(
             f"/walls/{wid}/label", wall_label(wid, f, self.storey_of.get(wid)), position=top,
             anchor="bottom-center", font_screen_scale=1.1)
@@ -748,14 +804,22 @@ class ProjectScene:
         did = d["id"]
         pos = self.local(d["position"])
         spot = self.server.scene.add_icosphere(
-            f"/spots/{did}", radius=self.s.spot_radius_m,
+            f"/spots/{did}", radius=self.spot_radius,
             color=STATUS_RGB.get(d["review"]["status"], STATUS_RGB["pending"]),
             subdivisions=2, cast_shadow=False, receive_shadow=False, position=pos)
         spot.on_click(lambda ev, did=did: self._on_spot_click(ev, did))
         self.spots[did] = spot
         self.spot_labels[did] = self.server.scene.add_label(
-            f"/spot_labels/{did}", spot_label(d), position=pos + self.label_lift(d), anchor="bottom-center",
+            f"/spot_labels/{did}", spot_label(d, self.class_names), position=pos + self.label_lift(d), anchor="bottom-center",
             font_screen_scale=0.8, depth_test=False)
+
+    def _extent(self) -> float:
+        """The floor's larger side in plan (metres; 10 without walls)."""
+        if not self.frames:
+            return 10.0
+        pts = np.concatenate([rect_segments(f, 0, f.width_m, 0, f.height_m).reshape(-1, 3)
+                              for f in self.frames.values()])
+        return float(max(np.ptp(pts[:, 0]), np.ptp(pts[:, 1]), 1.0))
 
     def _set_initial_camera(self) -> None:
         """Look down on the whole floor from the south, slightly tilted."""
@@ -766,11 +830,11 @@ class ProjectScene:
             lo, hi = pts.min(axis=0), pts.max(axis=0)
         ext = float(max(hi[0] - lo[0], hi[1] - lo[1], 1.0))
         mid = (lo + hi) / 2.0
-        # aim right of the middle: the review panel covers the right of the page
-        target = np.array([mid[0] + 0.15 * ext, mid[1], lo[2]])
+        # aim right of the middle and from high enough: the review panel covers the right of the page
+        target = np.array([mid[0] + 0.2 * ext, mid[1], lo[2]])
         cam = self.server.initial_camera
         cam.look_at = tuple(target)
-        cam.position = tuple(target + np.array([0.0, -0.35 * ext, 0.8 * ext]))
+        cam.position = tuple(target + np.array([0.0, -0.4 * ext, 0.95 * ext]))
         cam.up = (0.0, 0.0, 1.0)
 
     # ------------------------------------------------------------------ review state
@@ -795,7 +859,7 @@ class ProjectScene:
                 spot.color = STATUS_RGB.get(det["review"]["status"], STATUS_RGB["pending"])
             label = self.spot_labels.get(did)
             if label is not None:
-                label.text = spot_label(det)
+                label.text = spot_label(det, self.class_names)
             self._refresh_status()
             sessions = list(self.sessions.values())
         for session in sessions:
@@ -1127,7 +1191,7 @@ class ReviewSession:
             pos = self.scene.local(det["position"])
             if self._highlight is None:
                 self._highlight = self.client.scene.add_icosphere(
-                    "/selection", radius=self.scene.s.spot_radius_m * 1.9, color=SELECTION_RGB,
+                    "/selection", radius=self.scene.spot_radius * 1.9, color=SELECTION_RGB,
                     wireframe=True, subdivisions=1, cast_shadow=False, receive_shadow=False,
                     position=pos)
             else:
@@ -1212,7 +1276,7 @@ class ReviewSession:
             spot = sc.spots.get(did)
             if det is None or spot is None:
                 continue
-            text = spot_label(det) + (f" · {det['review']['status']}" if did == self.selected else "")
+            text = spot_label(det, sc.class_names) + (f" · {det['review']['status']}" if did == self.selected else "")
             node = self.labels.get(did)
             if node is not None:
                 node.text = text
@@ -1336,7 +1400,7 @@ class ReviewSession:
 
     def info_text(self, det: dict) -> str:
         r = det["review"]
-        who = f" by {r['by']} at {r['at']}" if r.get("by") else ""
+        who = f" by {r['by']} on {readable_time(r['at'])}" if r.get("by") else ""
         storey = self.scene.storey_of.get(det.get("wall"))
         where = surface_text(det.get("wall"), self.scene.surfaces.get(det.get("wall")))
         lines = [f"**{det.get('ref') or det['id']} · {det['class']}** on {where}"

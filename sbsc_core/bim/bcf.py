@@ -1,10 +1,14 @@
 """The findings of a Scan-vs-BIM comparison as a BCF 2.1 file (bcf-client).
 
 One topic per missing, displaced or unexpected object, so that the findings open in the
-BIM tools facility managers already use. Each topic references the as-designed IFC
-file, selects the designed element (by IFC GUID) where there is one, has a viewpoint with
-a camera in front of the object, looking at the wall, and a snapshot: the wall's
-orthoimage crop with the designed and found positions marked (see :mod:`.report`).
+BIM tools facility managers already use. Each topic references the IFC files it selects
+in: a missing object the designed element of the as-designed IFC, an unexpected one its
+element of the as-is IFC (:class:`AsIs`: the exported file's name and GlobalId seed,
+:func:`.export.object_guid`), a displaced one both. It has a viewpoint with a camera in
+front of the object, looking at the wall, and a snapshot: the wall's orthoimage crop with
+the designed and found positions marked (see :mod:`.report`). The topic types
+(``Missing``, ``Displaced``, ``Unexpected``) are the BCF's own extension list
+(``extensions.xsd`` in the file); dates carry their time zone (UTC).
 
 An object on a ceiling is seen from below (the camera under it, looking up, the image's up
 along the ceiling's ``axis_v``), one on a column from the side of its face (a round column:
@@ -17,6 +21,7 @@ import datetime
 import os
 import tempfile
 import uuid
+from dataclasses import dataclass
 from pathlib import Path
 
 import bcf.v2.model as mdl
@@ -26,12 +31,39 @@ from bcf.v2.visinfo import VisualizationInfoHandler, build_camera_from_vectors, 
 from xsdata.models.datatype import XmlDateTime
 
 from .compare import Comparison, ComparisonItem
+from .export import object_guid, review_status, stable_guid
 from .report import finding_snapshot, wall_picture
 from .surfaces import surface_normal
 
 AUTHOR = "sbsc"
 CAMERA_DISTANCE_M = 1.5
 TITLES = {"missing": "Missing", "displaced": "Displaced", "unexpected": "Unexpected"}
+STATUSES = ("Open", "Closed")
+EXTENSIONS_XSD = "extensions.xsd"
+
+
+@dataclass(frozen=True)
+class AsIs:
+    """The as-is IFC the unexpected (and displaced) topics select in: its file name and the
+    seed of its GlobalIds (:func:`.export.export_ifc`'s ``file_name`` and ``guid_seed``)."""
+
+    file_name: str
+    guid_seed: str
+
+
+def extensions_xsd(labels: list[str]) -> bytes:
+    """The BCF 2.1 extension schema: our topic types, statuses and labels (findings, classes)."""
+    def enum(name: str, values: list[str]) -> str:
+        items = "".join(f'<xs:enumeration value="{v}"/>' for v in values)
+        return (f'<xs:simpleType name="{name}"><xs:restriction base="{name}">{items}'
+                "</xs:restriction></xs:simpleType>")
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n'
+            '<xs:schema xmlns:xs="http://www.w3.org/2001/XMLSchema"><xs:redefine schemaLocation="markup.xsd">'
+            + enum("TopicType", list(TITLES.values())) + enum("TopicStatus", list(STATUSES))
+            + enum("TopicLabel", labels) + "</xs:redefine>"
+            '<xs:element name="ExtendedTopicType" type="TopicType"/>'
+            '<xs:element name="ExtendedTopicStatus" type="TopicStatus"/>'
+            '<xs:element name="ExtendedTopicLabel" type="TopicLabel"/></xs:schema>\n').encode()
 
 
 def _fmt(p: np.ndarray | None) -> str:
@@ -83,7 +115,16 @@ def topic_text(comparison: Comparison, item: ComparisonItem) -> tuple[str, str]:
     return title, " ".join(lines)
 
 
-def _viewpoint(comparison: Comparison, item: ComparisonItem) -> mdl.VisualizationInfo:
+def _asis_guid(item: ComparisonItem, asis: AsIs | None) -> str | None:
+    """The GlobalId of the finding's as-is element: only an accepted detection is in the
+    as-is IFC (its export keeps accepted objects), a pending one is not yet."""
+    det = item.detection
+    if asis is None or det is None or not det.get("id") or review_status(det) != "accepted":
+        return None
+    return object_guid(asis.guid_seed, str(det["id"]))
+
+
+def _viewpoint(comparison: Comparison, item: ComparisonItem, asis: AsIs | None = None) -> mdl.VisualizationInfo:
     p = item.designed_position if item.designed is not None else item.detected_position
     n = _normal(comparison, item)
     if n is None:
@@ -92,9 +133,11 @@ def _viewpoint(comparison: Comparison, item: ComparisonItem) -> mdl.Visualizatio
         eye = p + CAMERA_DISTANCE_M * np.asarray(n, float)
     direction = (p - eye) / np.linalg.norm(p - eye)
     up = _up(comparison, item, direction)
-    if item.designed is not None:
-        components = build_components(item.designed.guid)
-    else:  # an unexpected object is not in the design: nothing to select (BCF 2.1 forbids an empty Selection)
+    guids = [g for g in ((item.designed.guid if item.designed is not None else None),
+                         _asis_guid(item, asis)) if g]
+    if guids:
+        components = build_components(*guids)
+    else:  # nothing to select (BCF 2.1 forbids an empty Selection)
         components = mdl.Components(visibility=mdl.ComponentVisibility(default_visibility=True))
     return mdl.VisualizationInfo(
         guid=str(uuid.uuid4()),
@@ -104,21 +147,31 @@ def _viewpoint(comparison: Comparison, item: ComparisonItem) -> mdl.Visualizatio
     )
 
 
-def build_bcf(comparison: Comparison, image_dir: Path | None = None, project_name: str = "Scan-vs-BIM") -> BcfXml:
-    """A BCF 2.1 document with one topic per finding."""
+def build_bcf(comparison: Comparison, image_dir: Path | None = None, project_name: str = "Scan-vs-BIM", *,
+              asis: AsIs | None = None, author: str = AUTHOR) -> BcfXml:
+    """A BCF 2.1 document with one topic per finding (see the module's description)."""
     doc = BcfXml.create_new(project_name)
+    labels = sorted({*TITLES, *(item.class_id for item in comparison.findings)})
+    doc.project_info.extension_schema = EXTENSIONS_XSD
+    doc.extension_schema = extensions_xsd(labels)
     ifc_name = Path(comparison.design.path).name
-    now = datetime.datetime.now(datetime.UTC)
+    now = XmlDateTime.from_datetime(datetime.datetime.now(datetime.UTC).replace(microsecond=0))
+    designed_file = mdl.HeaderFile(filename=ifc_name, ifc_project=comparison.design.project_guid,
+                                   is_external=True, reference=ifc_name, date=now)
+    asis_file = None if asis is None else mdl.HeaderFile(
+        filename=asis.file_name, ifc_project=stable_guid(asis.guid_seed, "project"), is_external=True,
+        reference=asis.file_name, date=now)
     pictures: dict[str, tuple[np.ndarray, float]] = {}
     for k, item in enumerate(comparison.findings):
         title, description = topic_text(comparison, item)
-        topic = doc.add_topic(title, description, AUTHOR, topic_type="Issue", topic_status="Open")
+        topic = doc.add_topic(title, description, author, topic_type=TITLES[item.status], topic_status="Open")
         topic.topic.labels = [item.status, item.class_id]
         topic.topic.index = k + 1
-        topic.header = mdl.Header(file=[mdl.HeaderFile(
-            filename=ifc_name, ifc_project=comparison.design.project_guid, is_external=True,
-            reference=ifc_name, date=XmlDateTime.from_datetime(now))])
-        handler = VisualizationInfoHandler(_viewpoint(comparison, item))
+        topic.topic.creation_date = now
+        files = [f for f, used in ((designed_file, item.designed is not None),
+                                   (asis_file, _asis_guid(item, asis) is not None)) if f is not None and used]
+        topic.header = mdl.Header(file=files or [designed_file])
+        handler = VisualizationInfoHandler(_viewpoint(comparison, item, asis))
         snapshot = None
         if item.wall in comparison.walls:
             if item.wall not in pictures:
@@ -132,10 +185,11 @@ def build_bcf(comparison: Comparison, image_dir: Path | None = None, project_nam
     return doc
 
 
-def write_bcf(comparison: Comparison, path: Path, image_dir: Path | None = None) -> None:
-    """Write the findings' BCF zip to ``path`` (atomically)."""
+def write_bcf(comparison: Comparison, path: Path, image_dir: Path | None = None, *,
+              project_name: str = "Scan-vs-BIM", asis: AsIs | None = None, author: str = AUTHOR) -> None:
+    """Write the findings' BCF zip to ``path`` (atomically); see :func:`build_bcf`."""
     path = Path(path)
-    doc = build_bcf(comparison, image_dir)
+    doc = build_bcf(comparison, image_dir, project_name, asis=asis, author=author)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.partial-", suffix=".bcf", dir=path.parent)
     os.close(fd)
     try:

@@ -22,16 +22,24 @@ recognized", meant to augment the as-is BIM model. This module writes that model
   placed relative to its IfcCovering / IfcColumn (its body standing out into the room) and
   connected to it;
 - several storeys (contract 4 ``storeys``): one IfcBuildingStorey each, every wall, surface
-  and object contained in its own.
+  and object contained in its own;
+- the project's name, and a header naming the file, the exporting user and organisation;
+- GlobalIds that stay the same for the same object across exports and re-runs
+  (:func:`stable_guid`: a UUID5 of the project's seed and the object, compressed as IFC
+  does), so that what others keep referencing in the model goes on resolving.
 
 :class:`IfcModelBuilder` is shared with :mod:`.design` (the as-designed writer).
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import os
 import tempfile
+import uuid
+from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -639,6 +647,58 @@ def add_storeys_and_surfaces(builder: IfcModelBuilder, doc: DetectionsDocument) 
 
 # --------------------------------------------------------------------------- export
 
+GUID_NAMESPACE = uuid.UUID("6b0e1c52-6d1e-5b8a-9a51-5b5c0f1e2d29")  # sbsc's namespace of IFC GlobalIds
+ASIS_NAME = "sbsc as-is model"
+
+
+def stable_guid(seed: str, key: str) -> str:
+    """The IFC GlobalId of object ``key`` of the project ``seed``: the same on every export.
+
+    A UUID5 (namespace :data:`GUID_NAMESPACE`) of ``seed`` and ``key``, compressed to the
+    22 characters of an IFC GlobalId. Objects found by recognition use ``object/<ref>``
+    (the reference the review shows, e.g. ``D0007``), the project ``project``.
+    """
+    return ifcopenshell.guid.compress(uuid.uuid5(GUID_NAMESPACE, f"{seed}|{key}").hex)
+
+
+def object_guid(seed: str, ref: str) -> str:
+    """The GlobalId of the as-is element of the detection ``ref`` (what BCF topics select)."""
+    return stable_guid(seed, f"object/{ref}")
+
+
+def default_guid_seed(document: dict) -> str:
+    """A seed for a document without a project: its walls (the same scan gives the same seed)."""
+    walls = [[w.get("id"), w.get("origin")] for w in document.get("walls") or [] if isinstance(w, dict)]
+    return "doc-" + hashlib.sha1(json.dumps(walls, sort_keys=True, default=str).encode()).hexdigest()[:20]
+
+
+def _stable_guids(file: ifcopenshell.file, seed: str, fixed: set[int]) -> None:
+    """Give every rooted entity not in ``fixed`` (entity ids) a GlobalId from its class, name
+    and rank among the entities of that class and name (the file's order is the build order,
+    the same for the same document)."""
+    seen: Counter[tuple[str, str]] = Counter()
+    for e in sorted(file.by_type("IfcRoot"), key=lambda e: e.id()):
+        if e.id() in fixed:
+            continue
+        if e.is_a("IfcProject"):
+            e.GlobalId = stable_guid(seed, "project")
+            continue
+        k = (e.is_a(), str(e.Name or ""))
+        e.GlobalId = stable_guid(seed, f"{k[0]}/{k[1]}/{seen[k]}")
+        seen[k] += 1
+
+
+def _header(file: ifcopenshell.file, file_name: str | None, author: str | None,
+            organisation: str | None) -> None:
+    from .. import __version__
+
+    h = file.header.file_name
+    h.name = file_name or "sbsc-as-is.ifc"
+    h.author = (author or "sbsc",)
+    h.organization = (organisation or "",)
+    h.originating_system = f"sbsc {__version__}"
+    h.authorization = author or ""
+
 
 def _recognition_pset(det: dict) -> dict[str, Any]:
     review = det.get("review") if isinstance(det.get("review"), dict) else {}
@@ -669,8 +729,15 @@ def selected_detections(detections: list[dict], accepted_only: bool) -> list[dic
 
 def export_ifc(document: dict, *, library: ModelLibrary | None = None, schema: str = "IFC4",
                accepted_only: bool = False, signoff: dict | None = None,
-               typings: dict[str, ClassTyping] | None = None, crs: str | CRS | None = None) -> ifcopenshell.file:
+               typings: dict[str, ClassTyping] | None = None, crs: str | CRS | None = None,
+               project_name: str | None = None, author: str | None = None, organisation: str | None = None,
+               file_name: str | None = None, guid_seed: str | None = None) -> ifcopenshell.file:
     """The as-is IFC model of a detections document (contract 4).
+
+    ``project_name`` (default: the document's ``project_name``) names the IfcProject;
+    ``file_name``, ``author`` and ``organisation`` go into the file's header. GlobalIds
+    derive from ``guid_seed`` (default: :func:`default_guid_seed`) and each object
+    (:func:`stable_guid`): two exports of the same project give the same GlobalIds.
 
     Rejected detections are never written; ``accepted_only`` drops pending ones too.
     ``signoff`` (``{"by", "at", "comment", "counts"}``, default: the document's
@@ -683,26 +750,36 @@ def export_ifc(document: dict, *, library: ModelLibrary | None = None, schema: s
     doc = parse_detections_document(document)
     doc = localised(doc, crs)
     typings = typings if typings is not None else class_typings(library)
-    builder = IfcModelBuilder(schema, project_name="sbsc as-is model", typings=typings,
+    seed = guid_seed or default_guid_seed(document)
+    name = project_name or (document.get("project_name") if isinstance(document.get("project_name"), str) else None)
+    builder = IfcModelBuilder(schema, project_name=name or ASIS_NAME, typings=typings,
                               storey_elevation=storey_elevation(doc.walls),
                               description="secondary building service components recognized in a scan")
     add_storeys_and_surfaces(builder, doc)
     elements = []
+    fixed: set[int] = set()
     for det in selected_detections(doc.detections, accepted_only):
         wall_id = det.get("wall") if det.get("wall") in doc.walls or det.get("wall") in doc.surfaces else None
         label = str(det.get("id") or "")
         typing = builder.typing_of(det["class"], det.get("width_m") or 0.1, det.get("height_m") or 0.1)
-        elements.append(builder.add_component(
+        element = builder.add_component(
             det["class"], np.asarray(det["position"], float), wall_id=wall_id,
             name=f"{typing.name} {label}".strip(), tag=label or None,
             width_m=det.get("width_m"), height_m=det.get("height_m"),
-            psets={PSET_RECOGNITION: _recognition_pset(det)}, rotation_deg=_rotation(det)))
+            psets={PSET_RECOGNITION: _recognition_pset(det)}, rotation_deg=_rotation(det))
+        if label:
+            element.GlobalId = object_guid(seed, label)
+            fixed.add(element.id())
+        elements.append(element)
     signoff = signoff if signoff is not None else doc.signoff
     if signoff:
         builder.add_approval(signoff, elements)
     if doc.georeference is not None:
         write_georeference(builder.file, doc.georeference)
-    return builder.finish()
+    model = builder.finish()
+    _stable_guids(model, seed, fixed)
+    _header(model, file_name, author, organisation)
+    return model
 
 
 @dataclass
@@ -759,7 +836,8 @@ def export_ifc_file(detections: Path, out: Path, schema: str = "IFC4", accepted_
     raw = load_json(detections)
     parse_detections_document(raw, where=str(detections))
     model = export_ifc(raw, schema=schema, accepted_only=accepted_only, typings=typings,
-                       crs=parse_crs(crs, "--crs") if crs else None)
+                       crs=parse_crs(crs, "--crs") if crs else None, file_name=Path(out).name,
+                       author=os.environ.get("USER") or None)
     write_ifc_atomic(model, out)
     return {"schema": schema, "crs": projected_crs_name(model), "walls": len(model.by_type("IfcWall")),
             "openings": len(model.by_type("IfcOpeningElement")),

@@ -98,13 +98,46 @@ def _box(img: np.ndarray, frame: WallFrame, s: float, u: float, v: float, w: flo
     return p0, p1
 
 
-def _label(img: np.ndarray, text: str, at: tuple[int, int], colour: tuple[int, int, int]) -> None:
-    font, scale = cv2.FONT_HERSHEY_SIMPLEX, 0.42
-    (tw, th), base = cv2.getTextSize(text, font, scale, 1)
-    x = int(np.clip(at[0], 0, max(0, img.shape[1] - tw - 4)))
-    y = int(np.clip(at[1], th + 4, img.shape[0] - 2))
-    cv2.rectangle(img, (x, y - th - 4), (x + tw + 4, y + base - 2), (255, 255, 255), -1)
-    cv2.putText(img, text, (x + 2, y - 2), font, scale, colour, 1, cv2.LINE_AA)
+Rect = tuple[int, int, int, int]  # x0, y0, x1, y1 in pixels
+
+
+def _overlaps(a: Rect, b: Rect) -> bool:
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
+
+
+class _Labels:
+    """The labels of one picture, placed once every box is drawn: each beside its box where
+    it covers no box and no label placed before it (above, below, right, left, then further
+    out), so that labels never run into the boxes or into each other."""
+
+    FONT, SCALE = cv2.FONT_HERSHEY_SIMPLEX, 0.42
+
+    def __init__(self) -> None:
+        self.boxes: list[Rect] = []
+        self.texts: list[tuple[str, Rect, tuple[int, int, int]]] = []
+
+    def box(self, p0: tuple[int, int], p1: tuple[int, int]) -> None:
+        self.boxes.append((min(p0[0], p1[0]) - 2, min(p0[1], p1[1]) - 2, max(p0[0], p1[0]) + 2, max(p0[1], p1[1]) + 2))
+
+    def add(self, text: str, p0: tuple[int, int], p1: tuple[int, int], colour: tuple[int, int, int]) -> None:
+        self.texts.append((text, (p0[0], p0[1], p1[0], p1[1]), colour))
+
+    def draw(self, img: np.ndarray) -> None:
+        h, w = img.shape[:2]
+        placed: list[Rect] = []
+        for text, (x0, y0, x1, y1), colour in self.texts:
+            (tw, th), base = cv2.getTextSize(text, self.FONT, self.SCALE, 1)
+            lw, lh = tw + 4, th + base + 4
+            cands = []
+            for k in range(4):  # rings further and further out
+                gap = 2 + k * (lh + 2)
+                cands += [(x0, y0 - gap - lh), (x0, y1 + gap), (x1 + gap + k * lw, y0), (x0 - gap - lw - k * lw, y0)]
+            rects = [(int(np.clip(x, 0, max(0, w - lw))), int(np.clip(y, 0, max(0, h - lh)))) for x, y in cands]
+            rects = [(x, y, x + lw, y + lh) for x, y in rects]
+            free = next((r for r in rects if not any(_overlaps(r, b) for b in self.boxes + placed)), rects[0])
+            placed.append(free)
+            cv2.rectangle(img, free[:2], (free[2] - 1, free[3] - 1), (255, 255, 255), -1)
+            cv2.putText(img, text, (free[0] + 2, free[3] - base - 2), self.FONT, self.SCALE, colour, 1, cv2.LINE_AA)
 
 
 def _uv(frame: WallFrame, p: np.ndarray) -> tuple[float, float]:
@@ -122,8 +155,13 @@ def _detected_size(item: ComparisonItem) -> tuple[float, float]:
     return float(det.get("width_m") or 0.1), float(det.get("height_m") or 0.1)
 
 
-def mark_item(img: np.ndarray, frame: WallFrame, s: float, wall_id: str, item: ComparisonItem) -> None:
-    """Draw one item's designed and/or found position if it lies on ``wall_id``."""
+def mark_item(img: np.ndarray, frame: WallFrame, s: float, wall_id: str, item: ComparisonItem,
+              labels: _Labels | None = None) -> None:
+    """Draw one item's designed and/or found position if it lies on ``wall_id``; its label
+    goes to ``labels`` (placed by :meth:`_Labels.draw` once every box is there), or is drawn
+    at once without it."""
+    own = labels is None
+    labels = _Labels() if own else labels
     on_design = item.designed is not None and item.design_wall == wall_id
     on_found = item.detection is not None and item.detection_wall == wall_id
     colour = STATUS_COLOUR[item.status]
@@ -135,21 +173,25 @@ def mark_item(img: np.ndarray, frame: WallFrame, s: float, wall_id: str, item: C
         else:
             p0, p1 = _box(img, frame, s, du, dv, *_designed_size(item),
                           C_DESIGN if item.status == "displaced" else colour)
+            labels.box(p0, p1)
             if item.status == "missing":
                 cv2.line(img, p0, p1, colour, 2, cv2.LINE_AA)
                 cv2.line(img, (p0[0], p1[1]), (p1[0], p0[1]), colour, 2, cv2.LINE_AA)
-                _label(img, f"missing {item.class_id}", (p0[0], p0[1] - 4), colour)
+                labels.add(f"missing {item.class_id}", p0, p1, colour)
     if on_found:
         fu, fv = _uv(frame, item.detected_position)
-        p0, _ = _box(img, frame, s, fu, fv, *_detected_size(item), colour)
+        p0, p1 = _box(img, frame, s, fu, fv, *_detected_size(item), colour)
+        labels.box(p0, p1)
         if item.status == "unexpected":
-            _label(img, f"unexpected {item.detection.get('class')}", (p0[0], p0[1] - 4), colour)
+            labels.add(f"unexpected {item.detection.get('class')}", p0, p1, colour)
         if item.status == "displaced":
-            _label(img, f"{item.class_id} moved {item.deviation_m:.2f} m", (p0[0], p0[1] - 4), colour)
+            labels.add(f"{item.class_id} moved {item.deviation_m:.2f} m", p0, p1, colour)
     if on_design and on_found and item.status == "displaced":
         a = _to_px(frame, s, *_uv(frame, item.designed.position))
         b = _to_px(frame, s, *_uv(frame, item.detected_position))
         cv2.arrowedLine(img, a, b, C_DISPLACED, 2, cv2.LINE_AA, tipLength=0.15)
+    if own:
+        labels.draw(img)
 
 
 def wall_picture(comparison: Comparison, wall_id: str, image_dir: Path | None = None) -> tuple[np.ndarray, float]:
@@ -157,8 +199,10 @@ def wall_picture(comparison: Comparison, wall_id: str, image_dir: Path | None = 
     frame = comparison.walls[wall_id]
     openings = [o for o in comparison.openings if o.get("wall") == wall_id]
     img, s = wall_background(frame, openings, load_orthoimage(image_dir, wall_id))
+    labels = _Labels()
     for item in comparison.items:
-        mark_item(img, frame, s, wall_id, item)
+        mark_item(img, frame, s, wall_id, item, labels)
+    labels.draw(img)
     return img, s
 
 
@@ -217,17 +261,45 @@ def _rows(items: list[dict]) -> str:
     return f"<table>{head}{''.join(out)}</table>"
 
 
+def _anchor(wall_id: str) -> str:
+    return "wall-" + "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in str(wall_id))
+
+
+FINDINGS = ("missing", "displaced", "unexpected")
+
+
+def _findings_list(data: dict, comparison: Comparison) -> str:
+    """The findings first: one line each (what, where, how far), linked to its wall's picture."""
+    items = [it for it in data["items"] if it["status"] in FINDINGS]
+    if not items:
+        return "<h2>Findings</h2><p>None: every designed object on a scanned wall was found in place.</p>"
+    items.sort(key=lambda it: (FINDINGS.index(it["status"]), str(it["wall"] or ""), it["class"]))
+    lines = []
+    for it in items:
+        det, d = it["detection"] or {}, it["designed"] or {}
+        what = f"<b class='{it['status']}'>{it['status']}</b> {html.escape(it['class'])}"
+        ref = " ".join(x for x in (str(det.get("id") or ""), str(d.get("name") or "")) if x)
+        dev = "" if it["deviation_m"] is None else f", {it['deviation_m'] * 1000:.0f} mm away"
+        wall = it["wall"]
+        where = (f"on <a href='#{_anchor(wall)}'>{html.escape(str(wall))}</a>" if wall in comparison.walls
+                 else "not on a scanned wall")
+        lines.append(f"<li>{what} {where}{dev}{' (' + html.escape(ref) + ')' if ref else ''}</li>")
+    return f"<h2>Findings ({len(items)})</h2><ol class='findings'>{''.join(lines)}</ol>"
+
+
 def render_report(comparison: Comparison, image_dir: Path | None = None) -> str:
     """The report as one HTML string."""
     data = comparison.to_dict()
     summary = data["summary"]
     esc = html.escape
+    n_compared = sum(summary.get(k, 0) for k in ("found", "displaced", "unexpected"))
     parts = [
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
         "<title>Scan-vs-BIM comparison</title>", f"<style>{_CSS}</style></head><body>",
         "<h1>Scan-vs-BIM comparison</h1>",
         f"<p>As-designed model: <code>{esc(str(data['as_designed']))}</code><br>"
-        f"Detections: <code>{esc(str(data['detections']))}</code><br>"
+        f"Detections: <code>{esc(str(data['detections'] or 'the review project (its current results)'))}</code>"
+        f" ({n_compared} compared)<br>"
         f"Position tolerance {comparison.tolerance_m * 1000:.0f} mm; a designed object and a detection more than "
         f"{comparison.max_displacement_m:.2f} m apart are reported separately (missing + unexpected).</p>",
         "<table><tr>" + "".join(f"<th class='{k}'>{k.replace('_', ' ')}</th>" for k in summary) + "</tr><tr>"
@@ -235,6 +307,7 @@ def render_report(comparison: Comparison, image_dir: Path | None = None) -> str:
         "<p class='legend'><span class='found'>&#9632; found</span><span style='color:#1470c8'>&#9633; designed</span>"
         "<span class='displaced'>&#9632; displaced (arrow: designed &rarr; found)</span>"
         "<span class='missing'>&#9746; missing</span><span class='unexpected'>&#9632; unexpected</span></p>",
+        _findings_list(data, comparison),
     ]
     by_wall: dict[str, list[dict]] = {}
     off_wall: list[dict] = []
@@ -258,7 +331,7 @@ def render_report(comparison: Comparison, image_dir: Path | None = None) -> str:
             designs = sorted({i["designed"]["design_wall"] for i in items
                               if i["designed"] and i["designed"]["design_wall"]})
         counts = {s: sum(i["status"] == s for i in items) for s in ("found", "displaced", "missing", "unexpected")}
-        parts.append(f"<h2>{title} {esc(wid)}</h2><p class='muted'>{design_label}: "
+        parts.append(f"<h2 id='{_anchor(wid)}'>{title} {esc(wid)}</h2><p class='muted'>{design_label}: "
                      f"{esc(', '.join(designs) or 'none matched')}; "
                      + ", ".join(f"{k} {v}" for k, v in counts.items()) + "</p>")
         parts.append(f"<img alt='wall {esc(wid)}' src='data:image/png;base64,{_png_b64(img)}'>")
