@@ -222,7 +222,7 @@ _FLAT_M = 0.05  # a depth model varying by less than this share of its height in
 
 def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[str, np.ndarray],
               offsets: dict[str, tuple[float, float]], relief: np.ndarray | None,
-              models: dict[str, np.ndarray], model_offsets: dict[str, tuple[float, float]],
+              models: dict[str, np.ndarray | list[np.ndarray]], model_offsets: dict[str, tuple[float, float]],
               search_px: int) -> tuple[dict[str, float] | None, bool]:
     """Each class's evidence at a candidate: the mean of the comparisons available for every
     class of ``seen``: its print NCC (when each has a view on this wall) and its relief score
@@ -230,11 +230,12 @@ def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[st
     the relief was compared. None when neither is available."""
     parts: list[dict[str, float]] = []
     if all(c in views for c in seen):
-        parts.append({c: print_score(diff, views[c], _shifted(cand.centre, offsets.get(c), cand.rotation_deg),
-                                     cand.rotation_deg, search_px=search_px) for c in seen})
+        parts.append({c: max(print_score(diff, v, _shifted(cand.centre, offsets.get(c), cand.rotation_deg),
+                                         cand.rotation_deg, search_px=search_px) for v in _designs(views[c]))
+                      for c in seen})
     with_relief = False
     if relief is not None and all(c in models for c in seen):
-        reliefs = {c: relief_score(relief, models[c], _shifted(cand.centre, model_offsets.get(c), cand.rotation_deg),
+        reliefs = {c: _best_design(relief, models[c], _shifted(cand.centre, model_offsets.get(c), cand.rotation_deg),
                                    cand.rotation_deg, search_px=search_px) for c in seen}
         if all(v is not None for v in reliefs.values()):
             parts.append({c: float(v) for c, v in reliefs.items()})  # type: ignore[arg-type]
@@ -244,11 +245,53 @@ def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[st
     return {c: float(np.mean([p[c] for p in parts])) for c in seen}, with_relief
 
 
+def _designs(x: np.ndarray | list[np.ndarray]) -> list[np.ndarray]:
+    return x if isinstance(x, list) else [x]
+
+
+def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, threshold: float
+                  ) -> dict[str, list[np.ndarray]]:
+    """The front views of the further designs of each class that has some (the last
+    ``learnt_views`` of its views, ``model.json``; written by ``sbsc learn``) as seen on a wall
+    of colour ``wall_rgb``: the Lab difference to the wall where it exceeds ``threshold``,
+    cropped to the model's content like :func:`print_views`. Learnt views are crops of the
+    scan, so they are compared as they are (no blur, no noise)."""
+    out: dict[str, list[np.ndarray]] = {}
+    wall = cv2.cvtColor(np.asarray(wall_rgb, np.float32).reshape(1, 1, 3) / 255.0, cv2.COLOR_RGB2Lab).reshape(3)
+    for c, t in templates.items():
+        k = t.extra.get("learnt_views", 0)
+        if not isinstance(k, int) or isinstance(k, bool) or k <= 0 or not t.colour_views:
+            continue
+        b = content_box(t)
+        prints = []
+        for view in t.colour_views[-k:]:
+            if view.shape[:2] != (t.height_px, t.width_px):
+                continue
+            lab = cv2.cvtColor(np.ascontiguousarray(view[..., :3], np.float32) / 255.0, cv2.COLOR_RGB2Lab)
+            diff = lab - wall[None, None, :]
+            fg = (np.linalg.norm(diff, axis=2) > threshold) & (view[..., 3] > 127)
+            diff = np.where(fg[..., None], diff, 0.0).astype(np.float32)
+            prints.append(np.ascontiguousarray(diff[b.r0:b.r1, b.c0:b.c1]))
+        if prints:
+            out[c] = prints
+    return out
+
+
+def _best_design(relief: np.ndarray, model: np.ndarray | list[np.ndarray], centre: tuple[float, float],
+                 rotation_deg: float, *, search_px: int) -> float | None:
+    """:func:`relief_score` of a class's depth model, or the best of its designs' (a list:
+    the reference model and the further ones, e.g. learnt by ``sbsc learn``)."""
+    scores = [relief_score(relief, m, centre, rotation_deg, search_px=search_px)
+              for m in (model if isinstance(model, list) else [model])]
+    scores = [x for x in scores if x is not None]
+    return max(scores) if scores else None
+
+
 def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str, np.ndarray],
                        groups: list[frozenset[str]], settings: LookalikeSettings, *,
                        offsets: dict[str, tuple[float, float]] | None = None,
                        relief: np.ndarray | None = None,
-                       models: dict[str, np.ndarray] | None = None,
+                       models: dict[str, np.ndarray | list[np.ndarray]] | None = None,
                        model_offsets: dict[str, tuple[float, float]] | None = None) -> list[Candidate]:
     """Candidates with every look-alike class decided by its print (see the module).
 
@@ -327,21 +370,28 @@ def print_views(protos: dict, templates: dict[str, ModelTemplate]
 
 
 def relief_models(templates: dict[str, ModelTemplate]
-                  ) -> tuple[dict[str, np.ndarray], dict[str, tuple[float, float]]]:
+                  ) -> tuple[dict[str, np.ndarray | list[np.ndarray]], dict[str, tuple[float, float]]]:
     """Each class's depth model cropped to its content (:func:`content_box`), and the
-    content's offset from the footprint centre (:func:`content_offset`)."""
-    models, offsets = {}, {}
+    content's offset from the footprint centre (:func:`content_offset`). A class with further
+    depth models (other designs, :meth:`~sbsc_core.templates.ModelTemplate.depth_models`) has
+    the list of all of them, each cropped alike; the best of them speaks for the class."""
+    models: dict[str, np.ndarray | list[np.ndarray]] = {}
+    offsets = {}
     for c, t in templates.items():
-        d = t.depth_filled()
-        if d is None:
+        designs = t.depth_models()
+        if not designs:
             continue
+        d = designs[0]
+        crop = None
         if d.shape[:2] == (t.height_px, t.width_px):
             b = content_box(t)
-            d = d[b.r0:b.r1, b.c0:b.c1]
+            crop = (slice(b.r0, b.r1), slice(b.c0, b.c1))
             offsets[c] = content_offset(t)
         else:
             offsets[c] = (0.0, 0.0)
-        models[c] = np.ascontiguousarray(d, np.float32)
+        cut = [np.ascontiguousarray(m[crop] if crop is not None and m.shape == d.shape else m, np.float32)
+               for m in designs]
+        models[c] = cut[0] if len(cut) == 1 else cut
     return models, offsets
 
 
@@ -396,6 +446,9 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
     if not groups:
         return depth, colour
     views, offsets = print_views(protos, prototypes.templates)
+    for c, prints in design_prints(prototypes.templates, image.wall_rgb, image.threshold).items():
+        if c in views:  # a class's further designs (sbsc learn): the best of its prints speaks for it
+            views[c] = [views[c], *prints]  # type: ignore[list-item]
     mkey = ("relief_models",)
     if mkey not in prototypes._cache:
         prototypes._cache[mkey] = relief_models(prototypes.templates)  # type: ignore[assignment]

@@ -192,6 +192,18 @@ def _write_design(class_dir: Path, examples: list[Example], k: int | None) -> li
     return files
 
 
+def _count_learnt_view(class_dir: Path, files: list[str]) -> None:
+    """Count a learnt design's front view in ``model.json``'s ``learnt_views``: the last so many
+    views of the class are designs taught by examples (look-alikes compare them on each wall)."""
+    if not any(f.startswith("colour") for f in files):
+        return
+    path = class_dir / "model.json"
+    meta = json.loads(path.read_text(encoding="utf-8"))
+    k = meta.get("learnt_views", 0)
+    meta["learnt_views"] = (k if isinstance(k, int) and not isinstance(k, bool) and k > 0 else 0) + 1
+    path.write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
+
+
 def _new_class_size(label: str, objs: list, surfaces_and_clicks: list) -> tuple[float, float]:
     """The median size of a new class's examples: given (``width_m``, ``height_m``) or measured."""
     sizes = []
@@ -305,6 +317,7 @@ def learn_library(detect_out: Path, reviewed: Path, models: Path, out: Path, *,
             cdir = tmp / t.class_id
             if t.action == "new design":
                 t.files = _write_design(cdir, designs[t.class_id], _next_index(cdir))
+                _count_learnt_view(cdir, t.files)
             elif t.action == "new class":
                 meta, examples = new[t.class_id]
                 cdir.mkdir()
