@@ -141,6 +141,22 @@ def _has_relief(t: ModelTemplate) -> bool:
     return m.size > 0 and float(m.std()) >= _FLAT_M * max(float(np.abs(m).max()), 1e-9)
 
 
+def design_templates(t: ModelTemplate) -> list[ModelTemplate]:
+    """A class's model and each of its learnt designs (``model.json`` ``learnt_views``: the
+    last so many front views, written by ``sbsc learn``) as a model of its own: that view,
+    and the further depth model of the same rank from the end (else the reference one)."""
+    k = t.extra.get("learnt_views", 0)
+    if not isinstance(k, int) or isinstance(k, bool) or k <= 0 or len(t.colour_views) <= 1:
+        return [t]
+    k = min(k, len(t.colour_views) - 1)
+    out = [replace(t, colour_views=t.colour_views[:-k], extra_depths=[])]
+    for j, view in enumerate(t.colour_views[-k:]):
+        back = k - j  # 1 for the last view
+        depth = t.extra_depths[-back] if back <= len(t.extra_depths) else t.depth
+        out.append(replace(t, colour_views=[view], depth=depth, extra_depths=[]))
+    return out
+
+
 def lookalike_sets(templates: dict[str, ModelTemplate], settings: LookalikeSettings) -> list[frozenset[str]]:
     """The groups (two or more classes) of look-alike classes of the library."""
     ids = sorted(templates)
@@ -151,18 +167,21 @@ def lookalike_sets(templates: dict[str, ModelTemplate], settings: LookalikeSetti
             c = parent[c]
         return c
 
-    labs = {c: _mean_lab(templates[c]) for c in ids}
+    designs = {c: design_templates(templates[c]) for c in ids}
+    labs = {c: [_mean_lab(t) for t in designs[c]] for c in ids}
     for i, a in enumerate(ids):
         for b in ids[i + 1:]:
-            ta, tb = templates[a], templates[b]
-            if labs[a] is None or labs[b] is None or not _same_size(ta, tb, settings.size_tolerance):
-                continue
-            same_colour = float(np.linalg.norm(labs[a] - labs[b])) <= settings.max_colour_delta_e
-            if not same_colour and not settings.depth_alike_any_colour:
-                continue
-            if (same_colour and settings.relief_decides and _has_relief(ta) and _has_relief(tb)) or \
-                    depth_similarity(ta, tb) >= settings.min_depth_ncc:
-                parent[root(b)] = root(a)
+            for (ta, la), (tb, lb) in ((x, y) for x in zip(designs[a], labs[a], strict=True)
+                                       for y in zip(designs[b], labs[b], strict=True)):
+                if la is None or lb is None or not _same_size(ta, tb, settings.size_tolerance):
+                    continue
+                same_colour = float(np.linalg.norm(la - lb)) <= settings.max_colour_delta_e
+                if not same_colour and not settings.depth_alike_any_colour:
+                    continue
+                if (same_colour and settings.relief_decides and _has_relief(ta) and _has_relief(tb)) or \
+                        depth_similarity(ta, tb) >= settings.min_depth_ncc:
+                    parent[root(b)] = root(a)
+                    break
     groups: dict[str, set[str]] = {}
     for c in ids:
         groups.setdefault(root(c), set()).add(c)

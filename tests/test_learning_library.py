@@ -210,3 +210,26 @@ def test_cli_learn_writes_a_library_and_refuses_bad_input_in_one_line(taught, ca
     assert main(["learn", *args, "--classes", str(classes), "--out", str(taught["tmp"] / "n4")]) == 2
     assert "the library has this class already" in capsys.readouterr().err
     assert not any((taught["tmp"] / n).exists() for n in ("n2", "n3", "n4"))
+
+
+def test_look_alikes_are_found_between_learnt_designs_too() -> None:
+    from dataclasses import replace
+
+    from sbsc_core.lookalikes import design_templates, lookalike_sets
+    from sbsc_core.settings import LookalikeSettings
+    from tests.recognition_synth import sign_like
+
+    green, _ = sign_like()
+    red, _ = sign_like(back=(200, 20, 30))
+    tall = cv2.resize(red, (42, 60), interpolation=cv2.INTER_NEAREST)  # the library's design: another size
+    lib = ModelLibrary({"a": make_model("a", green, np.full((42, 42), 0.004, np.float32)),
+                        "b": make_model("b", tall, np.full((60, 42), 0.004, np.float32))}, "x")
+    templates = make_templates(lib, PIXEL_M)
+    assert lookalike_sets(templates, LookalikeSettings()) == []
+    # b's building has a square sign like a's: taught as b's learnt design (the last view, with alpha)
+    view = np.zeros((60, 42, 4), np.uint8)
+    view[9:51, :] = green
+    b = templates["b"]
+    templates["b"] = replace(b, colour_views=[*b.colour_views, view], extra={"learnt_views": 1})
+    assert [len(design_templates(t)) for t in templates.values()] == [1, 2]
+    assert lookalike_sets(templates, LookalikeSettings()) == [frozenset({"a", "b"})]

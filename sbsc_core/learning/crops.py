@@ -17,6 +17,9 @@ import numpy as np
 MIN_SEEN = 0.6  # a crop with less of its footprint scanned is left out
 MAX_TURN_DEG = 5.0  # an object turned by more (from upright or upside down) gives no crop
 MIN_DEPTH_SAMPLES = 1  # crops a learnt depth model needs at least
+OBJECT_DELTA_E = 12.0  # a learnt view's pixel this far (CIE76) from the surface's colour is the object
+OBJECT_RELIEF_M = 0.003  # ... and so is one standing out this much
+OBJECT_MIN_SHARE = 0.25  # an object box smaller than this share of the footprint is not trusted
 
 Window = tuple[int, int, int, int]
 
@@ -47,6 +50,48 @@ def surface_level(depth: np.ndarray, win: Window, ring_px: int) -> float:
     ring = depth[R0:R1, C0:C1].astype(np.float32).copy()
     ring[r0 - R0:r1 - R0, c0 - C0:c1 - C0] = np.nan
     return float(np.nanmedian(ring)) if np.isfinite(ring).any() else 0.0
+
+
+def surface_colour(colour: np.ndarray, depth: np.ndarray, win: Window, ring_px: int) -> np.ndarray | None:
+    """The median colour of the scanned pixels of a ring of ``ring_px`` around ``win`` (None unseen)."""
+    r0, c0, r1, c1 = win
+    R0, C0 = max(0, r0 - ring_px), max(0, c0 - ring_px)
+    R1, C1 = min(depth.shape[0], r1 + ring_px), min(depth.shape[1], c1 + ring_px)
+    ring = np.isfinite(depth[R0:R1, C0:C1])
+    ring[r0 - R0:r1 - R0, c0 - C0:c1 - C0] = False
+    if not ring.any():
+        return None
+    return np.median(colour[R0:R1, C0:C1][ring], axis=0)
+
+
+def object_alpha(view_bgr: np.ndarray, surface_bgr: np.ndarray | None, relief_m: np.ndarray | None, *,
+                 min_delta_e: float = OBJECT_DELTA_E, min_relief_m: float = OBJECT_RELIEF_M,
+                 min_share: float = OBJECT_MIN_SHARE) -> np.ndarray:
+    """The alpha of a learnt front view: 255 over the bounding box of what is the object (a colour
+    ``min_delta_e`` from the surface's, or relief of ``min_relief_m``), 0 around it; all 255 when
+    that box covers less than ``min_share`` of the footprint (an object of the surface's colour
+    without relief: nothing tells it from the surface, so the whole footprint is its view)."""
+    import cv2
+
+    h, w = view_bgr.shape[:2]
+    fg = np.zeros((h, w), bool)
+    if surface_bgr is not None:
+        lab = cv2.cvtColor(view_bgr.astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab)
+        wall = cv2.cvtColor(np.asarray(surface_bgr, np.float32).reshape(1, 1, 3) / 255.0, cv2.COLOR_BGR2Lab)
+        fg |= np.linalg.norm(lab - wall, axis=2) > min_delta_e
+    if relief_m is not None and relief_m.shape == (h, w):
+        fg |= np.nan_to_num(np.abs(relief_m), nan=0.0) >= min_relief_m
+    fg = cv2.morphologyEx(fg.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)) > 0  # noise specks
+    alpha = np.full((h, w), 255, np.uint8)
+    if not fg.any():
+        return alpha
+    rr, cc = np.flatnonzero(fg.any(axis=1)), np.flatnonzero(fg.any(axis=0))
+    r0, r1, c0, c1 = rr[0], rr[-1] + 1, cc[0], cc[-1] + 1
+    if (r1 - r0) * (c1 - c0) < min_share * h * w:
+        return alpha
+    alpha[:] = 0
+    alpha[r0:r1, c0:c1] = 255
+    return alpha
 
 
 def relief(depth: np.ndarray, win: Window, ring_px: int) -> np.ndarray | None:

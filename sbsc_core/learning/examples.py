@@ -43,7 +43,7 @@ from ..io.detections_model import (
 )
 from ..io.safe_json import load_json_file
 from ..types import WallFrame
-from .crops import MIN_SEEN, Window, footprint, seen_share, surface_level, upright
+from .crops import MIN_SEEN, Window, footprint, seen_share, surface_colour, surface_level, upright
 from .snap import snap_to_relief
 
 MAX_OFF_SURFACE_M = 0.15  # an example's position at most this far from its surface's plane
@@ -106,6 +106,7 @@ class Example:
     colour: np.ndarray  # BGR crop over the footprint
     relief: np.ndarray  # depth crop minus the surface level (NaN unseen)
     rho: float | None = None  # the snap's match with the class's models (None: not snapped by them)
+    surface_bgr: np.ndarray | None = None  # the surface's colour around the footprint
 
 
 # --------------------------------------------------------------------------- reading
@@ -268,7 +269,8 @@ def cut(label: str, class_id: str, s: Surface, u: float, v: float, width_m: floa
     r0, c0, r1, c1 = win
     level = surface_level(depth, win, ring_px=max(2, (r1 - r0) // 4))
     return Example(label, class_id, s, u, v, width_m, height_m, s.colour()[r0:r1, c0:c1].copy(),
-                   depth[r0:r1, c0:c1].astype(np.float32) - level, rho)
+                   depth[r0:r1, c0:c1].astype(np.float32) - level, rho,
+                   surface_colour(s.colour(), depth, win, ring_px=max(2, (r1 - r0) // 4)))
 
 
 def place(label: str, obj: ReviewedObject, surfaces: dict[str, Surface]) -> tuple[Surface, float, float, bool]:

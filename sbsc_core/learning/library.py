@@ -45,7 +45,7 @@ from ..io.models import (
 from ..io.safe_json import load_json_file
 from ..templates import make_template
 from ..types import SURFACE_KINDS, ObjectModel
-from .crops import learnt_depth, learnt_view
+from .crops import learnt_depth, learnt_view, object_alpha
 from .examples import (
     Example,
     cut,
@@ -180,6 +180,10 @@ def _write_design(class_dir: Path, examples: list[Example], k: int | None) -> li
     files = []
     view = learnt_view([e.colour for e in examples])
     if view is not None:
+        surfaces = [e.surface_bgr for e in examples if e.surface_bgr is not None]
+        alpha = object_alpha(view, np.median(surfaces, axis=0) if surfaces else None,
+                             learnt_depth([e.relief for e in examples]))
+        view = np.dstack([view, alpha])  # BGRA: the object's box opaque, the surface around it not
         name = f"colour{suffix}.png"
         if not cv2.imwrite(str(class_dir / name), view):
             raise InputError(class_dir / name, "cannot write")
