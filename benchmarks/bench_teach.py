@@ -16,12 +16,15 @@ taught from ``--examples`` of its objects (``sbsc learn`` makes it a new class: 
 relief under each click, medians of the crops), and the floor is detected again: the class's
 recall on its other objects and the whole floor's FP.
 
+With ``--together`` the left-out classes are removed from the design-change run's library and
+taught there as new classes beside the designs: one detection measures both.
+
 One detection runs at a time (``nice``). A floor with fewer than ``examples + 1`` instances of a
 class (``one_room`` has one of each) is scored on ``--next-floor`` only.
 
     .venv/bin/python benchmarks/bench_teach.py --run-dir /tmp/teach --scene I --designs third \\
         --library-designs standard [--seed 1] [--next-floor 2] [--leave-out radiator exit_light]
-        [--no-design] [--json out.json]
+        [--together] [--no-design] [--json out.json]
 """
 
 from __future__ import annotations
@@ -127,15 +130,24 @@ def design_change(run: Path, a: argparse.Namespace) -> dict:
     before = detect(floor, floor / "models", run / f"det_{tag}_{a.seed}")
     examples = pick_examples(truth, a.examples)
     rev = write_reviewed(examples, run / f"reviewed_{tag}_{a.seed}.json")
-    lib = run / f"lib_{tag}_{a.seed}"
-    learnt = learn(before, rev, floor / "models", lib)
-    after = detect(floor, lib, run / f"det_{tag}_{a.seed}_learnt")
+    models, suffix = floor / "models", ""
+    if a.together and a.leave_out:  # the left-out classes are taught as new classes in the same run
+        suffix = "_minus_" + "_".join(sorted(a.leave_out))
+        models = run / f"lib_{tag}{suffix}"
+        if not models.is_dir():
+            shutil.copytree(floor / "models", models,
+                            ignore=lambda d, names: [n for n in names if n in a.leave_out and Path(d) == floor / "models"])
+    lib = run / f"lib_{tag}_{a.seed}{suffix}_learnt"
+    learnt = learn(before, rev, models, lib)
+    after = detect(floor, lib, run / f"det_{tag}_{a.seed}{suffix}_learnt")
     res = {"scene": a.scene, "designs": a.designs, "library_designs": a.library_designs, "seed": a.seed,
-           "examples": len(examples),
-           "new_designs": sorted(c for c, files in learnt.items()
-                                 if len(files) > len(os.listdir(floor / "models" / c))),
+           "examples": len(examples), "left_out": sorted(a.leave_out) if a.together else [],
+           "new_designs": sorted(c for c, files in learnt.items() if (floor / "models" / c).is_dir()
+                                 and len(files) > len(os.listdir(floor / "models" / c))),
            "before_all": figures(before, truth), "before_rest": figures(before, truth, examples),
            "after_rest": figures(after, truth, examples)}
+    if a.together:
+        res["new_classes"] = {c: figures(after, truth, examples, c)["class"] for c in a.leave_out}
     if a.next_floor is not None:
         nxt = simulate(run / f"sim_{tag}_{a.next_floor}", scene=a.scene, seed=a.next_floor, designs=a.designs,
                        library_designs=a.library_designs)
@@ -182,6 +194,9 @@ def main() -> int:
     p.add_argument("--examples", type=int, default=2)
     p.add_argument("--leave-out", nargs="*", default=[], metavar="CLASS")
     p.add_argument("--no-design", action="store_true", help="only the new-class part")
+    p.add_argument("--together", action="store_true",
+                   help="leave the --leave-out classes out of the design-change run's library and teach them "
+                        "there as new classes (one detection instead of one per class)")
     p.add_argument("--json", type=Path)
     a = p.parse_args()
     a.run_dir.mkdir(parents=True, exist_ok=True)
@@ -190,7 +205,7 @@ def main() -> int:
         out["design_change"] = design_change(a.run_dir, a)
         print(json.dumps(out["design_change"]), flush=True)
     out["new_class"] = []
-    for cls in a.leave_out:
+    for cls in [] if a.together else a.leave_out:
         out["new_class"].append(new_class(a.run_dir, a, cls))
         print(json.dumps(out["new_class"][-1]), flush=True)
     if a.json:
