@@ -72,15 +72,26 @@ def detect(scan_dir: Path, models: Path, out: Path) -> Path:
     return out
 
 
-def pick_examples(truth: TruthDocument, n: int, classes: list[str] | None = None) -> list:
-    """``n`` truth objects per class: upright and fully visible ones first, then by place."""
+def missed_by(det_dir: Path, truth: TruthDocument) -> set[int]:
+    """Indices of the truth objects that a detection did not find as their class."""
+    doc = json.loads((det_dir / "detections.json").read_text(encoding="utf-8"))
+    found = {m.truth_index for m in evaluate(doc, truth).matches if getattr(m, "truth_index", None) is not None}
+    return set(range(len(truth.objects))) - found
+
+
+def pick_examples(truth: TruthDocument, n: int, classes: list[str] | None = None,
+                  missed: set[int] | None = None) -> list:
+    """``n`` truth objects per class: upright ones first, then those recognition ``missed`` (a
+    reviewer marks what is missing), then the fully visible ones, then by place."""
+    missed = missed or set()
+    index = {id(o): i for i, o in enumerate(truth.objects)}
     by_class: dict[str, list] = {}
     for o in truth.objects:
         if classes is None or o.class_id in classes:
             by_class.setdefault(o.class_id, []).append(o)
     out = []
     for objs in by_class.values():
-        objs.sort(key=lambda o: (abs(float(o.extra.get("rotation_deg") or 0.0)) > 5.0,
+        objs.sort(key=lambda o: (abs(float(o.extra.get("rotation_deg") or 0.0)) > 5.0, index[id(o)] not in missed,
                                  -float(o.extra.get("visible_fraction", 1.0)), o.wall or "", o.u or 0.0))
         out.extend(objs[:n])
     return out
@@ -128,7 +139,7 @@ def design_change(run: Path, a: argparse.Namespace) -> dict:
                      library_designs=a.library_designs)
     truth = read_truth(floor / "ground_truth.json")
     before = detect(floor, floor / "models", run / f"det_{tag}_{a.seed}")
-    examples = pick_examples(truth, a.examples)
+    examples = pick_examples(truth, a.examples, missed=missed_by(before, truth))
     rev = write_reviewed(examples, run / f"reviewed_{tag}_{a.seed}.json")
     models, suffix = floor / "models", ""
     if a.together and a.leave_out:  # the left-out classes are taught as new classes in the same run
