@@ -150,23 +150,30 @@ def design_change(run: Path, a: argparse.Namespace) -> dict:
                             ignore=lambda d, names: [n for n in names if n in a.leave_out and Path(d) == floor / "models"])
     lib = run / f"lib_{tag}_{a.seed}{suffix}_learnt"
     learnt = learn(before, rev, models, lib)
-    after = detect(floor, lib, run / f"det_{tag}_{a.seed}{suffix}_learnt")
     res = {"scene": a.scene, "designs": a.designs, "library_designs": a.library_designs, "seed": a.seed,
            "examples": len(examples), "left_out": sorted(a.leave_out) if a.together else [],
            "new_designs": sorted(c for c, files in learnt.items() if (floor / "models" / c).is_dir()
                                  and len(files) > len(os.listdir(floor / "models" / c))),
-           "before_all": figures(before, truth), "before_rest": figures(before, truth, examples),
-           "after_rest": figures(after, truth, examples)}
+           "before_all": figures(before, truth), "before_rest": figures(before, truth, examples)}
+    if res["before_rest"]["instances"] == 0:  # every object was an example (one_room): the next floor tells
+        return {**res, **next_floor(run, a, tag, lib)}
+    after = detect(floor, lib, run / f"det_{tag}_{a.seed}{suffix}_learnt")
+    res["after_rest"] = figures(after, truth, examples)
     if a.together:
         res["new_classes"] = {c: figures(after, truth, examples, c)["class"] for c in a.leave_out}
-    if a.next_floor is not None:
-        nxt = simulate(run / f"sim_{tag}_{a.next_floor}", scene=a.scene, seed=a.next_floor, designs=a.designs,
-                       library_designs=a.library_designs)
-        ntruth = read_truth(nxt / "ground_truth.json")
-        res["next_floor"] = {"seed": a.next_floor,
-                             "before": figures(detect(nxt, nxt / "models", run / f"det_{tag}_{a.next_floor}"), ntruth),
-                             "after": figures(detect(nxt, lib, run / f"det_{tag}_{a.next_floor}_learnt"), ntruth)}
-    return res
+    return {**res, **next_floor(run, a, tag, lib)}
+
+
+def next_floor(run: Path, a: argparse.Namespace, tag: str, lib: Path) -> dict:
+    """``--next-floor``: that floor with its library and with the learnt one ({} without it)."""
+    if a.next_floor is None:
+        return {}
+    nxt = simulate(run / f"sim_{tag}_{a.next_floor}", scene=a.scene, seed=a.next_floor, designs=a.designs,
+                   library_designs=a.library_designs)
+    ntruth = read_truth(nxt / "ground_truth.json")
+    return {"next_floor": {"seed": a.next_floor,
+                           "before": figures(detect(nxt, nxt / "models", run / f"det_{tag}_{a.next_floor}"), ntruth),
+                           "after": figures(detect(nxt, lib, run / f"det_{tag}_{a.next_floor}_{lib.name}"), ntruth)}}
 
 
 def new_class(run: Path, a: argparse.Namespace, cls: str) -> dict:
