@@ -48,6 +48,7 @@ from sbsc_core.evaluate import evaluate  # noqa: E402
 from sbsc_core.io.documents import TruthDocument, read_truth  # noqa: E402
 
 MATCH_M = 0.10  # contract 5's match radius
+WELL_SEEN = 0.95  # a reviewer marks an object whose footprint the scan saw this well
 
 
 def sbsc(*args: str) -> float:
@@ -79,11 +80,32 @@ def missed_by(det_dir: Path, truth: TruthDocument) -> set[int]:
     return set(range(len(truth.objects))) - found
 
 
+def seen_shares(det_dir: Path, truth: TruthDocument) -> dict[int, float]:
+    """The share of each truth object's footprint that the scan saw (its surface's depth
+    orthoimage in the detect output); 0 when it is on no surface."""
+    from sbsc_core.errors import InputError
+    from sbsc_core.learning.crops import footprint, seen_share
+    from sbsc_core.learning.examples import locate, read_detect_output
+
+    surfaces = read_detect_output(det_dir)
+    out = {}
+    for i, o in enumerate(truth.objects):
+        try:
+            s, u, v = locate("", np.asarray(o.position, float), surfaces)
+        except InputError:
+            out[i] = 0.0
+            continue
+        win = footprint(s.depth().shape, s.frame.height_m, s.pixel_m, u, v, o.width_m, o.height_m)
+        out[i] = 0.0 if win is None else seen_share(s.depth(), win)
+    return out
+
+
 def pick_examples(truth: TruthDocument, n: int, classes: list[str] | None = None,
-                  missed: set[int] | None = None) -> list:
-    """``n`` truth objects per class: upright ones first, then those recognition ``missed`` (a
-    reviewer marks what is missing), then the fully visible ones, then by place."""
-    missed = missed or set()
+                  missed: set[int] | None = None, seen: dict[int, float] | None = None) -> list:
+    """``n`` truth objects per class, as a reviewer would mark them: upright and well seen
+    (:data:`WELL_SEEN` of the footprint) first, of those the ones recognition ``missed`` (what
+    is missing), then by the share seen and by place."""
+    missed, seen = missed or set(), seen or {}
     index = {id(o): i for i, o in enumerate(truth.objects)}
     by_class: dict[str, list] = {}
     for o in truth.objects:
@@ -91,8 +113,9 @@ def pick_examples(truth: TruthDocument, n: int, classes: list[str] | None = None
             by_class.setdefault(o.class_id, []).append(o)
     out = []
     for objs in by_class.values():
-        objs.sort(key=lambda o: (abs(float(o.extra.get("rotation_deg") or 0.0)) > 5.0, index[id(o)] not in missed,
-                                 -float(o.extra.get("visible_fraction", 1.0)), o.wall or "", o.u or 0.0))
+        objs.sort(key=lambda o: (abs(float(o.extra.get("rotation_deg") or 0.0)) > 5.0,
+                                 seen.get(index[id(o)], 1.0) < WELL_SEEN, index[id(o)] not in missed,
+                                 -seen.get(index[id(o)], 1.0), o.wall or "", o.u or 0.0))
         out.extend(objs[:n])
     return out
 
@@ -139,7 +162,7 @@ def design_change(run: Path, a: argparse.Namespace) -> dict:
                      library_designs=a.library_designs)
     truth = read_truth(floor / "ground_truth.json")
     before = detect(floor, floor / "models", run / f"det_{tag}_{a.seed}")
-    examples = pick_examples(truth, a.examples, missed=missed_by(before, truth))
+    examples = pick_examples(truth, a.examples, missed=missed_by(before, truth), seen=seen_shares(before, truth))
     rev = write_reviewed(examples, run / f"reviewed_{tag}_{a.seed}.json")
     models, suffix = floor / "models", ""
     if a.together and a.leave_out:  # the left-out classes are taught as new classes in the same run
@@ -185,7 +208,7 @@ def new_class(run: Path, a: argparse.Namespace, cls: str) -> dict:
     minus = run / f"lib_{tag}_minus_{cls}"
     if not minus.is_dir():
         shutil.copytree(floor / "models", minus, ignore=lambda d, names: [cls] if Path(d) == floor / "models" else [])
-    examples = pick_examples(truth, a.examples, [cls])
+    examples = pick_examples(truth, a.examples, [cls], seen=seen_shares(before, truth))
     rev = write_reviewed(examples, run / f"reviewed_{tag}_{cls}.json")
     lib = run / f"lib_{tag}_{cls}_learnt"
     learn(before, rev, minus, lib)

@@ -118,10 +118,21 @@ def _common(crops: list[np.ndarray]) -> list[np.ndarray]:
 
 
 def learnt_view(crops: list[np.ndarray]) -> np.ndarray | None:
-    """The per-pixel median of the colour crops of one class (uint8); None without crops."""
+    """The per-pixel median of the colour crops of one class (uint8); None without crops.
+
+    Float crops may hold NaN where the scan saw nothing: the median is taken over the crops
+    that saw each pixel, and a pixel none saw takes the median colour of the view."""
     if not crops:
         return None
-    return np.median(np.stack(_common(crops)), axis=0).round().astype(np.uint8)
+    stack = np.stack(_common(crops))
+    if stack.dtype.kind != "f":
+        return np.median(stack, axis=0).round().astype(np.uint8)
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pixels stay NaN
+        view = np.nanmedian(stack, axis=0)
+        fill = np.nanmedian(view.reshape(-1, view.shape[-1]), axis=0)
+    view = np.where(np.isfinite(view), view, np.nan_to_num(fill, nan=0.0))
+    return np.clip(view.round(), 0, 255).astype(np.uint8)
 
 
 def learnt_depth(crops: list[np.ndarray]) -> np.ndarray | None:

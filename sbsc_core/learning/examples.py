@@ -53,6 +53,8 @@ BLOB_PEAK_SHARE = 0.35  # ... and at least this share of the relief's peak near 
 BLOB_SEARCH_M = 0.05  # the blob must reach this close to the click
 BLOB_MAX_M = 2.5  # larger blobs are a piece of furniture or the surface bending, not an object
 SNAP_RADIUS_M = 0.06  # a library class's example moves at most this far to its best match
+SNAP_AGREE_M = 0.02  # a snap this far from the relief blob's centre is not trusted
+SIZE_TOLERANCE = 0.3  # a blob within this share of a class's sides has its size
 REVIEWED_MAX_BYTES = 64 << 20
 
 
@@ -103,7 +105,7 @@ class Example:
     v: float
     width_m: float
     height_m: float
-    colour: np.ndarray  # BGR crop over the footprint
+    colour: np.ndarray  # BGR crop over the footprint, float32, NaN where the scan saw nothing
     relief: np.ndarray  # depth crop minus the surface level (NaN unseen)
     rho: float | None = None  # the snap's match with the class's models (None: not snapped by them)
     surface_bgr: np.ndarray | None = None  # the surface's colour around the footprint
@@ -254,6 +256,22 @@ def snap_known(s: Surface, models: list[np.ndarray], u: float, v: float) -> tupl
     return best
 
 
+def trust_snap(s: Surface, u: float, v: float, su: float, sv: float, rho: float | None, width_m: float,
+               height_m: float, min_rho: float) -> bool:
+    """Whether a library class's example moves from its click (u, v) to its snap (su, sv): the
+    match correlates ``min_rho`` or more, and it agrees (within :data:`SNAP_AGREE_M`) with the
+    relief blob under the click when that blob has about the class's size (within
+    :data:`SIZE_TOLERANCE`). A model of another design fits a new product a few centimetres off
+    (a tall sign's model on a square plate); two examples moved so would blur their median."""
+    if rho is None or rho < min_rho:
+        return False
+    blob = relief_blob(s.depth(), s.frame.height_m, s.pixel_m, u, v)
+    if blob is None or abs(blob[2] - width_m) > SIZE_TOLERANCE * width_m \
+            or abs(blob[3] - height_m) > SIZE_TOLERANCE * height_m:
+        return True
+    return math.hypot(su - blob[0], sv - blob[1]) <= SNAP_AGREE_M
+
+
 def cut(label: str, class_id: str, s: Surface, u: float, v: float, width_m: float, height_m: float,
         rho: float | None = None) -> Example:
     """The example's crops over its footprint; InputError when it leaves the surface or is not scanned."""
@@ -268,7 +286,9 @@ def cut(label: str, class_id: str, s: Surface, u: float, v: float, width_m: floa
                                 f"(at least {MIN_SEEN:.0%} needed)")
     r0, c0, r1, c1 = win
     level = surface_level(depth, win, ring_px=max(2, (r1 - r0) // 4))
-    return Example(label, class_id, s, u, v, width_m, height_m, s.colour()[r0:r1, c0:c1].copy(),
+    colour = s.colour()[r0:r1, c0:c1].astype(np.float32)
+    colour[~np.isfinite(depth[r0:r1, c0:c1])] = np.nan  # unseen: no colour either
+    return Example(label, class_id, s, u, v, width_m, height_m, colour,
                    depth[r0:r1, c0:c1].astype(np.float32) - level, rho,
                    surface_colour(s.colour(), depth, win, ring_px=max(2, (r1 - r0) // 4)))
 

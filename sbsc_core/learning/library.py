@@ -54,6 +54,7 @@ from .examples import (
     read_reviewed,
     relief_blob,
     snap_known,
+    trust_snap,
 )
 
 DEFAULT_IFC_CLASS = "IfcBuildingElementProxy"
@@ -284,10 +285,11 @@ def learn_library(detect_out: Path, reviewed: Path, models: Path, out: Path, *,
                 rho = None
                 if tmodels:
                     su, sv, rho = snap_known(s, tmodels, u, v)
-                    u, v = (u, v) if given else (su, sv)
+                    if not given and trust_snap(s, u, v, su, sv, rho, m.width_m, m.height_m, min_rho):
+                        u, v = su, sv
                 examples.append(cut(lab, cid, s, u, v, m.width_m, m.height_m, rho))
             rho = _median([e.rho if e.rho is not None else 0.0 for e in examples]) if tmodels else None
-            delta = _median([colour_delta(e.colour, m.colour_views) for e in examples])
+            delta = _median([colour_delta(learnt_view([e.colour]), m.colour_views) for e in examples])
             missed = sum(not found(e, detections) for e in examples)
             matches = missed == 0 and (rho is None or rho >= min_rho) and (delta is None or delta <= max_colour_delta)
             t = Taught(cid, "matches" if matches else "new design", len(examples), rho,
