@@ -233,3 +233,34 @@ def test_look_alikes_are_found_between_learnt_designs_too() -> None:
     templates["b"] = replace(b, colour_views=[*b.colour_views, view], extra={"learnt_views": 1})
     assert [len(design_templates(t)) for t in templates.values()] == [1, 2]
     assert lookalike_sets(templates, LookalikeSettings()) == [frozenset({"a", "b"})]
+
+
+def test_a_learnt_view_is_the_median_of_what_each_crop_saw() -> None:
+    from sbsc_core.learning.crops import learnt_view
+
+    a = np.full((4, 4, 3), 100.0, np.float32)
+    b = np.full((4, 4, 3), 110.0, np.float32)
+    c = np.full((4, 4, 3), 200.0, np.float32)
+    a[0, 0] = b[0, 0] = np.nan  # unseen by two crops: the third's colour
+    c[1, 1] = np.nan
+    view = learnt_view([a, b, c])
+    assert view.dtype == np.uint8 and int(view[0, 0, 0]) == 200 and int(view[1, 1, 0]) == 105
+    assert int(view[2, 2, 0]) == 110
+    a[:] = np.nan  # a pixel no crop saw takes the view's median colour
+    assert int(learnt_view([a])[0, 0, 0]) == 0 and int(learnt_view([a, c])[1, 1, 0]) == 200
+
+
+def test_an_example_moves_to_a_snap_only_where_the_relief_agrees(tmp_path: Path) -> None:
+    from sbsc_core.learning.examples import read_detect_output, trust_snap
+
+    other = make_template(make_model("x", *socket_like(relief_m=0.02)), PIXEL_M)
+    ortho, area = make_wall(seed=8)
+    paste(ortho, area, other, READER_AT, seed=8)
+    surface = read_detect_output(write_detect_output([ortho], tmp_path / "det"))["W01"]
+    u, v = (float(x) for x in ortho.pixel_to_uv(*READER_AT))
+    # the relief blob is the 0.08 m plate at the click: a snap 1 cm off agrees, 4 cm off does not
+    assert trust_snap(surface, u, v, u + 0.01, v, 0.9, 0.08, 0.08, 0.75)
+    assert not trust_snap(surface, u, v, u + 0.04, v, 0.9, 0.08, 0.08, 0.75)
+    assert not trust_snap(surface, u, v, u + 0.01, v, 0.6, 0.08, 0.08, 0.75)  # a weak match
+    # a class of another size (no blob of its size there): the match alone decides
+    assert trust_snap(surface, u, v, u + 0.04, v, 0.9, 0.30, 0.30, 0.75)
