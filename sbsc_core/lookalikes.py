@@ -299,11 +299,14 @@ def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, thr
 def _best_design(relief: np.ndarray, model: np.ndarray | list[np.ndarray], centre: tuple[float, float],
                  rotation_deg: float, *, search_px: int) -> float | None:
     """:func:`relief_score` of a class's depth model, or the best of its designs' (a list:
-    the reference model and the further ones, e.g. learnt by ``sbsc learn``)."""
-    scores = [relief_score(relief, m, centre, rotation_deg, search_px=search_px)
-              for m in (model if isinstance(model, list) else [model])]
-    scores = [x for x in scores if x is not None]
-    return max(scores) if scores else None
+    the reference model and the further ones, e.g. learnt by ``sbsc learn``). None when the
+    reference model is flat (a sign): a learnt design of it is a flat plate too, whose scanner
+    noise and rim would only add chance to the print's evidence."""
+    models = model if isinstance(model, list) else [model]
+    scores = [relief_score(relief, m, centre, rotation_deg, search_px=search_px) for m in models]
+    if scores[0] is None:
+        return None
+    return max(x for x in scores if x is not None)
 
 
 def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str, np.ndarray],
