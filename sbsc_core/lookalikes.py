@@ -299,14 +299,14 @@ def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, thr
 def _best_design(relief: np.ndarray, model: np.ndarray | list[np.ndarray], centre: tuple[float, float],
                  rotation_deg: float, *, search_px: int) -> float | None:
     """:func:`relief_score` of a class's depth model, or the best of its designs' (a list:
-    the reference model and the further ones, e.g. learnt by ``sbsc learn``). None when the
-    reference model is flat (a sign): a learnt design of it is a flat plate too, whose scanner
-    noise and rim would only add chance to the print's evidence."""
+    the reference model and the further ones, e.g. learnt by ``sbsc learn``). None when one of
+    them is flat inside its content (a sign): the class may be a flat plate, which its relief
+    cannot tell from another."""
     models = model if isinstance(model, list) else [model]
     scores = [relief_score(relief, m, centre, rotation_deg, search_px=search_px) for m in models]
-    if scores[0] is None:
+    if any(x is None for x in scores):
         return None
-    return max(x for x in scores if x is not None)
+    return max(scores)
 
 
 def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str, np.ndarray],
@@ -400,19 +400,21 @@ def relief_models(templates: dict[str, ModelTemplate]
     models: dict[str, np.ndarray | list[np.ndarray]] = {}
     offsets = {}
     for c, t in templates.items():
-        designs = t.depth_models()
-        if not designs:
+        d = t.depth_filled()
+        if d is None:
             continue
-        d = designs[0]
-        crop = None
         if d.shape[:2] == (t.height_px, t.width_px):
             b = content_box(t)
-            crop = (slice(b.r0, b.r1), slice(b.c0, b.c1))
+            d = d[b.r0:b.r1, b.c0:b.c1]
             offsets[c] = content_offset(t)
         else:
             offsets[c] = (0.0, 0.0)
-        cut = [np.ascontiguousarray(m[crop] if crop is not None and m.shape == d.shape else m, np.float32)
-               for m in designs]
+        cut = [np.ascontiguousarray(d, np.float32)]
+        for design in design_templates(t)[1:]:  # learnt designs: each cropped to its own content
+            m = design.depth_filled()
+            if m is not None and m.shape[:2] == (t.height_px, t.width_px):
+                b = content_box(design)
+                cut.append(np.ascontiguousarray(m[b.r0:b.r1, b.c0:b.c1], np.float32))
         models[c] = cut[0] if len(cut) == 1 else cut
     return models, offsets
 
