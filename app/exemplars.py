@@ -1,5 +1,7 @@
 """Learn from decisions: the reviewed objects of a project as a model library (contract 2).
 
+The crops and their medians are the library's (:mod:`sbsc_core.learning.crops`).
+
 Every accepted object (recognized, relabelled or added by a reviewer) is cut out of its
 wall's colour and depth orthoimages over exactly its footprint. Each class of the project's
 library is copied with its own views and ``model.json``, and gets one learnt front view
@@ -18,7 +20,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import warnings
 from pathlib import Path
 
 import cv2
@@ -26,38 +27,14 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from sbsc_core.learning.crops import footprint, learnt_depth, learnt_view, relief, upright
+
 from .models import DetectionRow, Project, WallRow
 
-MIN_SEEN = 0.6  # a crop with less of its footprint scanned is left out
+__all__ = ["build_exemplar_library", "footprint", "learnt_depth", "learnt_view", "upright"]
+
 MAX_VIEWS = 12  # crops per class at most (the surest first), merged into one view and one depth model
-MAX_TURN_DEG = 5.0  # an object turned by more (from upright or upside down) gives no crop
-MIN_DEPTH_SAMPLES = 1  # crops a learnt depth model needs at least
 EXEMPLAR_BASE = 100  # exemplar views are colour_101.png, colour_102.png, ...
-
-
-def footprint(shape: tuple[int, ...], wall_height_m: float, pixel_m: float, u: float, v: float,
-              width_m: float, height_m: float) -> tuple[int, int, int, int] | None:
-    """(r0, c0, r1, c1) of an object's footprint in an orthoimage; None when it leaves the image."""
-    c0 = int(round((u - width_m / 2) / pixel_m))
-    c1 = int(round((u + width_m / 2) / pixel_m))
-    r0 = int(round((wall_height_m - v - height_m / 2) / pixel_m))
-    r1 = int(round((wall_height_m - v + height_m / 2) / pixel_m))
-    if r0 < 0 or c0 < 0 or r1 > shape[0] or c1 > shape[1] or r1 - r0 < 2 or c1 - c0 < 2:
-        return None
-    return r0, c0, r1, c1
-
-
-def _relief(depth: np.ndarray, win: tuple[int, int, int, int], ring_px: int) -> np.ndarray | None:
-    r0, c0, r1, c1 = win
-    crop = depth[r0:r1, c0:c1].astype(np.float32)
-    if np.isfinite(crop).mean() < MIN_SEEN:
-        return None
-    R0, C0 = max(0, r0 - ring_px), max(0, c0 - ring_px)
-    R1, C1 = min(depth.shape[0], r1 + ring_px), min(depth.shape[1], c1 + ring_px)
-    ring = depth[R0:R1, C0:C1].copy()
-    ring[r0 - R0:r1 - R0, c0 - C0:c1 - C0] = np.nan
-    level = float(np.nanmedian(ring)) if np.isfinite(ring).any() else 0.0
-    return crop - level
 
 
 def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_library: Path,
@@ -111,12 +88,12 @@ def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_
         if win is None:
             continue
         r0, c0, r1, c1 = win
-        relief = _relief(depth, win, ring_px=max(2, (r1 - r0) // 4)) if depth is not None else None
-        if depth is not None and relief is None:
+        crop_relief = relief(depth, win, ring_px=max(2, (r1 - r0) // 4)) if depth is not None else None
+        if depth is not None and crop_relief is None:
             continue  # mostly unseen
         views.setdefault(d.class_id, []).append(colour[r0:r1, c0:c1])
-        if relief is not None:
-            reliefs.setdefault(d.class_id, []).append(relief.astype(np.float32))
+        if crop_relief is not None:
+            reliefs.setdefault(d.class_id, []).append(crop_relief)
         added[d.class_id] = added.get(d.class_id, 0) + 1
     # numbered after the library's own views: colour_101.png, depth_101.npy
     for cid, crops in views.items():
@@ -130,35 +107,3 @@ def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_
     return added
 
 
-def _common(crops: list[np.ndarray]) -> list[np.ndarray]:
-    """The crops of the most common size (a wall of another pixel size gives another)."""
-    shapes = [c.shape for c in crops]
-    shape = max(set(shapes), key=shapes.count)
-    return [c for c in crops if c.shape == shape]
-
-
-def learnt_view(crops: list[np.ndarray]) -> np.ndarray | None:
-    """The per-pixel median of the colour crops of one class (BGR uint8); None without crops."""
-    if not crops:
-        return None
-    return np.median(np.stack(_common(crops)), axis=0).round().astype(np.uint8)
-
-
-def upright(rotation_deg: float) -> bool:
-    """Whether an object turned by ``rotation_deg`` still covers its upright footprint: within
-    ``MAX_TURN_DEG`` of upright or of upside down (the crop is the object as it hangs)."""
-    off = abs((rotation_deg + 90.0) % 180.0 - 90.0)
-    return off <= MAX_TURN_DEG
-
-
-def learnt_depth(crops: list[np.ndarray]) -> np.ndarray | None:
-    """The per-pixel median of the relief crops of one class (NaN where none saw it); None
-    with fewer than ``MIN_DEPTH_SAMPLES`` crops. Crops of another size than the most common
-    one (a wall of another pixel size) are left out."""
-    if len(crops) < MIN_DEPTH_SAMPLES:
-        return None
-    stack = np.stack(_common(crops))
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pixels stay NaN
-        model = np.nanmedian(stack, axis=0).astype(np.float32)
-    return model if np.isfinite(model).any() else None

@@ -49,23 +49,34 @@ def scene_amplitude(relief: np.ndarray, shape: tuple[int, int], centre: tuple[fl
     return relief_amplitude(crop_padded(relief, b.r0, b.r1, b.c0, b.c1))
 
 
-def amplitude_compatible(relief: np.ndarray, models: dict[str, np.ndarray],
+Models = dict[str, "np.ndarray | list[np.ndarray]"]  # class -> its depth model, or one per design
+
+
+def _designs(m: np.ndarray | list[np.ndarray]) -> list[np.ndarray]:
+    return list(m) if isinstance(m, list) else [m]
+
+
+def amplitude_compatible(relief: np.ndarray, models: Models,
                          centres: dict[str, tuple[float, float]], rotation_deg: float,
                          gain_range: tuple[float, float]) -> dict[str, bool]:
-    """For each class of ``models`` (depth models cropped to their content), whether the
-    scene's relief in its footprint (at ``centres[c]``, turned by ``rotation_deg``) stands out
-    as far as the model does, within ``gain_range`` (the depth recognizer's accepted scene /
-    model amplitude ratio).
+    """For each class of ``models`` (depth models cropped to their content; a class with
+    several designs is compatible when one of them is), whether the scene's relief in its
+    footprint (at ``centres[c]``, turned by ``rotation_deg``) stands out as far as the model
+    does, within ``gain_range`` (the depth recognizer's accepted scene / model amplitude ratio).
 
     An object whose relief stands out 16 mm is not a 2.5 mm flush socket nor a 45 mm call
     point, however alike their outlines and prints. A class whose amplitude cannot be
     measured here counts as compatible.
     """
     out = {}
-    for c, m in models.items():
-        own = relief_amplitude(m)
-        seen = scene_amplitude(relief, m.shape[:2], centres[c], rotation_deg)
-        out[c] = own is None or seen is None or own <= 0 or gain_range[0] <= seen / own <= gain_range[1]
+    for c, designs in models.items():
+        out[c] = False
+        for m in _designs(designs):
+            own = relief_amplitude(m)
+            seen = scene_amplitude(relief, m.shape[:2], centres[c], rotation_deg)
+            if own is None or seen is None or own <= 0 or gain_range[0] <= seen / own <= gain_range[1]:
+                out[c] = True
+                break
     return out
 
 
@@ -78,7 +89,7 @@ class FlatRefusal:
     scene_m: float  # how far the scene does in its footprint
 
 
-def colour_where_relief_allows(colour: list[Candidate], relief: np.ndarray | None, models: dict[str, np.ndarray],
+def colour_where_relief_allows(colour: list[Candidate], relief: np.ndarray | None, models: Models,
                                offsets: dict[str, tuple[float, float]], gain_range: tuple[float, float]
                                ) -> tuple[list[Candidate], list[FlatRefusal]]:
     """The colour candidates whose class's depth model the relief in their footprint does not
@@ -90,22 +101,26 @@ def colour_where_relief_allows(colour: list[Candidate], relief: np.ndarray | Non
     a specular highlight or a poster's white square taken for a flush socket. The relief is
     measured where it is known (:func:`scene_amplitude`); noise only raises it, so a noisy
     scan refuses less, never more. Classes without a depth model, and places seen too
-    sparsely to measure, are kept.
+    sparsely to measure, are kept; a class with several designs is refused only when the
+    relief is too flat for every one of them.
     """
     if relief is None or not colour:
         return colour, []
     kept: list[Candidate] = []
     refused: list[FlatRefusal] = []
+    centre_of = lambda cand: shifted_centre(cand.centre, offsets.get(cand.class_id), cand.rotation_deg)  # noqa: E731
     for cand in colour:
-        m = models.get(cand.class_id)
-        own = None if m is None else relief_amplitude(m)
-        if m is None or own is None or own <= 0:
-            kept.append(cand)
-            continue
-        centre = shifted_centre(cand.centre, offsets.get(cand.class_id), cand.rotation_deg)
-        seen = scene_amplitude(relief, m.shape[:2], centre, cand.rotation_deg)
-        if seen is not None and seen < gain_range[0] * own:
-            refused.append(FlatRefusal(cand, own, seen))
+        flat: list[FlatRefusal] = []
+        designs = _designs(models[cand.class_id]) if cand.class_id in models else []
+        for m in designs:
+            own = relief_amplitude(m)
+            seen = None if own is None or own <= 0 else scene_amplitude(relief, m.shape[:2], centre_of(cand),
+                                                                        cand.rotation_deg)
+            if seen is None or seen >= gain_range[0] * own:
+                break
+            flat.append(FlatRefusal(cand, own, seen))
+        if designs and len(flat) == len(designs):
+            refused.append(flat[0])
         else:
             kept.append(cand)
     return kept, refused

@@ -211,7 +211,14 @@ def _add_compare(cmds: Commands) -> None:
     json_option(c)
 
 
-BUILTIN: tuple[Registrar, ...] = (_add_simulate, _add_detect, _add_evaluate, _add_export_ifc, _add_compare)
+def _add_learn(cmds: Commands) -> None:
+    from .learning.command import add_learn
+
+    add_learn(cmds)
+
+
+BUILTIN: tuple[Registrar, ...] = (_add_simulate, _add_detect, _add_evaluate, _add_export_ifc, _add_compare,
+                                  _add_learn)
 
 
 def plugin_registrars() -> list[Registrar]:

@@ -152,6 +152,22 @@ def _has_relief(t: ModelTemplate) -> bool:
     return m.size > 0 and float(m.std()) >= _FLAT_M * max(float(np.abs(m).max()), 1e-9)
 
 
+def design_templates(t: ModelTemplate) -> list[ModelTemplate]:
+    """A class's model and each of its learnt designs (``model.json`` ``learnt_views``: the
+    last so many front views, written by ``sbsc learn``) as a model of its own: that view,
+    and the further depth model of the same rank from the end (else the reference one)."""
+    k = t.extra.get("learnt_views", 0)
+    if not isinstance(k, int) or isinstance(k, bool) or k <= 0 or len(t.colour_views) <= 1:
+        return [t]
+    k = min(k, len(t.colour_views) - 1)
+    out = [replace(t, colour_views=t.colour_views[:-k], extra_depths=[])]
+    for j, view in enumerate(t.colour_views[-k:]):
+        back = k - j  # 1 for the last view
+        depth = t.extra_depths[-back] if back <= len(t.extra_depths) else t.depth
+        out.append(replace(t, colour_views=[view], depth=depth, extra_depths=[]))
+    return out
+
+
 def lookalike_sets(templates: dict[str, ModelTemplate], settings: LookalikeSettings) -> list[frozenset[str]]:
     """The groups (two or more classes) of look-alike classes of the library."""
     ids = sorted(templates)
@@ -162,18 +178,21 @@ def lookalike_sets(templates: dict[str, ModelTemplate], settings: LookalikeSetti
             c = parent[c]
         return c
 
-    labs = {c: _mean_lab(templates[c]) for c in ids}
+    designs = {c: design_templates(templates[c]) for c in ids}
+    labs = {c: [_mean_lab(t) for t in designs[c]] for c in ids}
     for i, a in enumerate(ids):
         for b in ids[i + 1:]:
-            ta, tb = templates[a], templates[b]
-            if labs[a] is None or labs[b] is None or not _same_size(ta, tb, settings.size_tolerance):
-                continue
-            same_colour = float(np.linalg.norm(labs[a] - labs[b])) <= settings.max_colour_delta_e
-            if not same_colour and not settings.depth_alike_any_colour:
-                continue
-            if (same_colour and settings.relief_decides and _has_relief(ta) and _has_relief(tb)) or \
-                    depth_similarity(ta, tb) >= settings.min_depth_ncc:
-                parent[root(b)] = root(a)
+            for (ta, la), (tb, lb) in ((x, y) for x in zip(designs[a], labs[a], strict=True)
+                                       for y in zip(designs[b], labs[b], strict=True)):
+                if la is None or lb is None or not _same_size(ta, tb, settings.size_tolerance):
+                    continue
+                same_colour = float(np.linalg.norm(la - lb)) <= settings.max_colour_delta_e
+                if not same_colour and not settings.depth_alike_any_colour:
+                    continue
+                if (same_colour and settings.relief_decides and _has_relief(ta) and _has_relief(tb)) or \
+                        depth_similarity(ta, tb) >= settings.min_depth_ncc:
+                    parent[root(b)] = root(a)
+                    break
     groups: dict[str, set[str]] = {}
     for c in ids:
         groups.setdefault(root(c), set()).add(c)
@@ -233,7 +252,7 @@ _FLAT_M = 0.05  # a depth model varying by less than this share of its height in
 
 def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[str, np.ndarray],
               offsets: dict[str, tuple[float, float]], relief: np.ndarray | None,
-              models: dict[str, np.ndarray], model_offsets: dict[str, tuple[float, float]],
+              models: dict[str, np.ndarray | list[np.ndarray]], model_offsets: dict[str, tuple[float, float]],
               search_px: int) -> tuple[dict[str, float] | None, bool]:
     """Each class's evidence at a candidate: the mean of the comparisons available for every
     class of ``seen``: its print NCC (when each has a view on this wall) and its relief score
@@ -241,11 +260,12 @@ def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[st
     the relief was compared. None when neither is available."""
     parts: list[dict[str, float]] = []
     if all(c in views for c in seen):
-        parts.append({c: print_score(diff, views[c], _shifted(cand.centre, offsets.get(c), cand.rotation_deg),
-                                     cand.rotation_deg, search_px=search_px) for c in seen})
+        parts.append({c: max(print_score(diff, v, _shifted(cand.centre, offsets.get(c), cand.rotation_deg),
+                                         cand.rotation_deg, search_px=search_px) for v in _designs(views[c]))
+                      for c in seen})
     with_relief = False
     if relief is not None and all(c in models for c in seen):
-        reliefs = {c: relief_score(relief, models[c], _shifted(cand.centre, model_offsets.get(c), cand.rotation_deg),
+        reliefs = {c: _best_design(relief, models[c], _shifted(cand.centre, model_offsets.get(c), cand.rotation_deg),
                                    cand.rotation_deg, search_px=search_px) for c in seen}
         if all(v is not None for v in reliefs.values()):
             parts.append({c: float(v) for c, v in reliefs.items()})  # type: ignore[arg-type]
@@ -255,11 +275,56 @@ def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[st
     return {c: float(np.mean([p[c] for p in parts])) for c in seen}, with_relief
 
 
+def _designs(x: np.ndarray | list[np.ndarray]) -> list[np.ndarray]:
+    return x if isinstance(x, list) else [x]
+
+
+def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, threshold: float
+                  ) -> dict[str, list[np.ndarray]]:
+    """The front views of the further designs of each class that has some (the last
+    ``learnt_views`` of its views, ``model.json``; written by ``sbsc learn``) as seen on a wall
+    of colour ``wall_rgb``: the Lab difference to the wall where it exceeds ``threshold``,
+    cropped to the model's content like :func:`print_views`. Learnt views are crops of the
+    scan, so they are compared as they are (no blur, no noise)."""
+    out: dict[str, list[np.ndarray]] = {}
+    wall = cv2.cvtColor(np.asarray(wall_rgb, np.float32).reshape(1, 1, 3) / 255.0, cv2.COLOR_RGB2Lab).reshape(3)
+    for c, t in templates.items():
+        k = t.extra.get("learnt_views", 0)
+        if not isinstance(k, int) or isinstance(k, bool) or k <= 0 or not t.colour_views:
+            continue
+        b = content_box(t)
+        prints = []
+        for view in t.colour_views[-k:]:
+            if view.shape[:2] != (t.height_px, t.width_px):
+                continue
+            lab = cv2.cvtColor(np.ascontiguousarray(view[..., :3], np.float32) / 255.0, cv2.COLOR_RGB2Lab)
+            diff = lab - wall[None, None, :]
+            fg = (np.linalg.norm(diff, axis=2) > threshold) & (view[..., 3] > 127)
+            diff = np.where(fg[..., None], diff, 0.0).astype(np.float32)
+            prints.append(np.ascontiguousarray(diff[b.r0:b.r1, b.c0:b.c1]))
+        if prints:
+            out[c] = prints
+    return out
+
+
+def _best_design(relief: np.ndarray, model: np.ndarray | list[np.ndarray], centre: tuple[float, float],
+                 rotation_deg: float, *, search_px: int) -> float | None:
+    """:func:`relief_score` of a class's depth model, or the best of its designs' (a list:
+    the reference model and the further ones, e.g. learnt by ``sbsc learn``). None when one of
+    them is flat inside its content (a sign): the class may be a flat plate, which its relief
+    cannot tell from another."""
+    models = model if isinstance(model, list) else [model]
+    scores = [relief_score(relief, m, centre, rotation_deg, search_px=search_px) for m in models]
+    if any(x is None for x in scores):
+        return None
+    return max(scores)
+
+
 def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str, np.ndarray],
                        groups: list[frozenset[str]], settings: LookalikeSettings, *,
                        offsets: dict[str, tuple[float, float]] | None = None,
                        relief: np.ndarray | None = None,
-                       models: dict[str, np.ndarray] | None = None,
+                       models: dict[str, np.ndarray | list[np.ndarray]] | None = None,
                        model_offsets: dict[str, tuple[float, float]] | None = None,
                        gain_range: tuple[float, float] | None = None) -> list[Candidate]:
     """Candidates with every look-alike class decided by its print (see the module).
@@ -340,10 +405,13 @@ def print_views(protos: dict, templates: dict[str, ModelTemplate]
 
 
 def relief_models(templates: dict[str, ModelTemplate]
-                  ) -> tuple[dict[str, np.ndarray], dict[str, tuple[float, float]]]:
+                  ) -> tuple[dict[str, np.ndarray | list[np.ndarray]], dict[str, tuple[float, float]]]:
     """Each class's depth model cropped to its content (:func:`content_box`), and the
-    content's offset from the footprint centre (:func:`content_offset`)."""
-    models, offsets = {}, {}
+    content's offset from the footprint centre (:func:`content_offset`). A class with further
+    depth models (other designs, :meth:`~sbsc_core.templates.ModelTemplate.depth_models`) has
+    the list of all of them, each cropped alike; the best of them speaks for the class."""
+    models: dict[str, np.ndarray | list[np.ndarray]] = {}
+    offsets = {}
     for c, t in templates.items():
         d = t.depth_filled()
         if d is None:
@@ -354,7 +422,13 @@ def relief_models(templates: dict[str, ModelTemplate]
             offsets[c] = content_offset(t)
         else:
             offsets[c] = (0.0, 0.0)
-        models[c] = np.ascontiguousarray(d, np.float32)
+        cut = [np.ascontiguousarray(d, np.float32)]
+        for design in design_templates(t)[1:]:  # learnt designs: each cropped to its own content
+            m = design.depth_filled()
+            if m is not None and m.shape[:2] == (t.height_px, t.width_px):
+                b = content_box(design)
+                cut.append(np.ascontiguousarray(m[b.r0:b.r1, b.c0:b.c1], np.float32))
+        models[c] = cut[0] if len(cut) == 1 else cut
     return models, offsets
 
 
@@ -411,6 +485,9 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
     if not groups:
         return depth, colour
     views, offsets = print_views(protos, prototypes.templates)
+    for c, prints in design_prints(prototypes.templates, image.wall_rgb, image.threshold).items():
+        if c in views:  # a class's further designs (sbsc learn): the best of its prints speaks for it
+            views[c] = [views[c], *prints]  # type: ignore[list-item]
     mkey = ("relief_models",)
     if mkey not in prototypes._cache:
         prototypes._cache[mkey] = relief_models(prototypes.templates)  # type: ignore[assignment]

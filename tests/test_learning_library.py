@@ -1,0 +1,266 @@
+"""``sbsc learn`` (sbsc_core.learning): new classes and designs taught by reviewed objects.
+
+Synthetic detect outputs (a wall's orthoimages and detections.json) keep these fast; the
+learnt library is then read by the library reader and searched by depth recognition.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from sbsc_core.cli import main
+from sbsc_core.depth_recognition import depth_rois, match_depth
+from sbsc_core.errors import InputError
+from sbsc_core.io.models import load_model_library
+from sbsc_core.learning.library import learn_library
+from sbsc_core.settings import DepthRecognitionSettings
+from sbsc_core.templates import make_template, make_templates
+from sbsc_core.types import ModelLibrary, Orthoimage
+from tests.recognition_synth import (
+    PIXEL_M,
+    make_model,
+    make_wall,
+    paste,
+    socket_like,
+    synthetic_library,
+)
+
+READER_AT = (150.0, 200.0)  # (row, col) of the taught object on the first wall
+
+
+def write_library(lib: ModelLibrary, root: Path) -> Path:
+    for cid, m in lib.models.items():
+        d = root / cid
+        d.mkdir(parents=True)
+        meta = {"name": m.name, "ifc_class": m.ifc_class, "width_m": m.width_m, "height_m": m.height_m}
+        (d / "model.json").write_text(json.dumps(meta), encoding="utf-8")
+        cv2.imwrite(str(d / "colour.png"), cv2.cvtColor(m.colour_views[0], cv2.COLOR_RGBA2BGRA))
+        if m.depth is not None:
+            np.save(d / "depth.npy", m.depth.astype(np.float32))
+    return root
+
+
+def write_detect_output(walls: list[Orthoimage], out: Path, detections: list[dict] = ()) -> Path:
+    (out / "orthoimages").mkdir(parents=True)
+    for o in walls:
+        cv2.imwrite(str(out / "orthoimages" / f"{o.wall_id}_colour.png"), cv2.cvtColor(o.colour, cv2.COLOR_RGB2BGR))
+        np.save(out / "orthoimages" / f"{o.wall_id}_depth.npy", o.depth.astype(np.float32))
+    doc = {"schema": "sbsc.detections/1", "pixel_m": PIXEL_M, "openings": [], "detections": list(detections),
+           "walls": [{"id": o.wall_id, **o.frame.to_dict()} for o in walls]}
+    (out / "detections.json").write_text(json.dumps(doc), encoding="utf-8")
+    return out
+
+
+def world(o: Orthoimage, row: float, col: float) -> list[float]:
+    u, v = o.pixel_to_uv(row, col)
+    return [float(x) for x in o.frame.origin + float(u) * o.frame.axis_u + float(v) * o.frame.axis_v]
+
+
+def reviewed(path: Path, objects: list[dict]) -> Path:
+    path.write_text(json.dumps({"schema": "sbsc.detections/1", "detections": objects}), encoding="utf-8")
+    return path
+
+
+@pytest.fixture()
+def taught(tmp_path: Path) -> dict:
+    """A wall with one card reader (a class the library lacks: the synthetic socket's shape)."""
+    lib = synthetic_library()
+    reader = make_template(make_model("card_reader", *socket_like()), PIXEL_M)
+    library = write_library(ModelLibrary({k: m for k, m in lib.models.items() if k != "socket"}, "x"),
+                            tmp_path / "lib")
+    ortho, area = make_wall(seed=3)
+    paste(ortho, area, reader, READER_AT, seed=3)
+    det = write_detect_output([ortho], tmp_path / "det")
+    rev = reviewed(tmp_path / "reviewed.json", [{"class": "card_reader", "position": world(ortho, *READER_AT)}])
+    return {"lib": library, "det": det, "rev": rev, "ortho": ortho, "reader": reader, "tmp": tmp_path}
+
+
+def test_a_new_class_from_one_example_round_trip(taught) -> None:
+    out = taught["tmp"] / "new"
+    classes = taught["tmp"] / "classes.json"
+    classes.write_text(json.dumps({"card_reader": {"name": "Card reader", "ifc_class": "IfcCommunicationsAppliance",
+                                                   "predefined_type": "USERDEFINED"}}), encoding="utf-8")
+    done = learn_library(taught["det"], taught["rev"], taught["lib"], out, classes=classes)
+    assert [(t.class_id, t.action, t.examples) for t in done] == [("card_reader", "new class", 1)]
+    lib = load_model_library(out)
+    assert set(lib.class_ids) == {"panel", "sign", "knob", "arrow", "card_reader"}
+    m = lib["card_reader"]
+    assert (m.name, m.ifc_class, m.predefined_type, m.mount) == ("Card reader", "IfcCommunicationsAppliance",
+                                                                 "USERDEFINED", ("wall",))
+    # size measured from the relief under the click: the 16 x 16 px (0.08 m) plate, within two pixels
+    assert abs(m.width_m - 0.08) <= 2 * PIXEL_M and abs(m.height_m - 0.08) <= 2 * PIXEL_M
+    # the learnt depth model is the plate: its rim stands out about 12 mm, its recess less
+    assert m.depth is not None and 0.009 < float(np.nanmax(m.depth)) < 0.015
+    assert float(m.depth[m.depth.shape[0] // 2, m.depth.shape[1] // 2]) < 0.5 * float(np.nanmax(m.depth))
+    # untouched classes are copied file for file
+    assert sorted(p.name for p in (out / "panel").iterdir()) == ["colour.png", "depth.npy", "model.json"]
+
+
+def test_a_new_class_defaults_to_a_proxy_mounted_where_its_examples_are(taught) -> None:
+    out = taught["tmp"] / "new"
+    learn_library(taught["det"], taught["rev"], taught["lib"], out)
+    meta = json.loads((out / "card_reader" / "model.json").read_text(encoding="utf-8"))
+    assert meta["ifc_class"] == "IfcBuildingElementProxy" and meta["mount"] == ["wall"]
+
+
+def test_a_class_learnt_from_one_example_refuses_plain_wall_and_clutter_of_another_size(taught) -> None:
+    out = taught["tmp"] / "new"
+    learn_library(taught["det"], taught["rev"], taught["lib"], out)
+    templates = make_templates(load_model_library(out), PIXEL_M, classes=["card_reader"])
+    ortho, area = make_wall(seed=11)
+    paste(ortho, area, taught["reader"], (100.0, 120.0), seed=4)  # another instance
+    for i, (w, h) in enumerate(((32, 32), (10, 10), (16, 40))):  # boxes of other sizes, as relief alike
+        clutter = make_template(make_model(f"clutter{i}", *socket_like(w, h)), PIXEL_M)
+        paste(ortho, area, clutter, (200.0, 100.0 + 130 * i), seed=5 + i)
+    s = DepthRecognitionSettings()
+    found = match_depth(ortho, area, depth_rois(ortho, area, s), templates, s)
+    assert len(found) == 1
+    r, c = found[0].centre
+    assert abs(r - 100.0) <= 1.5 and abs(c - 120.0) <= 1.5
+    plain, plain_area = make_wall(seed=12)
+    assert match_depth(plain, plain_area, depth_rois(plain, plain_area, s), templates, s) == []
+
+
+def test_a_known_class_that_recognition_missed_gets_another_design(tmp_path: Path) -> None:
+    lib = synthetic_library()
+    library = write_library(lib, tmp_path / "lib")
+    # the building's socket: twice as deep, with a wider recess (another product)
+    other = make_template(make_model("socket", *socket_like(relief_m=0.024, body=(200, 200, 190))), PIXEL_M)
+    ortho, area = make_wall(seed=5)
+    paste(ortho, area, other, READER_AT, seed=5)
+    det = write_detect_output([ortho], tmp_path / "det")  # recognition found nothing
+    rev = reviewed(tmp_path / "r.json", [{"class": "socket", "position": world(ortho, *READER_AT)}])
+    done = learn_library(det, rev, library, tmp_path / "new")
+    assert [(t.class_id, t.action) for t in done] == [("socket", "new design")]
+    assert sorted(p.name for p in (tmp_path / "new" / "socket").iterdir()) == [
+        "colour.png", "colour_1.png", "depth.npy", "depth_1.npy", "model.json"]
+    m = load_model_library(tmp_path / "new")["socket"]
+    assert len(m.colour_views) == 2 and len(m.extra_depths) == 1
+    assert 0.018 < float(np.nanmax(m.extra_depths[0])) < 0.03
+
+
+def test_a_known_class_that_recognition_found_is_copied_unchanged(tmp_path: Path) -> None:
+    lib = synthetic_library()
+    library = write_library(lib, tmp_path / "lib")
+    t = make_templates(lib, PIXEL_M, classes=["socket"])["socket"]
+    ortho, area = make_wall(seed=6)
+    paste(ortho, area, t, READER_AT, seed=6)
+    u, v = (float(x) for x in ortho.pixel_to_uv(*READER_AT))
+    det = write_detect_output([ortho], tmp_path / "det", [{
+        "id": "D1", "class": "socket", "wall": "W01", "position": world(ortho, *READER_AT), "u": u, "v": v,
+        "width_m": 0.08, "height_m": 0.08, "alpha": 0.9, "rho_depth": 0.9, "rho_colour": 0.1, "source": "both"}])
+    rev = reviewed(tmp_path / "r.json", [{"class": "socket", "position": world(ortho, *READER_AT)}])
+    done = learn_library(det, rev, library, tmp_path / "new")
+    assert done[0].action == "matches" and done[0].rho > 0.9
+    assert sorted(p.name for p in (tmp_path / "new" / "socket").iterdir()) == ["colour.png", "depth.npy", "model.json"]
+
+
+@pytest.mark.parametrize(("change", "why"), [
+    ({"position": "far"}, "off the surface: the nearest surface is 0.50 m away"),
+    ({"position": "edge"}, "off the surface: its 0.08 x 0.08 m footprint"),
+    ({"position": "unseen"}, "not scanned: only 0% of its footprint"),
+    ({"rotation_deg": 30}, "turned by 30 degrees"),
+])
+def test_an_unusable_example_is_named_with_the_reason(taught, change: dict, why: str) -> None:
+    o = taught["ortho"]
+    obj = {"class": "card_reader", "position": world(o, *READER_AT)}
+    if change.get("position") == "far":
+        obj["position"] = list(np.asarray(obj["position"]) + 0.5 * o.frame.normal)
+    elif change.get("position") == "edge":
+        obj["position"], obj["width_m"], obj["height_m"] = world(o, 2.0, 200.0), 0.08, 0.08
+    elif change.get("position") == "unseen":
+        o.depth[100:200, 300:400] = np.nan
+        np.save(taught["det"] / "orthoimages" / "W01_depth.npy", o.depth)
+        obj["position"], obj["width_m"], obj["height_m"] = world(o, 150.0, 350.0), 0.08, 0.08
+    else:
+        obj.update(change)
+    rev = reviewed(taught["tmp"] / "bad.json", [{"class": "card_reader", "position": world(o, *READER_AT)}, obj])
+    with pytest.raises(InputError) as err:
+        learn_library(taught["det"], rev, taught["lib"], taught["tmp"] / "new")
+    assert str(err.value).startswith("bad.json: detections[1] (card_reader): " + why)
+    assert not (taught["tmp"] / "new").exists()
+
+
+def test_cli_learn_writes_a_library_and_refuses_bad_input_in_one_line(taught, capsys) -> None:
+    out = taught["tmp"] / "new"
+    args = [str(taught["det"]), "--reviewed", str(taught["rev"]), "--models", str(taught["lib"])]
+    assert main(["learn", *args, "--out", str(out), "--json", "-q"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert [c["action"] for c in summary["classes"]] == ["new class"]
+    assert "card_reader" in load_model_library(out).class_ids
+    # an output folder that holds something already
+    assert main(["learn", *args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "exists and is not empty" in err[0]
+    # not a detect output
+    assert main(["learn", str(taught["tmp"]), *args[1:], "--out", str(taught["tmp"] / "n2")]) == 2
+    assert "not a detect output" in capsys.readouterr().err
+    # a reviewed object without a place
+    bad = reviewed(taught["tmp"] / "noplace.json", [{"class": "card_reader"}])
+    assert main(["learn", args[0], "--reviewed", str(bad), "--models", args[4], "--out", str(taught["tmp"] / "n3")]) == 2
+    assert "detections[0] (card_reader): give its 'position'" in capsys.readouterr().err
+    # CLASSES.json naming a class of the library
+    classes = taught["tmp"] / "c.json"
+    classes.write_text(json.dumps({"panel": {"name": "P", "ifc_class": "IfcWall"}}), encoding="utf-8")
+    assert main(["learn", *args, "--classes", str(classes), "--out", str(taught["tmp"] / "n4")]) == 2
+    assert "the library has this class already" in capsys.readouterr().err
+    assert not any((taught["tmp"] / n).exists() for n in ("n2", "n3", "n4"))
+
+
+def test_look_alikes_are_found_between_learnt_designs_too() -> None:
+    from dataclasses import replace
+
+    from sbsc_core.lookalikes import design_templates, lookalike_sets
+    from sbsc_core.settings import LookalikeSettings
+    from tests.recognition_synth import sign_like
+
+    green, _ = sign_like()
+    red, _ = sign_like(back=(200, 20, 30))
+    tall = cv2.resize(red, (42, 60), interpolation=cv2.INTER_NEAREST)  # the library's design: another size
+    lib = ModelLibrary({"a": make_model("a", green, np.full((42, 42), 0.004, np.float32)),
+                        "b": make_model("b", tall, np.full((60, 42), 0.004, np.float32))}, "x")
+    templates = make_templates(lib, PIXEL_M)
+    assert lookalike_sets(templates, LookalikeSettings()) == []
+    # b's building has a square sign like a's: taught as b's learnt design (the last view, with alpha)
+    view = np.zeros((60, 42, 4), np.uint8)
+    view[9:51, :] = green
+    b = templates["b"]
+    templates["b"] = replace(b, colour_views=[*b.colour_views, view], extra={"learnt_views": 1})
+    assert [len(design_templates(t)) for t in templates.values()] == [1, 2]
+    assert lookalike_sets(templates, LookalikeSettings()) == [frozenset({"a", "b"})]
+
+
+def test_a_learnt_view_is_the_median_of_what_each_crop_saw() -> None:
+    from sbsc_core.learning.crops import learnt_view
+
+    a = np.full((4, 4, 3), 100.0, np.float32)
+    b = np.full((4, 4, 3), 110.0, np.float32)
+    c = np.full((4, 4, 3), 200.0, np.float32)
+    a[0, 0] = b[0, 0] = np.nan  # unseen by two crops: the third's colour
+    c[1, 1] = np.nan
+    view = learnt_view([a, b, c])
+    assert view.dtype == np.uint8 and int(view[0, 0, 0]) == 200 and int(view[1, 1, 0]) == 105
+    assert int(view[2, 2, 0]) == 110
+    a[:] = np.nan  # a pixel no crop saw takes the view's median colour
+    assert int(learnt_view([a])[0, 0, 0]) == 0 and int(learnt_view([a, c])[1, 1, 0]) == 200
+
+
+def test_an_example_moves_to_a_snap_only_where_the_relief_agrees(tmp_path: Path) -> None:
+    from sbsc_core.learning.examples import read_detect_output, trust_snap
+
+    other = make_template(make_model("x", *socket_like(relief_m=0.02)), PIXEL_M)
+    ortho, area = make_wall(seed=8)
+    paste(ortho, area, other, READER_AT, seed=8)
+    surface = read_detect_output(write_detect_output([ortho], tmp_path / "det"))["W01"]
+    u, v = (float(x) for x in ortho.pixel_to_uv(*READER_AT))
+    # the relief blob is the 0.08 m plate at the click: a snap 1 cm off agrees, 4 cm off does not
+    assert trust_snap(surface, u, v, u + 0.01, v, 0.9, 0.08, 0.08, 0.75)
+    assert not trust_snap(surface, u, v, u + 0.04, v, 0.9, 0.08, 0.08, 0.75)
+    assert not trust_snap(surface, u, v, u + 0.01, v, 0.6, 0.08, 0.08, 0.75)  # a weak match
+    # a class of another size (no blob of its size there): the match alone decides
+    assert trust_snap(surface, u, v, u + 0.04, v, 0.9, 0.30, 0.30, 0.75)
