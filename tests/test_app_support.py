@@ -298,6 +298,19 @@ class ServerProcess:
         return 0
 
 
+def join(settings, pid: int, name: str, role: str) -> None:  # noqa: ANN001
+    """Make user ``name`` a member of project ``pid`` (projects belong to their members)."""
+    from app.db import Database
+    from app.membership import set_member
+
+    db = Database(settings.db_url)
+    try:
+        with db.write() as s:
+            set_member(s, pid, name, role, None)
+    finally:
+        db.dispose()
+
+
 def auth(token: str) -> dict[str, str]:
     return {"Authorization": f"Bearer {token}"}
 
