@@ -89,6 +89,7 @@ class _FilePart:
         self.disposition = b""
         self.in_file = False
         self.field_bytes = 0
+        self.part_name = ""
         self.fh = None
         self.path: Path | None = None
         self.filename = ""
@@ -114,6 +115,7 @@ class _FilePart:
     def on_headers_finished(self) -> None:
         _, opts = parse_options_header(self.disposition)
         name = opts.get(b"name", b"").decode("utf-8", "replace")
+        self.part_name = name
         if name != self.field and b"filename" in opts:
             raise UploadRefused(400, f"no `{self.field}` field: send the file in the multipart field "
                                      f"'{self.field}' (it came in '{name[:40]}')")
@@ -135,8 +137,10 @@ class _FilePart:
         n = end - start
         if not self.in_file:
             self.field_bytes += n
-            if self.field_bytes > MAX_FIELD_BYTES:
-                raise UploadRefused(413, "form field too large")
+            if self.field_bytes > MAX_FIELD_BYTES:  # a file sent as a plain field, or under another name
+                raise UploadRefused(400, f"no `{self.field}` field: send the file in the multipart field "
+                                         f"'{self.field}', with a file name (field '{self.part_name[:40]}' is "
+                                         "not a file upload)")
             return
         self.size += n
         if self.size > self.max_bytes:
