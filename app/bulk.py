@@ -89,7 +89,7 @@ def _write_batch(s: Session, pid: int, chunk: list[int], status: str, user: Prin
     cols = (DetectionRow.id, DetectionRow.job_id, DetectionRow.status, DetectionRow.class_id,
             DetectionRow.u, DetectionRow.v, DetectionRow.version)
     current = {r[0]: r for r in s.execute(select(*cols).where(DetectionRow.id.in_(chunk)).with_for_update())}
-    changes, audit, done, skipped = [], [], [], []
+    audit, done, skipped = [], [], []
     for did in chunk:
         r = current.get(did)
         if r is None:
@@ -100,17 +100,17 @@ def _write_batch(s: Session, pid: int, chunk: list[int], status: str, user: Prin
             skipped.append({"id": str(did), "reason": f"already {status}"})
         else:
             _, _, was, cls, u, v, version = r
-            changes.append({"id": did, "status": status, "version": version + 1, "reviewed_by": user.name,
-                            "reviewed_at": now})
             audit.append({"detection_id": did, "project_id": pid, "user_id": user.id, "user_name": user.name,
                           "at": now, "action": ACTIONS[status], "version_from": version,
                           "version_to": version + 1, "before": {"status": was, "class": cls, "u": u, "v": v},
                           "after": {"status": status, "class": cls, "u": u, "v": v}, "comment": comment,
                           "batch": batch})
             done.append(did)
-    if changes:
-        s.execute(update(DetectionRow), changes)
-        s.execute(insert(ReviewDecision), audit)
+    if done:  # one UPDATE for the batch (the rows are locked: their versions are the ones read)
+        table = DetectionRow.__table__
+        s.execute(update(table).where(table.c.id.in_(done))
+                  .values(status=status, version=table.c.version + 1, reviewed_by=user.name, reviewed_at=now))
+        s.execute(insert(ReviewDecision.__table__), audit)  # Core: many rows in few statements
     return done, skipped
 
 
