@@ -41,7 +41,7 @@ from app.users import add_user  # noqa: E402
 from sbsc_core.io.ply import write_ply  # noqa: E402
 
 
-def run(bulk: int, rounds: int, reviewers: int, workdir: Path) -> dict:
+def run(bulk: int, rounds: int, reviewers: int, workdir: Path, hold_s: float = 30.0) -> dict:
     data = workdir / "data"
     settings = AppSettings(data_dir=data, viewer=False)
     rng = np.random.default_rng(0)
@@ -89,6 +89,8 @@ def run(bulk: int, rounds: int, reviewers: int, workdir: Path) -> dict:
                               headers={"Content-Type": "application/json"})
                 bulk_s.append(time.perf_counter() - t)
                 results.append({"status": resp.status_code, "changed": resp.json().get("changed")})
+            if not rounds:  # the baseline: the reviewers alone, for as long
+                time.sleep(hold_s)
         for th in threads:  # the reviewers decide for as long as the bulk requests run
             th.n = 0
         for th in threads:
@@ -117,10 +119,12 @@ def main() -> int:
     ap.add_argument("--bulk", type=int, default=BULK_MAX, help="detections of project A, all in each bulk")
     ap.add_argument("--rounds", type=int, default=2, help="bulk requests, one after the other")
     ap.add_argument("--reviewers", type=int, default=20)
+    ap.add_argument("--hold", type=float, default=30.0,
+                    help="with --rounds 0 (a baseline without bulk requests): how long the reviewers decide")
     ap.add_argument("--json", help="also write the result here")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="sbsc-bulk-") as tmp:
-        res = run(args.bulk, args.rounds, args.reviewers, Path(tmp))
+        res = run(args.bulk, args.rounds, args.reviewers, Path(tmp), args.hold)
     for k, v in res.items():
         print(f"{k:>22}: {v}")
     if args.json:
