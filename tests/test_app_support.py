@@ -335,5 +335,5 @@ def pid_alive(pid: int) -> bool:
     # a zombie is dead for our purpose
     try:
         return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
-    except FileNotFoundError:
+    except (FileNotFoundError, ProcessLookupError):  # gone while /proc was read (ESRCH)
         return False
