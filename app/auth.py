@@ -33,7 +33,8 @@ class Principal:
     role: str
 
     def may(self, role: str) -> bool:
-        return ROLES.index(self.role) >= ROLES.index(role)
+        levels = ("viewer", *ROLES)  # a project's viewer (app.membership) is below every global role
+        return levels.index(self.role) >= levels.index(role)
 
 
 def new_token() -> str:

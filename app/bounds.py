@@ -23,6 +23,7 @@ from sbsc_core.errors import InputError
 from sbsc_core.io.safe_json import loads_bounded
 
 INT64_MAX = 2**63 - 1
+LARGE_BODY = 64 * 1024  # a JSON body above this is checked in a worker thread
 _NUMBER = re.compile(r"^[+-]?\d+$")
 UPLOAD_PATH = re.compile(r"^/api/projects/[^/]+/(scans|models|design)/?$")  # streamed, own caps
 # NUL and the bidirectional controls (U+202A..U+202E, U+2066..U+2069, U+200E/U+200F, U+061C)
@@ -50,8 +51,10 @@ def bad_string(value: Any, where: str = "body") -> str | None:
                 if _BAD_CHARS.search(k):
                     return f"{at}: a key contains a control character"
                 stack.append((x, f"{at}.{k}" if at != "body" else k))
-        elif isinstance(v, list):
-            stack.extend((x, f"{at}[{i}]") for i, x in enumerate(v))
+        elif isinstance(v, list):  # (100,000 ids: only what may hold a bad value is looked at)
+            for i, x in enumerate(v):
+                if isinstance(x, (str, dict, list)) or (type(x) is int and not -INT64_MAX - 1 <= x <= INT64_MAX):
+                    stack.append((x, f"{at}[{i}]"))
         elif isinstance(v, int) and not isinstance(v, bool) and not -INT64_MAX - 1 <= v <= INT64_MAX:
             return f"{at}: number out of range (at most {INT64_MAX})"
     return None
@@ -71,6 +74,10 @@ class BoundsMiddleware:
 
     def __init__(self, app: ASGIApp, *, max_body: int, max_depth: int, max_keys: int) -> None:
         self.app, self.max_body, self.max_depth, self.max_keys = app, max_body, max_depth, max_keys
+
+    def _check(self, body: bytes) -> str | None:
+        """Why a JSON body is refused (InputError for its shape, a reason for its strings), or None."""
+        return bad_string(loads_bounded(body, "body", max_depth=self.max_depth, max_keys=self.max_keys))
 
     async def __call__(self, scope: dict, receive, send) -> None:  # noqa: ANN001
         if scope["type"] != "http" or not scope["path"].startswith("/api/"):
@@ -116,11 +123,15 @@ class BoundsMiddleware:
         if body.strip() and (ctype in (b"application/json", b"") or ctype.endswith(b"+json")) \
                 and scope["method"] != "GET":
             try:
-                doc = loads_bounded(body, "body", max_depth=self.max_depth, max_keys=self.max_keys)
+                if len(body) > LARGE_BODY:  # parsed and checked in a worker thread, off the event loop
+                    import anyio
+
+                    why = await anyio.to_thread.run_sync(self._check, body)
+                else:
+                    why = self._check(body)
             except InputError as exc:
                 await _send_json(send, 422, str(exc))
                 return
-            why = bad_string(doc)
             if why:
                 await _send_json(send, 422, why)
                 return

@@ -55,6 +55,13 @@ def register_import(cmds: Commands) -> None:
     v.add_argument("--design", help="as-designed IFC to compare with (default: as_designed.ifc beside the scan)")
 
 
+def _cmd_member(args: argparse.Namespace) -> int:
+    from .users import change_member_cli
+
+    print(change_member_cli(args.name, args.project, getattr(args, "role", None)))
+    return 0
+
+
 def register_serve(cmds: Commands) -> None:
     """``sbsc serve [--host H] [--port P] [--open]``."""
     v = cmds.add("serve", func=_cmd_serve, help="run the review app (data in $SBSC_DATA_DIR)")
@@ -65,7 +72,8 @@ def register_serve(cmds: Commands) -> None:
 
 
 def register_user(cmds: Commands) -> None:
-    """``sbsc user add NAME --role reviewer|manager|admin``."""
+    """``sbsc user add NAME --role reviewer|manager|admin``; ``sbsc user add-member NAME PROJECT
+    --role viewer|reviewer|manager`` and ``sbsc user remove-member NAME PROJECT``."""
     u = cmds.add("user", help="manage API users of the review app")
     usub = u.add_subparsers(dest="user_command", required=True, metavar="ACTION")
     ua = usub.add_parser("add", parents=[cmds.common], help="create a user and print its API token once",
@@ -74,6 +82,18 @@ def register_user(cmds: Commands) -> None:
     ua.add_argument("--role", required=True, choices=["reviewer", "manager", "admin"],
                     help="what the user may do: reviewer (review), manager (also sign off), admin (everything)")
     ua.set_defaults(func=_cmd_user_add)
+    um = usub.add_parser("add-member", parents=[cmds.common], help="make a user a member of a project",
+                         description="make a user a member of a project, or change its role there")
+    um.add_argument("name", metavar="NAME", help="the user's name")
+    um.add_argument("project", metavar="PROJECT", type=int, help="the project's id")
+    um.add_argument("--role", required=True, choices=["viewer", "reviewer", "manager"],
+                    help="the user's role in the project (at most its global role)")
+    um.set_defaults(func=_cmd_member)
+    ur = usub.add_parser("remove-member", parents=[cmds.common], help="end a user's membership of a project",
+                         description="end a user's membership of a project")
+    ur.add_argument("name", metavar="NAME", help="the user's name")
+    ur.add_argument("project", metavar="PROJECT", type=int, help="the project's id")
+    ur.set_defaults(func=_cmd_member)
 
 
 REGISTRARS = (register_serve, register_user, register_import)

@@ -77,6 +77,14 @@ class AppSettings(BaseSettings):
     # exports: the organisation named in the header of IFC files (SBSC_ORGANISATION)
     organisation: str = ""
 
+    # slow clients (app.slow_clients; uvicorn's own limits where it has them)
+    http_header_timeout_s: float = 10.0  # a request's line and headers must arrive within this
+    http_body_idle_s: float = 30.0  # a request body that stops arriving for this long is dropped
+    http_keep_alive_s: float = 5.0  # idle time between requests on a kept-alive connection
+    http_limit_concurrency: int = 1000  # open connections + requests in progress (more: 503)
+    http_max_header_bytes: int = 16 * 1024  # request line and headers (more: 400)
+    http_backlog: int = 2048  # connections waiting to be accepted
+
     # first run
     create_admin_on_first_run: bool = True
 

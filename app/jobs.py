@@ -27,6 +27,7 @@ import logging
 import multiprocessing as mp
 import os
 import re
+import shutil
 import signal
 import threading
 import time
@@ -42,6 +43,7 @@ from sbsc_core.errors import InputError, SbscError
 
 from .config import AppSettings
 from .db import Database
+from .failures import reason as failure_reason
 from .models import Job, ModelLibraryRow, Project, Scan, utcnow
 from .results import import_results
 
@@ -83,6 +85,8 @@ def load_runner(spec: str) -> Callable:
 def describe_exit(code: int | None) -> str:
     if code is None:
         return "worker process did not exit"
+    if code == -signal.SIGKILL:  # the kernel's out-of-memory killer sends SIGKILL
+        return "a worker ran out of memory or was killed (signal SIGKILL)"
     if code < 0:
         try:
             return f"worker process died (killed by signal {signal.Signals(-code).name})"
@@ -245,11 +249,18 @@ def run_job(job_id: int, owner: str, settings_data: dict, parent_pid: int) -> No
             os.setsid()
     settings = AppSettings(**settings_data)
     _watch_parent(parent_pid)
+    # the pipeline's scratch (partitions) under <data>/tmp, which start-up empties: a killed
+    # job leaves no scratch folder behind in its job folder
+    scratch = settings.tmp_dir / f"job-{job_id}-{uuid.uuid4().hex[:8]}"
+    with contextlib.suppress(OSError):
+        scratch.mkdir(parents=True, exist_ok=True)
+        os.environ["SBSC_SCRATCH_DIR"] = str(scratch)
     db = Database(settings.db_url)
     try:
         _run(db, settings, job_id, owner)
     finally:
         db.dispose()
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
@@ -302,10 +313,14 @@ def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
             admin(f"failed: {exc}")
             _finish_failed(db, job_id, owner, redact(str(exc), settings.data_dir))
         except Exception as exc:  # noqa: BLE001 - the job must end failed with a reason
-            admin(traceback.format_exc())
+            with contextlib.suppress(OSError):
+                admin(traceback.format_exc())
             log.error("job %d: internal error\n%s", job_id, traceback.format_exc())
-            say(f"failed: internal error ({type(exc).__name__}); the details are in the administrator's log")
-            _finish_failed(db, job_id, owner, f"internal error ({type(exc).__name__}); "
+            known = failure_reason(exc)  # a full disk, a lost worker: what the user can act on
+            with contextlib.suppress(OSError):  # the log itself may be on the full disk
+                say(f"failed: {known}" if known else
+                    f"failed: internal error ({type(exc).__name__}); the details are in the administrator's log")
+            _finish_failed(db, job_id, owner, known or f"internal error ({type(exc).__name__}); "
                                               "an administrator can read the details in the job's admin log")
 
 

@@ -290,6 +290,20 @@ class SignOff(Base):
     counts: Mapped[dict[str, Any]] = mapped_column(JSON)
 
 
+class ProjectMember(Base):
+    """A user's role in one project (viewer, reviewer, manager); see ``app.membership``."""
+
+    __tablename__ = "project_members"
+    __table_args__ = (UniqueConstraint("project_id", "user_id"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    project_id: Mapped[int] = mapped_column(ForeignKey("projects.id"), index=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("users.id"), index=True)
+    role: Mapped[str] = mapped_column(String(20))
+    added_by: Mapped[str | None] = mapped_column(String(100))
+    added_at: Mapped[datetime] = mapped_column(Stamp, default=utcnow)
+
+
 @event.listens_for(ReviewDecision, "before_update")
 @event.listens_for(ReviewDecision, "before_delete")
 @event.listens_for(ProjectEvent, "before_update")

@@ -8,7 +8,8 @@ required on every call but ``/api/health``.
 
 The codes of an operation come from what it is built on: its path parameters (404),
 its role dependency (401, 403), the request bounds (413, 422; :mod:`app.bounds`), a
-locked project (409, 423), the streamed uploads (400, 413, 415, 429) and the
+locked project (409, 423), the streamed uploads (400, 413, 415, 429), a full disk on
+writes (507) and the
 ``HTTPException`` / ``JSONResponse`` status codes written in its own source.
 """
 
@@ -36,6 +37,7 @@ DESCRIPTIONS = {
     422: "Invalid input (field, bounds, file content)", 423: "The project is signed off (locked)",
     429: "Too many uploads in progress for this user", 501: "Not available in this installation",
     503: "Service unavailable (e.g. the 3D viewer)",
+    507: "No space left on the data disk (the server works again once space is freed)",
 }
 _CODE_RE = re.compile(r"(?:HTTPException|UploadRefused)\(\s*(\d{3})|status_code=(\d{3})")
 _SOURCES: dict[Any, str] = {}
@@ -106,7 +108,9 @@ def error_codes(route: RouteInfo, operation: dict) -> set[int]:
         codes.add(404)
     methods = route.methods
     if methods & {"POST", "PUT", "PATCH", "DELETE"}:
-        codes.add(413)
+        codes |= {413, 507}  # 507: a full disk (app.failures)
+    elif "mkstemp" in src:
+        codes.add(507)
     if "open_project" in src or "_check_open" in src or "handle_upload" in src:
         codes |= {409, 423}
     body = operation.get("requestBody", {}).get("content", {})

@@ -17,8 +17,6 @@ Errors are :mod:`app.errors` classes (``ServiceError`` here) carrying the HTTP s
 from __future__ import annotations
 
 import functools
-import uuid
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -249,77 +247,6 @@ def select_detections(s: Session, p: Project, flt: Filter) -> list[DetectionRow]
     if flt.min_confidence is not None:
         rows = [d for d in rows if score(d) is not None and score(d) >= flt.min_confidence]
     return sorted(rows, key=lambda d: -(score(d) or 0.0))
-
-
-def bulk_decide(s: Session, pid: int, status: str, user: Principal, *,
-                ids: Sequence[int | str] | None = None, flt: Filter | None = None,
-                dry_run: bool = False, expect: int | None = None,
-                comment: str | None = None) -> dict:
-    """One decision for many detections (``ids`` or ``flt``); each one audited like a single one.
-
-    ``dry_run`` only counts (for the confirmation the UI shows); ``expect`` is the count the
-    reviewer confirmed: when the selection has changed meanwhile nothing is decided (409).
-    Answers ``{"changed", "skipped": [{"id", "reason"}], "batch", "ids"}``.
-    """
-    if status not in REVIEW_STATUSES:
-        raise Invalid(f"status: must be one of {', '.join(REVIEW_STATUSES)}")
-    if (ids is None) == (flt is None):
-        raise Invalid("give either ids or filter")
-    p = open_project(s, pid)
-    skipped: list[dict] = []
-    if ids is not None:
-        if len(ids) > BULK_MAX:
-            raise Invalid(f"ids: at most {BULK_MAX}")
-        rows: list[DetectionRow] = []
-        seen: set[int] = set()
-        for raw in ids:
-            try:
-                did = int(raw)
-            except (TypeError, ValueError):
-                skipped.append({"id": str(raw), "reason": "not a detection id"})
-                continue
-            if did in seen:
-                continue
-            if not 0 < did < 2**62:
-                skipped.append({"id": str(raw), "reason": "not found in this project"})
-                continue
-            seen.add(did)
-            d = s.get(DetectionRow, did, with_for_update=True)
-            if d is None or d.project_id != pid:
-                skipped.append({"id": str(did), "reason": "not found in this project"})
-            elif d.job_id != p.current_job_id:
-                skipped.append({"id": str(did), "reason": "replaced by a newer job"})
-            elif d.status == status:
-                skipped.append({"id": str(did), "reason": f"already {status}"})
-            elif d.class_id != d.detected_class:
-                skipped.append({"id": str(did), "reason": RELABELLED})
-            else:
-                rows.append(d)
-    else:
-        assert flt is not None
-        if flt.review not in REVIEW_STATUSES:
-            raise Invalid(f"filter.review: must be one of {', '.join(REVIEW_STATUSES)}")
-        rows = [d for d in select_detections(s, p, flt) if d.status != status]
-        skipped += [{"id": str(d.id), "reason": RELABELLED} for d in rows if d.class_id != d.detected_class]
-        rows = [d for d in rows if d.class_id == d.detected_class]
-    if expect is not None and expect != len(rows):
-        raise Conflict(f"the selection changed: {len(rows)} detection(s) match now, not {expect}; "
-                       "look again and confirm")
-    out = {"changed": 0 if dry_run else len(rows), "matched": len(rows), "skipped": skipped,
-           "ids": [str(d.id) for d in rows], "batch": None}
-    if dry_run or not rows:
-        return out
-    batch = uuid.uuid4().hex[:16]
-    now = utcnow()
-    for d in rows:
-        before, v0 = _state(d), d.version
-        d.status = status
-        d.version += 1
-        d.reviewed_by, d.reviewed_at = user.name, now
-        _audit(s, d, user, ACTIONS[status], v0, before, comment, batch=batch)
-    s.flush()
-    out["batch"] = batch
-    return out
 
 
 # --------------------------------------------------------------------------- adding objects

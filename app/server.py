@@ -19,6 +19,7 @@ from fastapi import FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
+from sqlalchemy.exc import DBAPIError
 
 from sbsc_core.errors import SbscError
 
@@ -26,8 +27,11 @@ from .api.deps import TokenCache
 from .bounds import BoundsMiddleware
 from .config import AppSettings
 from .db import Database, upgrade
+from .failures import DISK_FULL, disk_full
+from .headers import SecurityHeadersMiddleware
 from .jobs import JobManager
 from .openapi import allowed_methods, truthful_openapi
+from .slow_clients import uvicorn_options
 from .storage import clean_tmp, sweep_orphans
 from .thumbnails import ImageCache
 
@@ -118,12 +122,23 @@ def create_app(settings: AppSettings | None = None, *, start_jobs: bool = True) 
         return JSONResponse({"detail": "a number in the request is out of range (at most 2**63-1)"},
                             status_code=422)
 
+    async def _on_disk_full(_: Request, exc: Exception) -> JSONResponse:
+        # a full disk (a file, the database) is a 507 the client can act on, never a 500
+        if not disk_full(exc):
+            raise exc
+        log.warning("refused a request: %s", exc)
+        return JSONResponse({"detail": DISK_FULL}, status_code=507)
+
+    app.add_exception_handler(OSError, _on_disk_full)
+    app.add_exception_handler(DBAPIError, _on_disk_full)
+
     app.add_middleware(BoundsMiddleware, max_body=settings.max_json_body_bytes,
                        max_depth=settings.max_json_depth, max_keys=settings.max_json_keys)
+    app.add_middleware(SecurityHeadersMiddleware, static_dir=settings.static_dir)  # outermost: every answer
 
-    from .api import design, export, jobs, projects, review, session, uploads
+    from .api import design, export, jobs, members, projects, review, session, uploads
 
-    for module in (projects, uploads, jobs, review, export, design, session):
+    for module in (projects, uploads, jobs, review, export, design, session, members):
         app.include_router(module.router)
 
     if settings.viewer:
@@ -232,7 +247,7 @@ def serve(host: str = "127.0.0.1", port: int = 8000, open_browser: bool = False)
         threading.Timer(1.5, lambda: webbrowser.open(url)).start()
     try:
         uvicorn.run(create_app(settings), host=host, port=port, log_level="info",
-                    timeout_graceful_shutdown=10)
+                    timeout_graceful_shutdown=10, **uvicorn_options(settings))  # slow clients time out
     except KeyboardInterrupt:
         pass
     sys.stdout.flush()

@@ -30,6 +30,8 @@ from starlette.requests import ClientDisconnect, Request
 
 from sbsc_core.errors import InputError
 
+from .failures import DISK_FULL, disk_full
+
 SCAN_SUFFIXES = (".ply", ".e57", ".las", ".laz", ".pcd", ".xyz", ".pts", ".txt")
 ZIP_SUFFIXES = (".zip",)
 MULTIPART_OVERHEAD = 64 * 1024  # boundaries and part headers beyond the file's own bytes
@@ -57,10 +59,15 @@ class ReceivedFile:
             self.path.unlink()
 
 
-def safe_filename(name: str, default: str = "upload") -> str:
-    """The last path component with only ``[A-Za-z0-9._-]`` kept (others become ``_``)."""
+def safe_filename(name: str, default: str = "upload", max_len: int = 120) -> str:
+    """The last path component with only ``[A-Za-z0-9._-]`` kept (others become ``_``); a
+    longer name than ``max_len`` is shortened in its stem, so it keeps its extension."""
     base = PurePath(name.replace("\\", "/")).name
-    base = re.sub(r"[^A-Za-z0-9._-]", "_", base).lstrip(".")[:120]
+    base = re.sub(r"[^A-Za-z0-9._-]", "_", base).lstrip(".")
+    if len(base) > max_len:
+        stem, suffix = os.path.splitext(base)
+        suffix = suffix if len(suffix) <= 16 else ""
+        base = stem[:max_len - len(suffix)] + suffix
     return base or default
 
 
@@ -82,6 +89,7 @@ class _FilePart:
         self.disposition = b""
         self.in_file = False
         self.field_bytes = 0
+        self.part_name = ""
         self.fh = None
         self.path: Path | None = None
         self.filename = ""
@@ -107,6 +115,10 @@ class _FilePart:
     def on_headers_finished(self) -> None:
         _, opts = parse_options_header(self.disposition)
         name = opts.get(b"name", b"").decode("utf-8", "replace")
+        self.part_name = name
+        if name != self.field and b"filename" in opts:
+            raise UploadRefused(400, f"no `{self.field}` field: send the file in the multipart field "
+                                     f"'{self.field}' (it came in '{name[:40]}')")
         if name != self.field or b"filename" not in opts:
             return
         if self.path is not None:
@@ -125,8 +137,10 @@ class _FilePart:
         n = end - start
         if not self.in_file:
             self.field_bytes += n
-            if self.field_bytes > MAX_FIELD_BYTES:
-                raise UploadRefused(413, "form field too large")
+            if self.field_bytes > MAX_FIELD_BYTES:  # a file sent as a plain field, or under another name
+                raise UploadRefused(400, f"no `{self.field}` field: send the file in the multipart field "
+                                         f"'{self.field}', with a file name (field '{self.part_name[:40]}' is "
+                                         "not a file upload)")
             return
         self.size += n
         if self.size > self.max_bytes:
@@ -134,7 +148,12 @@ class _FilePart:
                                      f"(more than {self.max_bytes:,} bytes allowed)")
         chunk = data[start:end]
         self.hash.update(chunk)
-        self.fh.write(chunk)
+        try:
+            self.fh.write(chunk)
+        except OSError as exc:
+            if disk_full(exc):
+                raise UploadRefused(507, DISK_FULL) from exc
+            raise
 
     def on_part_end(self) -> None:
         self.in_file = False
@@ -148,12 +167,18 @@ class _FilePart:
             "on_headers_finished", "on_part_data", "on_part_end", "on_end")}
 
     def close(self, keep: bool) -> None:
-        if self.fh is not None:
-            self.fh.close()
-            self.fh = None
-        if not keep and self.path is not None:
-            with contextlib.suppress(FileNotFoundError):
-                self.path.unlink()
+        """Close the partial file, and remove it unless ``keep``; also when closing fails
+        (a full disk fails the last flush): a partial file never stays behind."""
+        fh, self.fh = self.fh, None
+        closed = False
+        try:
+            if fh is not None:
+                fh.close()
+            closed = True
+        finally:
+            if (not keep or not closed) and self.path is not None:
+                with contextlib.suppress(FileNotFoundError):
+                    self.path.unlink()
 
 
 async def receive_file(request: Request, *, tmp_dir: Path, max_bytes: int, drain_bytes: int,
@@ -181,7 +206,7 @@ async def receive_file(request: Request, *, tmp_dir: Path, max_bytes: int, drain
                 if part.ended:
                     break
         except UploadRefused as exc:
-            if exc.status == 413:
+            if exc.status in (413, 507):
                 part.close(keep=False)
                 drained = 0
                 with contextlib.suppress(ClientDisconnect):
@@ -195,7 +220,7 @@ async def receive_file(request: Request, *, tmp_dir: Path, max_bytes: int, drain
         except ValueError as exc:  # python-multipart parse errors
             raise UploadRefused(400, f"malformed multipart body ({exc})") from None
         if part.path is None:
-            raise UploadRefused(400, f"multipart field '{field}' with a file is missing")
+            raise UploadRefused(400, f"no `{field}` field: the multipart field '{field}' with a file is missing")
         if not part.ended:
             raise UploadRefused(400, f"{part.filename}: upload incomplete "
                                      "(the body ended before its closing boundary)")
@@ -203,7 +228,12 @@ async def receive_file(request: Request, *, tmp_dir: Path, max_bytes: int, drain
             raise UploadRefused(422, f"{part.filename}: empty file")
         ok = True
     finally:
-        part.close(keep=ok)
+        try:
+            part.close(keep=ok)
+        except OSError as exc:
+            if disk_full(exc):
+                raise UploadRefused(507, DISK_FULL) from exc
+            raise
     return ReceivedFile(path=part.path, filename=part.filename, size=part.size,
                         sha256=part.hash.hexdigest())
 

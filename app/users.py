@@ -31,3 +31,31 @@ def add_user_cli(name: str, role: str) -> str:
     token = add_user(settings, name, role)
     return (f"created user '{name.strip()}' with role {role} in {settings.db_url}\n"
             f"API token (shown only now; keep it secret):\n{token}")
+
+
+def change_member_cli(name: str, project: int, role: str | None) -> str:
+    """``sbsc user add-member`` (with ``role``) / ``remove-member`` (without): the text it prints.
+
+    Raises InputError for an unknown user or project, or a role above the user's global role.
+    """
+    from . import membership
+
+    settings = AppSettings()
+    settings.ensure_dirs()
+    db = Database(settings.db_url)
+    what = "sbsc user add-member" if role else "sbsc user remove-member"
+    try:
+        upgrade(db)
+        with db.write() as s:
+            try:
+                if role:
+                    got = membership.set_member(s, project, name, role, None)
+                else:
+                    got = membership.remove_member(s, project, name, None)
+            except (LookupError, ValueError) as exc:
+                raise InputError(what, str(exc).strip("'\"")) from None
+    finally:
+        db.dispose()
+    if role:
+        return f"user '{got['user']}' is now {role} of project {project}"
+    return f"user '{got['user']}' is no longer a member of project {project}"

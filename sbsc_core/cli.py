@@ -25,8 +25,10 @@ import contextlib
 import dataclasses
 import json
 import logging
+import math
 import os
 import re
+import signal
 import sys
 import traceback
 import warnings
@@ -54,7 +56,54 @@ class Parser(argparse.ArgumentParser):
     """An ``ArgumentParser`` whose usage errors are one line, like every other error."""
 
     def error(self, message: str):  # noqa: D401 - argparse API
-        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(EXIT_BAD_INPUT, f"sbsc: error: {message} (see {self.prog} --help)\n")
+
+
+def number(kind: type, *, minimum: float | None = None, above: float | None = None,
+           maximum: float | None = None) -> Callable[[str], Any]:
+    """An argparse ``type``: an int or a finite float within bounds, else a usage error (exit 2)."""
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not {'an integer' if kind is int else 'a number'}: {text!r}") from None
+        if kind is float and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"must be a finite number, not {text}")
+        if minimum is not None and value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, not {text}")
+        if above is not None and not value > above:
+            raise argparse.ArgumentTypeError(f"must be more than {above}, not {text}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {maximum}, not {text}")
+        return value
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+def output_path(what: str) -> Callable[[str], str]:
+    """An argparse ``type`` for an output (``dir`` or ``file``): checked before any work starts.
+
+    A folder output must not be an existing file, a file output not an existing folder, and
+    the parent folder must exist (it is never created silently); ``-`` is stdout.
+    """
+    def check(text: str) -> str:
+        if text == "-" and what == "file":
+            return text
+        p = Path(text)
+        if what == "dir" and p.exists() and not p.is_dir():
+            raise argparse.ArgumentTypeError(f"{text} exists and is not a folder")
+        if what == "file" and p.is_dir():
+            raise argparse.ArgumentTypeError(f"{text} is a folder, not a file")
+        parent = p.absolute().parent
+        if parent.exists() and not parent.is_dir():
+            raise argparse.ArgumentTypeError(f"{parent} is a file, not a folder")
+        if not parent.is_dir():
+            raise argparse.ArgumentTypeError(f"folder {parent} does not exist (create it first)")
+        return text
+
+    check.__name__ = f"output {what}"
+    return check
 
 
 def common_options() -> argparse.ArgumentParser:
@@ -99,7 +148,7 @@ class Commands:
 
 
 def output_option(p: argparse.ArgumentParser, what: str, required: bool = True) -> None:
-    p.add_argument("--out", required=required, metavar="DIR" if what == "dir" else "FILE",
+    p.add_argument("--out", required=required, metavar="DIR" if what == "dir" else "FILE", type=output_path(what),
                    help=("output folder (created; its parent folder must exist)" if what == "dir"
                          else "output file (its folder must exist)"))
 
@@ -117,13 +166,13 @@ def _add_simulate(cmds: Commands) -> None:
     s.add_argument("--scene", metavar="NAME|FILE",
                    help="a bundled scene (one_room, scenario_I, scenario_II) or a scene description .yaml; "
                         "with --scenario building the style of its floors: scenario (default) or one_room")
-    s.add_argument("--storeys", type=int, default=2, metavar="N",
+    s.add_argument("--storeys", type=number(int, minimum=1, maximum=100), default=2, metavar="N",
                    help="--scenario building: number of storeys (default: 2)")
     s.add_argument("--format", choices=["ply", "e57", "las"], default="ply",
                    help="--scenario building: file format, one file per station (default: ply)")
     output_option(s, "dir")
-    s.add_argument("--seed", type=int, default=0, help="random seed of the scanner noise and the design changes (default: 0)")
-    s.add_argument("--step", type=float, default=None, metavar="DEG",
+    s.add_argument("--seed", type=number(int, minimum=0, maximum=2**32 - 1), default=0, help="random seed of the scanner noise and the design changes (default: 0)")
+    s.add_argument("--step", type=number(float, above=0.0, maximum=90.0), default=None, metavar="DEG",
                    help="scanner angular step in degrees (default: the scene's)")
     s.add_argument("--designs", choices=["standard", "alt", "third", "random"], default="standard",
                    help="design set the objects are built with (default: standard; third: for testing only; "
@@ -179,9 +228,9 @@ def _add_evaluate(cmds: Commands) -> None:
                  help="compare detections with ground truth (the paper's Table 1)")
     e.add_argument("--detections", required=True, metavar="FILE", help="detections.json of sbsc detect")
     e.add_argument("--truth", required=True, metavar="FILE", help="ground_truth.json of sbsc simulate")
-    e.add_argument("--json", metavar="FILE",
+    e.add_argument("--json", metavar="FILE", type=output_path("file"),
                    help="also write the table as JSON to FILE; '-' prints only the JSON on stdout")
-    e.add_argument("--max-distance", type=float, default=0.10, metavar="M",
+    e.add_argument("--max-distance", type=number(float, above=0.0), default=0.10, metavar="M",
                    help="match radius in metres (default: 0.10)")
     e.add_argument("--models", metavar="DIR",
                    help="model library whose class order and names the table uses (default: the bundled one)")
@@ -206,7 +255,7 @@ def _add_compare(cmds: Commands) -> None:
     c.add_argument("--as-designed", required=True, metavar="IFC", help="the as-designed IFC model")
     c.add_argument("--detections", required=True, metavar="FILE", help="detections.json of sbsc detect")
     output_option(c, "dir")
-    c.add_argument("--tolerance", type=float, default=0.10, metavar="M",
+    c.add_argument("--tolerance", type=number(float, above=0.0), default=0.10, metavar="M",
                    help="displacement tolerance in metres (default: 0.10)")
     json_option(c)
 
@@ -546,14 +595,62 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- main
 
 
+class Stopped(BaseException):
+    """SIGTERM or SIGINT: the command stops, cleaning up as it goes (not an ``Exception``, so
+    nothing on the way mistakes it for an error of its own)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _stop(signum: int, _frame: Any) -> None:
+    """The handler of SIGTERM / SIGINT: end the worker processes at once (the pools then
+    shut down without waiting for their tasks), then unwind the command (its ``with``
+    blocks remove the scratch folder and any partial output). Further signals are ignored
+    while it cleans up."""
+    import multiprocessing
+
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, signal.SIG_IGN)
+    for child in multiprocessing.active_children():
+        with contextlib.suppress(Exception):
+            child.terminate()
+    raise Stopped(signum)
+
+
+@contextlib.contextmanager
+def _stoppable() -> Iterator[None]:
+    """SIGTERM and SIGINT stop the whole command (in the main thread; restored afterwards)."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    saved = {sig: signal.signal(sig, _stop) for sig in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        yield
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+
+
 def main(argv: Sequence[str] | None = None, registrars: Sequence[Registrar] | None = None) -> int:
-    """Run ``sbsc`` with ``argv`` (default: the process's arguments); return the exit code."""
+    """Run ``sbsc`` with ``argv`` (default: the process's arguments); return the exit code.
+
+    SIGTERM (as ``timeout`` or a batch scheduler sends it) and SIGINT stop the command with
+    its worker processes and scratch folder; the exit status is 128 + the signal (143, 130).
+    """
     args = build_parser(registrars).parse_args(argv)
     con = Console(quiet=getattr(args, "quiet", False), verbose=getattr(args, "verbose", 0) or 0,
                   debug=getattr(args, "debug", False))
-    with _configured(con):
+    with _configured(con), _stoppable():
         try:
             return int(args.func(args) or 0)
+        except Stopped as exc:
+            con.close()
+            print(f"sbsc: stopped by {exc}", file=sys.stderr)
+            return 128 + exc.signum
         except SbscError as exc:
             con.close()
             if con.debug:

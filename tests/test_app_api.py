@@ -71,9 +71,18 @@ def upload_scan(c, token, pid, path: Path):  # noqa: ANN001, ANN201
         return c.post(f"/api/projects/{pid}/scans", files={"file": (path.name, fh)}, headers=auth(token))
 
 
+def share(c, srv, pid: int) -> None:  # noqa: ANN001
+    """Make the test's other users members of project ``pid`` with their global role."""
+    for name, role in (("rita", "reviewer"), ("rob", "reviewer"), ("max", "manager")):
+        r = c.post(f"/api/projects/{pid}/members", json={"user": name, "role": role},
+                   headers=auth(srv.tokens["ada"]))
+        assert r.status_code == 201, r.text
+
+
 def project_with_results(c, srv, name="P", detections=6) -> tuple[int, dict]:  # noqa: ANN001
     tok = srv.tokens["rita"]
     pid = new_project(c, tok, name)
+    share(c, srv, pid)
     r = upload_scan(c, tok, pid, write_small_ply(srv.base / f"{name}.ply"))
     assert r.status_code == 201, r.text
     fake_control(srv.data_dir, mode="ok", delay_s=0.2, detections=detections)

@@ -26,6 +26,7 @@ from .test_app_support import (
     ServerProcess,
     auth,
     fake_control,
+    join,
     simulate_one_room,
     write_small_ply,
 )
@@ -85,6 +86,7 @@ def sample_server(tmp_path_factory):
     pid = ensure_sample_project(sim / "scan.ply", out, models=sim / "models", settings=settings)
     assert ensure_sample_project(sim / "scan.ply", out, settings=settings) == pid  # idempotent
     token = add_user(settings, "rita", "reviewer")
+    join(settings, pid, "rita", "reviewer")  # projects belong to their members
     server = ServerProcess(data, {"SBSC_JOB_RUNNER": "tests.test_app_support:fake_detect_to_dir"}).start()
     fake_control(data, mode="ok", delay_s=3.0, detections=5)
     server.token, server.pid, server.base, server.n = token, pid, base, n
@@ -143,7 +145,7 @@ def test_keyboard_review_survives_reload(browser, sample_server):
         page.select_option("#f-status", "")
         page.locator(f".det[data-id='{target}']").click()
         page.wait_for_function(
-            "[...document.querySelectorAll('.det img')].slice(0, 12).every(i => i.complete && i.naturalWidth > 0)")
+            "() => [...document.querySelectorAll('.det img')].slice(0, 12).every(i => i.complete && i.naturalWidth > 0)")
         page.wait_for_function("document.querySelector('#p-colour').naturalWidth > 0")
         page.wait_for_selector("#p-history li")
         SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)

@@ -18,6 +18,7 @@ from fastapi.testclient import TestClient
 
 from app.auth import create_user
 from app.config import AppSettings
+from app.membership import set_member
 from app.models import DesignRow, Project
 from app.sample import ensure_sample_project
 from app.server import create_app
@@ -49,6 +50,7 @@ def env(tmp_path_factory):
     with TestClient(create_app(settings, start_jobs=False)) as client:
         with client.app.state.db.write() as s:
             _, token = create_user(s, "rita", "reviewer")
+            set_member(s, pid, "rita", "reviewer", None)
         yield {"client": client, "pid": pid, "h": {"Authorization": f"Bearer {token}"},
                "design": design, "diffs": diffs, "settings": settings}
 

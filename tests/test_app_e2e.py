@@ -20,7 +20,14 @@ import pytest
 from app.config import AppSettings
 from app.users import add_user
 
-from .test_app_support import ServerProcess, auth, simulate_one_room, wait_job, write_small_ply
+from .test_app_support import (
+    ServerProcess,
+    auth,
+    join,
+    simulate_one_room,
+    wait_job,
+    write_small_ply,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -46,6 +53,7 @@ def test_review_workflow_end_to_end(simulated, tmp_path):
             r = c.post("/api/projects", json={"name": "One room"}, headers=h)
             assert r.status_code == 201
             pid = r.json()["id"]
+            join(settings, pid, "max", "manager")  # projects belong to their members
             with open(simulated / "scan.ply", "rb") as fh:
                 r = c.post(f"/api/projects/{pid}/scans", files={"file": ("scan.ply", fh)}, headers=h)
             assert r.status_code == 201, r.text

@@ -87,6 +87,8 @@ def live(tmp_path_factory):
     with httpx.Client(base_url=server.url, timeout=60) as c:
         h = auth(tokens["admin"])
         pid = c.post("/api/projects", json={"name": "fuzz"}, headers=h).json()["id"]
+        assert c.post(f"/api/projects/{pid}/members", json={"user": "rita", "role": "reviewer"},
+                      headers=h).status_code == 201
         with open(write_small_ply(data.parent / "s.ply"), "rb") as fh:
             assert c.post(f"/api/projects/{pid}/scans", files={"file": ("s.ply", fh)}, headers=h).status_code == 201
         jid = c.post(f"/api/projects/{pid}/jobs", json={}, headers=h).json()["id"]

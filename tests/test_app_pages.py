@@ -24,7 +24,7 @@ from app.users import add_user
 from sbsc_core.bim.design import write_as_designed_ifc
 
 from .test_app_browser import browser  # noqa: F401 - the fixture (Debian chromium + Playwright)
-from .test_app_support import ROOT, ServerProcess, _fake_output, auth, write_small_ply
+from .test_app_support import ROOT, ServerProcess, _fake_output, auth, join, write_small_ply
 from .test_bim_fixtures import truth_document
 
 pytestmark = pytest.mark.browser
@@ -57,6 +57,7 @@ def site(tmp_path_factory):
     write_as_designed_ifc(truth_document(), sim / "as_designed.ifc", seed=0, n_moved=1, n_removed=1, n_added=1)
     pid = ensure_sample_project(write_small_ply(sim / "scan.ply", n=200), out, settings=settings, points=200)
     token = add_user(settings, "max", "manager")
+    join(settings, pid, "max", "manager")
     server = ServerProcess(data, {"SBSC_VIEWER": "false"}).start()
     with httpx.Client(base_url=server.url, timeout=30) as c:
         empty = c.post("/api/projects", json={"name": "Empty"}, headers=auth(token)).json()["id"]
@@ -150,7 +151,7 @@ def test_review_tiles_names_and_explanations(page, site) -> None:
     page.route(f"**/api/detections/{first}/thumbnail/**", lambda route: route.abort())
     page.goto(f"{site.url}/review.html?id={site.pid}")
     page.wait_for_selector(".det")
-    page.wait_for_function("[...document.querySelectorAll('.det img')].slice(2, 8)"
+    page.wait_for_function("() => [...document.querySelectorAll('.det img')].slice(2, 8)"  # a function: no eval under the CSP
                            ".every(i => i.complete && i.naturalWidth > 0)")
     # long class names: the whole name is on the tile, nothing cut or hidden
     for cls in page.locator(".det .cls").all():

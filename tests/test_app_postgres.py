@@ -22,6 +22,7 @@ from sqlalchemy import text
 
 from app.auth import create_user
 from app.config import AppSettings
+from app.membership import set_member
 from app.sample import ensure_sample_project
 from app.server import create_app
 
@@ -77,6 +78,8 @@ def test_review_flow_on_postgresql(pg_url, tmp_path):
         with db.write() as s:
             _, rita = create_user(s, f"rita{pid}", "reviewer")
             _, boss = create_user(s, f"max{pid}", "manager")
+            set_member(s, pid, f"rita{pid}", "reviewer", None)  # projects belong to their members
+            set_member(s, pid, f"max{pid}", "manager", None)
         h, hb = {"Authorization": f"Bearer {rita}"}, {"Authorization": f"Bearer {boss}"}
         dets = c.get(f"/api/projects/{pid}/detections", headers=h).json()["detections"]
         assert len(dets) == 4

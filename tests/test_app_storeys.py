@@ -13,6 +13,7 @@ import pytest
 
 from app.config import AppSettings
 from app.db import Database
+from app.membership import set_member
 from app.models import Project
 from app.results import job_dict, project_document
 from app.sample import ensure_sample_project
@@ -21,7 +22,14 @@ from app.viewer.scene import wall_label
 from sbsc_core.types import WallFrame
 
 from .test_app_browser import browser  # noqa: F401 - the fixture (Debian chromium + Playwright)
-from .test_app_support import ServerProcess, _fake_output, auth, served_fake_sample, write_small_ply
+from .test_app_support import (
+    ServerProcess,
+    _fake_output,
+    auth,
+    join,
+    served_fake_sample,
+    write_small_ply,
+)
 
 STOREYS = [{"id": "S1", "floor_z": 0.0, "ceiling_z": 2.5}, {"id": "S2", "floor_z": 2.8, "ceiling_z": 5.3}]
 
@@ -81,6 +89,7 @@ def test_scene_names_the_storey() -> None:
 def test_gallery_filters_by_storey(project, browser) -> None:  # noqa: F811
     settings, pid, doc = project
     token = add_user(settings, "sam", "manager")
+    join(settings, pid, "sam", "manager")
     server = ServerProcess(settings.data_dir, {"SBSC_VIEWER": "false"}).start()
     page = browser.new_page(viewport={"width": 1440, "height": 900})
     try:
@@ -148,6 +157,7 @@ def test_job_api_keeps_the_expected_storeys(tmp_path) -> None:
     with TestClient(create_app(settings, start_jobs=False)) as c:
         with c.app.state.db.write() as s:
             _, token = create_user(s, "max", "manager")
+            set_member(s, pid, "max", "manager", None)
         r = c.post(f"/api/projects/{pid}/jobs", json={"expected": EXPECTED_DOC}, headers=auth(token))
         assert r.status_code == 202, r.text
         job = r.json()

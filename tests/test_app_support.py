@@ -298,6 +298,19 @@ class ServerProcess:
         return 0
 
 
+def join(settings, pid: int, name: str, role: str) -> None:  # noqa: ANN001
+    """Make user ``name`` a member of project ``pid`` (projects belong to their members)."""
+    from app.db import Database
+    from app.membership import set_member
+
+    db = Database(settings.db_url)
+    try:
+        with db.write() as s:
+            set_member(s, pid, name, role, None)
+    finally:
+        db.dispose()
+
+
 def auth(token: str) -> dict[str, str]:
     return {"Authorization": f"Bearer {token}"}
 
@@ -322,5 +335,5 @@ def pid_alive(pid: int) -> bool:
     # a zombie is dead for our purpose
     try:
         return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
-    except FileNotFoundError:
+    except (FileNotFoundError, ProcessLookupError):  # gone while /proc was read (ESRCH)
         return False

@@ -13,6 +13,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.config import AppSettings
+from app.membership import set_member
 from app.sample import ensure_sample_project
 from app.server import create_app
 from app.surfaces import point_on
@@ -38,6 +39,7 @@ def client(project):
     with TestClient(create_app(settings, start_jobs=False)) as c:
         with c.app.state.db.write() as s:
             _, c.token = create_user(s, "rita", "reviewer")
+            set_member(s, pid, "rita", "reviewer", None)
         yield c
 
 

@@ -22,6 +22,7 @@ from app.auth import authenticate, create_user, hash_token
 from app.config import AppSettings
 from app.db import Database, alembic_config, upgrade
 from app.jobs import JobManager, describe_exit, overall_progress, parse_expected
+from app.membership import set_member
 from app.models import Base, DetectionRow, Job, Project, ReviewDecision
 from app.sample import ensure_sample_project, find_sample_project
 from app.server import create_app, first_run
@@ -218,6 +219,7 @@ def test_sample_project_from_a_finished_run(tmp_path):
         d = client.app.state.db
         with d.write() as s:
             _, token = create_user(s, "rita", "reviewer")
+            set_member(s, pid, "rita", "reviewer", None)  # projects belong to their members
         h = {"Authorization": f"Bearer {token}"}
         p = client.get(f"/api/projects/{pid}", headers=h).json()
         assert p["scans"][0]["points"] == 321 and p["jobs"][0]["status"] == "succeeded"

@@ -284,9 +284,11 @@ def test_missing_parent_folder_is_an_error_not_created(tmp_path, detections, cap
         "compare": ["compare", "--as-designed", str(tmp_path / "d.ifc"), "--detections", str(detections),
                     "--out", str(missing / "cmp")],
     }[command]
-    assert main(argv) == 2
+    with pytest.raises(SystemExit) as exc:  # a usage error, before any work (issue 30)
+        main(argv)
+    assert exc.value.code == 2
     err = capsys.readouterr().err.strip()
-    assert "\n" not in err and err.startswith("sbsc: error: --") and "does not exist" in err, err
+    assert "\n" not in err and err.startswith("sbsc: error: argument --") and "does not exist" in err, err
     assert not (tmp_path / "no").exists()
 
 

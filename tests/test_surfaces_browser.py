@@ -18,7 +18,7 @@ from app.sample import ensure_sample_project
 from app.users import add_user
 
 from .surfaces_output import write_surfaces_output
-from .test_app_support import ServerProcess, auth, write_small_ply
+from .test_app_support import ServerProcess, auth, join, write_small_ply
 from .test_review_browser import VIEW, browser, login  # noqa: F401 - the browser fixture
 
 pytestmark = pytest.mark.browser
@@ -40,6 +40,8 @@ def srv(tmp_path_factory):
         pids[name] = ensure_sample_project(write_small_ply(base / f"{name}.ply", n=3000), out, settings=settings,
                                            points=3000, name=f"Surfaces {name}")
     token = add_user(settings, "rita", "reviewer")
+    for pid in pids.values():
+        join(settings, pid, "rita", "reviewer")  # projects belong to their members
     server = ServerProcess(data).start()
     server.token, server.pids = token, pids
     yield server

@@ -11,6 +11,7 @@ from sqlalchemy import select
 
 from app.auth import create_user
 from app.config import AppSettings
+from app.membership import set_member
 from app.models import ReviewDecision
 from app.sample import ensure_sample_project
 from app.server import create_app
@@ -36,6 +37,9 @@ def service(tmp_path):
             _, mona = create_user(s, "mona", "manager")
         pid = ensure_sample_project(sp.scan, sp.out_dir, settings=settings, points=5000,
                                     name="viewer db test")
+        with db.write() as s:  # projects belong to their members
+            set_member(s, pid, "rita", "reviewer", None)
+            set_member(s, pid, "mona", "manager", None)
         backend = DbReviewBackend(db, settings)
         manager = ViewerManager(backend, settings=SceneSettings(poll_s=0.1, fly_s=0.02, fly_steps=2))
         try:

@@ -15,7 +15,7 @@ from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 from app.viewer.backend import InMemoryBackend, Reviewer
-from app.viewer.gate import COOKIE, ViewerGate
+from app.viewer.gate import COOKIE, ViewerGate, cookie_name
 from app.viewer.manager import ViewerManager
 from app.viewer.scene import SceneSettings, wall_hit
 from app.viewer.synthetic import write_synthetic_project
@@ -49,7 +49,7 @@ def gated(tmp_path):
 
 
 def _ws(port: int, origin: str, cookie: str | None):
-    headers = {"Cookie": f"{COOKIE}={cookie}"} if cookie else {}
+    headers = {"Cookie": f"{cookie_name(1)}={cookie}"} if cookie else {}
     return connect(f"ws://127.0.0.1:{port}/", origin=origin, additional_headers=headers,
                    subprotocols=[f"viser-v{viser.__version__}"], open_timeout=10)
 
@@ -60,10 +60,15 @@ def test_scene_refuses_without_login_or_from_a_foreign_origin(gated):
     scene = manager.wait_ready(1, 30)
     port = manager.viewer(1).port
     assert httpx.get(url).status_code == 403
-    ticket = gate.issue(1, "alice", "reviewer")
-    assert httpx.get(url, cookies={COOKIE: ticket}).status_code == 200
+    ticket = gate.issue(1, "alice", "reviewer", project=1)
+    assert httpx.get(url, cookies={cookie_name(1): ticket}).status_code == 200
+    # a ticket of another project (or of none) does not open this scene, under any cookie name
+    other, unbound = gate.issue(1, "alice", "reviewer", project=2), gate.issue(1, "alice", "reviewer")
+    for name, t in ((cookie_name(1), other), (cookie_name(2), other), (cookie_name(1), unbound),
+                    (COOKIE, unbound)):
+        assert httpx.get(url, cookies={name: t}).status_code == 403, name
     own = f"http://127.0.0.1:{port}"
-    for origin, cookie in ((own, None), ("http://evil.example", ticket), (own, "forged.0000")):
+    for origin, cookie in ((own, None), ("http://evil.example", ticket), (own, "forged.0000"), (own, other)):
         with pytest.raises(InvalidStatus) as exc:
             _ws(port, origin, cookie)
         assert exc.value.response.status_code == 403

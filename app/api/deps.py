@@ -15,6 +15,7 @@ from ..auth import Principal, authenticate, hash_token
 from ..config import AppSettings
 from ..db import Database
 from ..jobs import JobManager
+from ..membership import allows, project_in_path
 from ..models import ROLES, Project
 from ..review_service import bundled_classes
 from ..sessions import COOKIE as SESSION_COOKIE
@@ -132,13 +133,27 @@ def _lookup(db: Database, token: str) -> Principal | None:
         return authenticate(s, token)
 
 
+PROJECT_KEYS = frozenset({"pid", "jid", "did", "sid"})
+
+
+def _in_project(db: Database, user: Principal, params: dict) -> Principal:
+    with db.read() as s:
+        return project_in_path(s, user, params)
+
+
 def require(role: str) -> Callable[..., Principal]:
-    """A dependency that lets callers with ``role`` (or a higher one) through, else 403."""
+    """A dependency that lets callers with ``role`` (or a higher one) through, else 403.
+
+    Under a project (a ``pid``, ``jid``, ``did`` or ``sid`` in the path) the caller must be
+    a member (else 404) and its role there is what counts (:mod:`app.membership`).
+    """
     if role not in ROLES:
         raise ValueError(role)
 
-    async def check(user: Annotated[Principal, Depends(current_user)]) -> Principal:
-        if not user.may(role):
+    async def check(request: Request, user: Annotated[Principal, Depends(current_user)], db: DB) -> Principal:
+        if PROJECT_KEYS & request.path_params.keys():  # 404 outside the caller's projects
+            user = await run_in_threadpool(_in_project, db, user, request.path_params)
+        if not allows(user, role, request.method):
             raise HTTPException(403, f"user '{user.name}' has role {user.role}; this needs {role}")
         return user
 

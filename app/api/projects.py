@@ -12,6 +12,7 @@ from sqlalchemy import func, select
 from sbsc_core.io.detections_model import bad_text
 
 from ..auth import create_user
+from ..membership import add_creator, member_ids
 from ..models import DesignRow, Job, ModelLibraryRow, Project, Scan, SignOff, User, iso
 from ..results import job_dict, review_counts
 from ..review_service import current_signoff
@@ -74,10 +75,13 @@ def project_summary(s, p: Project) -> dict:  # noqa: ANN001
 
 
 @router.get("/projects", tags=["projects"])
-def list_projects(_: Reviewer, s: ReadSession) -> list[dict]:
+def list_projects(user: Reviewer, s: ReadSession) -> list[dict]:
+    """The projects the caller is a member of (an admin: all)."""
     out = []
     n_scans = dict(s.execute(select(Scan.project_id, func.count(Scan.id)).group_by(Scan.project_id)).all())
-    for p in s.scalars(select(Project).order_by(Project.id.desc())):
+    mine = member_ids(s, user)
+    query = select(Project) if mine is None else select(Project).where(Project.id.in_(mine))
+    for p in s.scalars(query.order_by(Project.id.desc())):
         last = s.scalars(select(Job).where(Job.project_id == p.id).order_by(Job.id.desc()).limit(1)).first()
         out.append({**project_summary(s, p), "scans": n_scans.get(p.id, 0),
                     "last_job": job_dict(last) if last else None, "counts": review_counts(s, p)})
@@ -93,6 +97,7 @@ def create_project(body: NewProject, user: Reviewer, db: DB) -> dict:
         p = Project(name=name, status="open", created_by=user.name)
         s.add(p)
         s.flush()
+        add_creator(s, p, user)
         return project_summary(s, p)
 
 

@@ -20,7 +20,7 @@ from typing import Any
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
 
 from .backend import ReviewError
-from .gate import COOKIE
+from .gate import cookie_name
 from .manager import ViewerManager
 
 ManagerSource = ViewerManager | Callable[[Request], ViewerManager]
@@ -49,7 +49,7 @@ def viewer_router(manager: ManagerSource, auth_dependency: Callable[..., Any]) -
         except ReviewError as exc:
             raise HTTPException(exc.status, str(exc)) from None
         if m.gate is not None and hasattr(user, "id"):
-            response.set_cookie(COOKIE, m.gate.issue(user.id, user.name, user.role),
+            response.set_cookie(cookie_name(pid), m.gate.issue(user.id, user.name, user.role, project=pid),
                                 max_age=int(m.gate.ttl_s), httponly=True, samesite="strict",
                                 secure=request.url.scheme == "https", path="/")
         return {"url": url, "ready": m.scene_for(pid).ready.is_set()}

@@ -114,15 +114,20 @@ class DbReviewBackend:
                 dets = [detection_dict(r) for r in rows]
             return Changes(now, dets, locked, signoff)
 
-    def resolve_user(self, user_id: int) -> Reviewer | None:
-        """The user behind a viewer ticket (None when disabled or gone since)."""
+    def resolve_user(self, user_id: int, project: int | None = None) -> Reviewer | None:
+        """The user behind a viewer ticket (None when disabled or gone since); for ``project``,
+        with its role there (None when no longer a member)."""
+        from ..membership import project_role
         from ..models import User
 
         with self.db.read() as s:
             u = s.get(User, int(user_id))
             if u is None or u.disabled:
                 return None
-            return Reviewer(name=u.name, role=u.role, ref=Principal(id=u.id, name=u.name, role=u.role))
+            role = u.role if project is None else project_role(s, Principal(u.id, u.name, u.role), project)
+            if role is None:
+                return None
+            return Reviewer(name=u.name, role=role, ref=Principal(id=u.id, name=u.name, role=role))
 
     def resolve_token(self, token: str) -> Reviewer | None:
         token = (token or "").strip()

@@ -30,7 +30,7 @@ from typing import Any
 import viser
 
 COOKIE = "sbsc_viewer"
-TICKET_TTL_S = 12 * 3600.0
+TICKET_TTL_S = 3600.0  # asked again each time a page opens the scene; an open scene stays connected
 _SERVE_LOCK = threading.Lock()  # the request filter is put in place while one viser server starts
 
 
@@ -40,6 +40,12 @@ class Ticket:
     name: str
     role: str
     expires: float
+    project: int | None = None  # the one project whose scene it opens
+
+
+def cookie_name(project: int | None) -> str:
+    """The cookie of one project's scene (each scene has its own: opening one keeps another)."""
+    return COOKIE if project is None else f"{COOKIE}_{project}"
 
 
 class ViewerGate:
@@ -53,8 +59,10 @@ class ViewerGate:
         self._lock = threading.Lock()
 
     # -- tickets -------------------------------------------------------------------------
-    def issue(self, user_id: int, name: str, role: str, now: float | None = None) -> str:
-        body = json.dumps({"u": user_id, "n": name, "r": role,
+    def issue(self, user_id: int, name: str, role: str, now: float | None = None, *,
+              project: int | None = None) -> str:
+        """A signed ticket; with ``project``, it opens that project's scene only."""
+        body = json.dumps({"u": user_id, "n": name, "r": role, "p": project,
                            "e": round((now or time.time()) + self.ttl_s)}, separators=(",", ":"))
         b = base64.urlsafe_b64encode(body.encode()).decode().rstrip("=")
         return f"{b}.{self._sign(b)}"
@@ -70,26 +78,32 @@ class ViewerGate:
             return None
         try:
             d = json.loads(base64.urlsafe_b64decode(b + "=" * (-len(b) % 4)))
-            t = Ticket(int(d["u"]), str(d["n"]), str(d["r"]), float(d["e"]))
+            p = d.get("p")
+            t = Ticket(int(d["u"]), str(d["n"]), str(d["r"]), float(d["e"]), None if p is None else int(p))
         except (ValueError, KeyError, TypeError):
             return None
         return t if t.expires > (now or time.time()) else None
 
-    def ticket_of(self, cookie_header: str | None) -> Ticket | None:
+    def ticket_of(self, cookie_header: str | None, project: int | None = None) -> Ticket | None:
+        """The valid ticket in a ``Cookie`` header; for ``project``, one naming that project."""
         if not cookie_header:
             return None
         try:
             jar = SimpleCookie(cookie_header)
         except CookieError:
             return None
-        morsel = jar.get(COOKIE)
-        return self.verify(morsel.value if morsel else None)
+        morsel = jar.get(cookie_name(project))
+        ticket = self.verify(morsel.value if morsel else None)
+        return ticket if ticket is not None and ticket.project == project else None
 
     # -- requests ------------------------------------------------------------------------
-    def check(self, connection: Any, request: Any) -> Any:
-        """``process_request`` of a viser server: None lets the request through, else a 403."""
+    def check(self, connection: Any, request: Any, project: int | None = None) -> Any:
+        """``process_request`` of a viser server: None lets the request through, else a 403.
+
+        The scene of ``project`` lets only tickets of that project in.
+        """
         headers = request.headers
-        ticket = self.ticket_of(headers.get("Cookie"))
+        ticket = self.ticket_of(headers.get("Cookie"), project)
         if ticket is None:
             return connection.respond(403, "Sign in to the sbsc review app and open the 3D view "
                                            "from the project's page.\n")
@@ -110,12 +124,16 @@ class ViewerGate:
             return self._users.get(connection)
 
     # -- servers -------------------------------------------------------------------------
-    def server(self, **kwargs: Any) -> viser.ViserServer:
-        """A ``viser.ViserServer(**kwargs)`` whose every request goes through :meth:`check`."""
+    def server(self, project: int | None = None, **kwargs: Any) -> viser.ViserServer:
+        """A ``viser.ViserServer(**kwargs)`` whose every request goes through :meth:`check`
+        (with ``project``: tickets of that project only)."""
         import websockets.asyncio.server as wss
 
         original = wss.serve
-        check = self.check
+        gate = self
+
+        def check(connection: Any, request: Any) -> Any:
+            return gate.check(connection, request, project)
 
         def serve(handler: Callable, *args: Any, process_request: Callable | None = None, **kw: Any):
             def gated(connection: Any, request: Any) -> Any:

@@ -80,7 +80,8 @@ class ViewerManager:
             data = self.backend.project_data(pid)
             kw = {"host": self.host, "port": 0, "label": f"sbsc · project {pid}",
                   "verbose": self.verbose}
-            server = self.gate.server(**kw) if self.gate is not None else viser.ViserServer(**kw)
+            server = self.gate.server(project=_ticket_project(pid), **kw) if self.gate is not None \
+                else viser.ViserServer(**kw)
             scene = ProjectScene(server, self.backend, pid, self.settings)
             if self.gate is not None:
                 scene.identify = lambda client, server=server: self._identify(server, client)
@@ -105,7 +106,9 @@ class ViewerManager:
         if ticket is None:
             return None
         resolve = getattr(self.backend, "resolve_user", None)
-        return resolve(ticket.user_id) if resolve else Reviewer(ticket.name, ticket.role, None)
+        if resolve is None:
+            return Reviewer(ticket.name, ticket.role, None)
+        return resolve(ticket.user_id) if ticket.project is None else resolve(ticket.user_id, ticket.project)
 
     # -- idle scenes ----------------------------------------------------------------------
     def _start_reaper(self) -> None:
@@ -182,3 +185,11 @@ def release_memory() -> None:
         ctypes.CDLL("libc.so.6").malloc_trim(0)
     except (OSError, AttributeError):  # not glibc
         pass
+
+
+def _ticket_project(pid: ProjectId) -> int | None:
+    """The project a scene's tickets must name (an id that is not a number: none)."""
+    try:
+        return int(pid)
+    except (TypeError, ValueError):
+        return None

@@ -32,16 +32,19 @@ def atomic_output_dir(out: str | os.PathLike[str]) -> Iterator[Path]:
     os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp makes 0700; the result is an ordinary folder
     try:
         yield tmp
-        if not out.exists():
-            os.replace(tmp, out)  # one atomic rename when nothing was there
-            return
-        for item in sorted(tmp.iterdir()):
-            target = out / item.name
-            if target.is_dir() and not target.is_symlink():
-                shutil.rmtree(target)
-            elif target.exists():
-                target.unlink()
-            os.replace(item, target)
+        try:
+            if not out.exists():
+                os.replace(tmp, out)  # one atomic rename when nothing was there
+                return
+            for item in sorted(tmp.iterdir()):
+                target = out / item.name
+                if target.is_dir() and not target.is_symlink():
+                    shutil.rmtree(target)
+                elif target.exists():
+                    target.unlink()
+                os.replace(item, target)
+        except OSError as exc:  # named by the user's path, never by the temporary folder's
+            raise InputError(out, f"cannot write the output here ({exc.strerror or type(exc).__name__})") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
@@ -49,6 +52,8 @@ def atomic_output_dir(out: str | os.PathLike[str]) -> Iterator[Path]:
 def write_json_atomic(path: str | os.PathLike[str], data: Any) -> None:
     """Write JSON to ``path`` via a temporary file and an atomic rename."""
     path = Path(path)
+    if path.is_dir():
+        raise InputError(path, "is a folder, not a file")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
@@ -60,6 +65,10 @@ def write_json_atomic(path: str | os.PathLike[str], data: Any) -> None:
             json.dump(data, fh, indent=2)
             fh.write("\n")
         os.replace(tmp, path)
+    except OSError as exc:  # named by the user's path, never by the temporary file's
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise InputError(path, f"cannot write here ({exc.strerror or type(exc).__name__})") from None
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
