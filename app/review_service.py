@@ -268,17 +268,33 @@ def add_object(s: Session, pid: int, class_id: str, wall_key: str, u: float, v: 
         raise Conflict(f"project {pid} has no detection results to add to yet")
     job = s.get(Job, p.current_job_id)
     classes = library_classes(s, job.models_id)
+    taught = None  # a class created for the project (app.teach): no model yet
     if class_id not in classes:
-        raise Invalid(f"class: '{class_id}' is not in the project's model library")
+        from .teach import project_classes, taught_class_fields
+
+        taught = project_classes(data_dir, pid).get(class_id)
+        if taught is None:
+            raise Invalid(f"class: '{class_id}' is not in the project's model library or classes")
+        classes = {**classes, class_id: taught_class_fields(taught)}
     wall = _wall(s, job.id, wall_key)
     if wall is None:
         raise Invalid(f"wall: '{wall_key}' is not a wall or surface of the project's current results")
     check_mount(classes, class_id, wall)
     _check_on_wall(wall, float(u), float(v))
     where = Snap(float(u), float(v))
-    if snap:
-        where = _snap(s, job, wall, class_id, where, data_dir)
-    w_m, h_m = float(classes[class_id]["width_m"]), float(classes[class_id]["height_m"])
+    if taught is not None:  # an example of a new class: the relief blob under the click, its size
+        from .teach import measure
+
+        blob = measure(wall, data_dir, float(u), float(v))
+        if blob is None:
+            raise Invalid(f"class: no relief under the click at u={float(u):.2f}, v={float(v):.2f} on {wall.key} "
+                          f"to measure a new '{class_id}' from (click on the object itself)")
+        where = Snap(float(blob[0]), float(blob[1]))
+        w_m, h_m = float(blob[2]), float(blob[3])
+    else:
+        if snap:
+            where = _snap(s, job, wall, class_id, where, data_dir)
+        w_m, h_m = float(classes[class_id]["width_m"]), float(classes[class_id]["height_m"])
     now = utcnow()
     d = DetectionRow(project_id=pid, job_id=job.id, ref=_next_ref(s, job.id), class_id=class_id,
                      detected_class=class_id, wall_key=wall.key, position=_position(wall, where.u, where.v),

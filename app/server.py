@@ -136,9 +136,9 @@ def create_app(settings: AppSettings | None = None, *, start_jobs: bool = True) 
                        max_depth=settings.max_json_depth, max_keys=settings.max_json_keys)
     app.add_middleware(SecurityHeadersMiddleware, static_dir=settings.static_dir)  # outermost: every answer
 
-    from .api import design, export, jobs, members, projects, review, session, uploads
+    from .api import design, export, jobs, members, projects, review, session, teach, uploads
 
-    for module in (projects, uploads, jobs, review, export, design, session, members):
+    for module in (projects, uploads, jobs, review, export, design, session, members, teach):
         app.include_router(module.router)
 
     if settings.viewer:

@@ -43,14 +43,15 @@ def _get_job(s, jid: int) -> Job:  # noqa: ANN001
     return job
 
 
-def check_new_job(s, project: Project, user: Principal) -> None:  # noqa: ANN001
-    """409 while the project has a job queued; 403 for a reviewer on a reviewed project."""
+def check_new_job(s, project: Project, user: Principal, *, reviewed_ok: bool = False) -> None:  # noqa: ANN001
+    """409 while the project has a job queued; 403 for a reviewer on a reviewed project (unless
+    ``reviewed_ok``: learning and searching again keeps every decision)."""
     queued = s.scalar(select(func.count(Job.id)).where(Job.project_id == project.id,
                                                        Job.status == "queued"))
     if queued:
         raise HTTPException(409, f"project {project.id} already has a job queued; wait for it or "
                                  "cancel it")
-    if not user.may("manager") and is_reviewed(s, project):
+    if not reviewed_ok and not user.may("manager") and is_reviewed(s, project):
         raise HTTPException(403, f"project {project.id} has review decisions; a new job on it "
                                  f"needs a manager (user '{user.name}' is {user.role})")
 

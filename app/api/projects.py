@@ -135,12 +135,17 @@ def get_project_detail(pid: int, _: Reviewer, s: ReadSession) -> dict:
 
 @router.get("/projects/{pid}/classes", tags=["review"])
 def project_classes(pid: int, request: Request, _: Reviewer, s: ReadSession) -> dict:
-    """The classes a detection of this project may be relabelled to (its model library)."""
+    """The classes a detection of this project may be relabelled to (its model library), and
+    the classes created for it that are not learnt yet (``"taught": true``, no size)."""
+    from ..teach import project_classes, taught_class_fields
+
     p = get_project(s, pid)
     models_id = p.models_id
     if p.current_job_id is not None:
         models_id = s.get(Job, p.current_job_id).models_id
-    return library_classes(request, s, models_id)
+    classes = library_classes(request, s, models_id)
+    created = project_classes(request.app.state.settings.data_dir, pid)
+    return {**{cid: taught_class_fields(spec) for cid, spec in created.items() if cid not in classes}, **classes}
 
 
 @router.get("/admin/jobs/{jid}/log", tags=["users"], response_class=PlainTextResponse)

@@ -1,0 +1,202 @@
+"""Teach and search again (issue 28) through a real server and its REST API.
+
+The runner is the fake one of ``test_app_support`` on a wall that also holds four card readers
+no library knows (a relief blob of 10 x 14 cm in a colour of their own). When the job's library
+has a class learnt from examples (``learnt_from`` in its model.json) whose size is the card
+readers', the runner finds every card reader as that class, as recognition would: so a test
+sees what a learnt class brings without depending on recognition quality (the learning itself
+is the library's, ``sbsc_core.learning``, run here for real).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+from collections.abc import Sequence
+from pathlib import Path
+
+import cv2
+import httpx
+import numpy as np
+import pytest
+
+from app.config import AppSettings
+from app.users import add_user
+
+from .test_app_support import PIXEL_M, _fake_output, auth, wait_job, write_small_ply
+
+RUNNER = "tests.test_app_teach:fake_with_card_readers"
+READERS = [(0.6, 1.5), (1.4, 1.5), (2.2, 1.5), (2.6, 0.8)]  # (u, v) on W01
+READER_SIZE = (0.10, 0.14)
+READER_COLOUR = (40, 90, 160)  # RGB
+WALL_H = 2.5
+
+
+def _learnt_reader_class(models: Path) -> str | None:
+    """A class of ``models`` learnt from examples whose size is a card reader's."""
+    for meta_path in sorted(Path(models).glob("*/model.json")):
+        meta = json.loads(meta_path.read_text())
+        if meta.get("learnt_from") and abs(meta["width_m"] - READER_SIZE[0]) < 0.03 \
+                and abs(meta["height_m"] - READER_SIZE[1]) < 0.03:
+            return meta_path.parent.name
+    return None
+
+
+def fake_with_card_readers(scans: Sequence[Path], models: Path, *, expected=None, out: Path,  # noqa: ANN001
+                           settings_file=None, log=None, progress=None) -> dict:  # noqa: ANN001
+    """The fake runner's output plus four card readers on W01, found once a class of them is learnt."""
+    summary = _fake_output(Path(out), 8, progress or (lambda s, f: None), 0.2)
+    img = Path(out) / "orthoimages"
+    colour = cv2.imread(str(img / "W01_colour.png"), cv2.IMREAD_COLOR)
+    depth = np.load(img / "W01_depth.npy")
+    w, h = READER_SIZE
+    for u, v in READERS:
+        c0, c1 = int((u - w / 2) / PIXEL_M), int((u + w / 2) / PIXEL_M)
+        r0, r1 = int((WALL_H - v - h / 2) / PIXEL_M), int((WALL_H - v + h / 2) / PIXEL_M)
+        colour[r0:r1, c0:c1] = READER_COLOUR[::-1]
+        depth[r0:r1, c0:c1] = 0.015
+    cv2.imwrite(str(img / "W01_colour.png"), colour)
+    np.save(img / "W01_depth.npy", depth)
+    cls = _learnt_reader_class(models)
+    if cls is not None:
+        doc = json.loads((Path(out) / "detections.json").read_text())
+        for k, (u, v) in enumerate(READERS):
+            doc["detections"].append({"id": f"D{100 + k:04d}", "class": cls, "wall": "W01",
+                                      "position": [u, 0.0, v], "u": u, "v": v, "width_m": w, "height_m": h,
+                                      "alpha": 0.55 + 0.01 * k, "rho_depth": 0.8, "rho_colour": 0.5,
+                                      "source": "both"})
+        (Path(out) / "detections.json").write_text(json.dumps(doc))
+        summary["detections"] += len(READERS)
+    return summary
+
+
+@pytest.fixture(scope="module")
+def srv(tmp_path_factory):
+    from .test_app_support import ServerProcess
+
+    base = tmp_path_factory.mktemp("teach")
+    data = base / "data"
+    settings = AppSettings(data_dir=data)
+    tokens = {name: add_user(settings, name, role) for name, role in
+              [("rita", "reviewer"), ("max", "manager"), ("ada", "admin"), ("olga", "reviewer")]}
+    server = ServerProcess(data, {"SBSC_JOB_RUNNER": RUNNER, "SBSC_VIEWER": "0"}).start()
+    server.tokens, server.base = tokens, base
+    yield server
+    server.stop()
+
+
+def project(c: httpx.Client, srv, name: str) -> int:  # noqa: ANN001
+    """A project of rita's (max its manager) with one finished job of the fake runner."""
+    h = auth(srv.tokens["rita"])
+    pid = c.post("/api/projects", json={"name": name}, headers=h).json()["id"]
+    assert c.post(f"/api/projects/{pid}/members", json={"user": "max", "role": "manager"},
+                  headers=auth(srv.tokens["ada"])).status_code == 201
+    ply = write_small_ply(srv.base / f"{name}.ply")
+    with open(ply, "rb") as fh:
+        assert c.post(f"/api/projects/{pid}/scans", files={"file": (ply.name, fh)}, headers=h).status_code == 201
+    r = c.post(f"/api/projects/{pid}/jobs", json={}, headers=h)
+    assert r.status_code == 202, r.text
+    assert wait_job(c, r.json()["id"], srv.tokens["rita"])["status"] == "succeeded"
+    return pid
+
+
+@pytest.fixture()
+def c(srv):
+    with httpx.Client(base_url=srv.url, timeout=60) as client:
+        yield client
+
+
+def test_create_a_class_checks_its_fields_the_library_and_the_members(c, srv) -> None:
+    pid = project(c, srv, "teach_classes")
+    rita = auth(srv.tokens["rita"])
+    url = f"/api/projects/{pid}/classes"
+    body = {"id": "card_reader", "name": "Card reader", "ifc_class": "IfcCommunicationsAppliance",
+            "mount": ["wall"]}
+    r = c.post(url, json=body, headers=rita)
+    assert r.status_code == 201, r.text
+    assert r.json()["taught"] is True and r.json()["mount"] == ["wall"]
+    listed = c.get(url, headers=rita).json()
+    assert listed["card_reader"]["name"] == "Card reader" and listed["card_reader"]["taught"] is True
+    assert "switch" in listed and not listed["switch"].get("taught")  # the library's classes stay
+    assert c.post(url, json=body, headers=rita).status_code == 409  # created already
+    r = c.post(url, json={**body, "id": "switch"}, headers=rita)  # the library has it
+    assert r.status_code == 409 and "library" in r.json()["detail"]
+    for bad in ({**body, "id": "Card Reader"}, {**body, "ifc_class": "Wall"}, {**body, "mount": ["floor"]},
+                {**body, "mount": ["wall", "wall"]}, {"id": "x1"}):
+        r = c.post(url, json={**bad, "id": bad.get("id", "x1")}, headers=rita)
+        assert r.status_code == 422 and "detail" in r.json(), (bad, r.text)
+    # not a member: 404 as every project route
+    r = c.post(url, json={**body, "id": "other"}, headers=auth(srv.tokens["olga"]))
+    assert r.status_code == 404
+
+
+def test_an_example_of_a_new_class_is_measured_on_the_relief_under_the_click(c, srv) -> None:
+    pid = project(c, srv, "teach_mark")
+    rita = auth(srv.tokens["rita"])
+    c.post(f"/api/projects/{pid}/classes", json={"id": "card_reader", "name": "Card reader"}, headers=rita)
+    u, v = READERS[0]
+    r = c.post(f"/api/projects/{pid}/detections", headers=rita,
+               json={"class": "card_reader", "wall": "W01", "u": u + 0.03, "v": v - 0.02, "status": "pending"})
+    assert r.status_code == 201, r.text
+    d = r.json()
+    assert (d["u"], d["v"]) == pytest.approx((u, v), abs=0.006)  # the blob's centre, not the click
+    assert (d["width_m"], d["height_m"]) == pytest.approx(READER_SIZE, abs=0.011)
+    # on plain wall there is nothing to measure: a 422 that says so
+    r = c.post(f"/api/projects/{pid}/detections", headers=rita,
+               json={"class": "card_reader", "wall": "W01", "u": 2.0, "v": 2.2})
+    assert r.status_code == 422 and "no relief" in r.json()["detail"]
+    r = c.post(f"/api/projects/{pid}/detections", headers=rita,
+               json={"class": "badge_reader", "wall": "W01", "u": u, "v": v})
+    assert r.status_code == 422 and "badge_reader" in r.json()["detail"]
+
+
+def test_learn_and_search_again_keeps_the_decisions_and_finds_the_rest_as_pending(c, srv) -> None:
+    pid = project(c, srv, "teach_learn")
+    rita, max_ = auth(srv.tokens["rita"]), auth(srv.tokens["max"])
+    assert c.post(f"/api/projects/{pid}/learn", headers=rita).status_code == 409  # nothing to learn from
+    c.post(f"/api/projects/{pid}/classes", json={"id": "card_reader", "name": "Card reader",
+                                                 "ifc_class": "IfcCommunicationsAppliance"}, headers=rita)
+    before = c.get(f"/api/projects/{pid}/detections", headers=rita).json()["detections"]
+    decided = {before[0]["id"]: "accepted", before[1]["id"]: "rejected"}
+    for did, status in decided.items():
+        d = next(x for x in before if x["id"] == did)
+        assert c.patch(f"/api/detections/{did}", json={"status": status, "version": d["review"]["version"]},
+                       headers=rita).status_code == 200
+    kept = {(x["class"], x["wall"], round(x["u"], 2), round(x["v"], 2)): decided[x["id"]]
+            for x in before if x["id"] in decided}
+    for u, v in READERS[:2]:  # two examples, accepted
+        r = c.post(f"/api/projects/{pid}/detections", headers=rita,
+                   json={"class": "card_reader", "wall": "W01", "u": u, "v": v, "status": "accepted"})
+        assert r.status_code == 201, r.text
+    r = c.post(f"/api/projects/{pid}/learn", headers=rita)  # a reviewer may teach
+    assert r.status_code == 202, r.text
+    out = r.json()
+    assert [t["action"] for t in out["classes"]] == ["new class"] and out["classes"][0]["examples"] == 2
+    assert c.post(f"/api/projects/{pid}/learn", headers=max_).status_code == 409  # a job is queued
+    assert wait_job(c, out["job"]["id"], srv.tokens["rita"])["status"] == "succeeded"
+    after = c.get(f"/api/projects/{pid}/detections?order=uncertain", headers=rita).json()["detections"]
+    readers = [x for x in after if x["class"] == "card_reader"]
+    assert len(readers) == len(READERS)
+    examples = [x for x in readers if x["review"]["status"] == "accepted"]
+    new = [x for x in readers if x["review"]["status"] == "pending"]
+    assert len(examples) == 2 and len(new) == 2  # the examples kept, the others new and pending
+    assert {(round(x["u"], 1), round(x["v"], 1)) for x in new} == {(round(u, 1), round(v, 1)) for u, v in READERS[2:]}
+    for x in after:
+        key = (x["class"], x["wall"], round(x["u"], 2), round(x["v"], 2))
+        if key in kept:
+            assert x["review"]["status"] == kept.pop(key)
+    assert not kept  # every earlier decision is on the new results
+    scores = [x["confidence"] if x.get("confidence") is not None else x.get("alpha") for x in after]
+    known = [s for s in scores if s is not None]
+    assert known == sorted(known) and scores[:len(known)] == known  # uncertain first, added last
+    # the learnt library downloads as a zip (contract 2) with the new class
+    z = c.get(f"/api/projects/{pid}/exemplars.zip", headers=rita)
+    assert z.status_code == 200
+    names = zipfile.ZipFile(io.BytesIO(z.content)).namelist()
+    assert "models/card_reader/model.json" in names and "models/card_reader/depth.npy" in names
+    meta = json.loads(zipfile.ZipFile(io.BytesIO(z.content)).read("models/card_reader/model.json"))
+    assert meta["ifc_class"] == "IfcCommunicationsAppliance" and meta["learnt_from"] == 2
+    # the class is the library's now: creating it again is a conflict
+    r = c.post(f"/api/projects/{pid}/classes", json={"id": "card_reader", "name": "x"}, headers=rita)
+    assert r.status_code == 409
