@@ -200,3 +200,19 @@ def test_learn_and_search_again_keeps_the_decisions_and_finds_the_rest_as_pendin
     # the class is the library's now: creating it again is a conflict
     r = c.post(f"/api/projects/{pid}/classes", json={"id": "card_reader", "name": "x"}, headers=rita)
     assert r.status_code == 409
+
+
+def test_a_relabelled_object_teaches_its_class_another_design(c, srv) -> None:
+    pid = project(c, srv, "teach_design")
+    rita = auth(srv.tokens["rita"])
+    dets = c.get(f"/api/projects/{pid}/detections", headers=rita).json()["detections"]
+    d = next(x for x in dets if x["class"] == "socket_x1")  # "this is a switch" of another design
+    r = c.patch(f"/api/detections/{d['id']}", json={"class": "switch", "version": 1}, headers=rita)
+    assert r.status_code == 200 and r.json()["review"]["status"] == "accepted"
+    r = c.post(f"/api/projects/{pid}/learn", headers=rita)
+    assert r.status_code == 202, r.text
+    assert [(t["class"], t["action"], t["examples"]) for t in r.json()["classes"]] == [("switch", "new design", 1)]
+    assert wait_job(c, r.json()["job"]["id"], srv.tokens["rita"])["status"] == "succeeded"
+    files = r.json()["classes"][0]["files"]
+    names = zipfile.ZipFile(io.BytesIO(c.get(f"/api/projects/{pid}/exemplars.zip", headers=rita).content)).namelist()
+    assert files and all(f"models/switch/{f}" in names for f in files)
