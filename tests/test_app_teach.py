@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import zipfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -24,7 +25,7 @@ import pytest
 from app.config import AppSettings
 from app.users import add_user
 
-from .test_app_support import PIXEL_M, _fake_output, auth, wait_job, write_small_ply
+from .test_app_support import PIXEL_M, _fake_output, auth, fake_control, wait_job, write_small_ply
 
 RUNNER = "tests.test_app_teach:fake_with_card_readers"
 READERS = [(0.6, 1.5), (1.4, 1.5), (2.2, 1.5), (2.6, 0.8)]  # (u, v) on W01
@@ -46,7 +47,9 @@ def _learnt_reader_class(models: Path) -> str | None:
 def fake_with_card_readers(scans: Sequence[Path], models: Path, *, expected=None, out: Path,  # noqa: ANN001
                            settings_file=None, log=None, progress=None) -> dict:  # noqa: ANN001
     """The fake runner's output plus four card readers on W01, found once a class of them is learnt."""
-    summary = _fake_output(Path(out), 8, progress or (lambda s, f: None), 0.2)
+    control = Path(os.environ.get("SBSC_DATA_DIR", ".")) / "fake_control.json"  # test_app_support.fake_control
+    delay_s = float(json.loads(control.read_text()).get("delay_s", 0.2)) if control.is_file() else 0.2
+    summary = _fake_output(Path(out), 8, progress or (lambda s, f: None), delay_s)
     img = Path(out) / "orthoimages"
     colour = cv2.imread(str(img / "W01_colour.png"), cv2.IMREAD_COLOR)
     depth = np.load(img / "W01_depth.npy")
@@ -81,7 +84,7 @@ def srv(tmp_path_factory):
     tokens = {name: add_user(settings, name, role) for name, role in
               [("rita", "reviewer"), ("max", "manager"), ("ada", "admin"), ("olga", "reviewer")]}
     server = ServerProcess(data, {"SBSC_JOB_RUNNER": RUNNER, "SBSC_VIEWER": "0"}).start()
-    server.tokens, server.base = tokens, base
+    server.tokens, server.base, server.data = tokens, base, data
     yield server
     server.stop()
 
@@ -169,11 +172,16 @@ def test_learn_and_search_again_keeps_the_decisions_and_finds_the_rest_as_pendin
         r = c.post(f"/api/projects/{pid}/detections", headers=rita,
                    json={"class": "card_reader", "wall": "W01", "u": u, "v": v, "status": "accepted"})
         assert r.status_code == 201, r.text
-    r = c.post(f"/api/projects/{pid}/learn", headers=rita)  # a reviewer may teach
-    assert r.status_code == 202, r.text
-    out = r.json()
-    assert [t["action"] for t in out["classes"]] == ["new class"] and out["classes"][0]["examples"] == 2
-    assert c.post(f"/api/projects/{pid}/learn", headers=max_).status_code == 409  # a job is queued
+    fake_control(srv.data, delay_s=3.0)  # long enough to learn again while the job runs
+    try:
+        r = c.post(f"/api/projects/{pid}/learn", headers=rita)  # a reviewer may teach
+        assert r.status_code == 202, r.text
+        out = r.json()
+        assert [t["action"] for t in out["classes"]] == ["new class"] and out["classes"][0]["examples"] == 2
+        again = c.post(f"/api/projects/{pid}/learn", headers=max_)
+        assert again.status_code == 409 and "job" in again.json()["detail"]  # a job is queued or running
+    finally:
+        fake_control(srv.data, delay_s=0.2)
     assert wait_job(c, out["job"]["id"], srv.tokens["rita"])["status"] == "succeeded"
     after = c.get(f"/api/projects/{pid}/detections?order=uncertain", headers=rita).json()["detections"]
     readers = [x for x in after if x["class"] == "card_reader"]

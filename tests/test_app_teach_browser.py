@@ -41,9 +41,9 @@ def test_create_a_class_mark_two_examples_learn_and_search_again(browser, srv) -
         page.fill("#t-name", "Card reader")
         page.fill("#t-ifc", "IfcCommunicationsAppliance")
         page.click("#t-create")
-        page.wait_for_function("document.getElementById('add-class').value === 'card_reader'")
+        page.wait_for_function("() => document.getElementById('add-class').value === 'card_reader'")  # a function: no eval
         page.select_option("#add-wall", "W01")
-        page.wait_for_function("document.getElementById('wall-img').naturalWidth > 0")
+        page.wait_for_function("() => document.getElementById('wall-img').naturalWidth > 0")
         for k, (u, v) in enumerate(READERS[:2]):  # two examples: click on each, confirm it
             box = page.locator("#wall-img").bounding_box()
             page.mouse.click(box["x"] + (u + 0.02) / WALL_W * box["width"],
@@ -51,7 +51,7 @@ def test_create_a_class_mark_two_examples_learn_and_search_again(browser, srv) -
             page.wait_for_selector("#add-confirm", state="visible")
             page.click("#add-ok")
             page.wait_for_selector("#add-confirm", state="hidden")
-            page.wait_for_function(f"document.getElementById('t-examples').textContent.includes('Card reader {k + 1}')")
+            page.wait_for_function(f"() => document.getElementById('t-examples').textContent.includes('Card reader {k + 1}')")
         assert page.locator("#t-learn").is_enabled()
         page.click("#t-learn")
         page.wait_for_selector("#t-status:has-text('Searched again')", timeout=60_000)

@@ -14,6 +14,7 @@ from typing import Literal
 
 from fastapi import APIRouter, HTTPException, Request
 from pydantic import BaseModel, Field
+from sqlalchemy import func, select
 
 from sbsc_core.errors import InputError
 
@@ -26,7 +27,7 @@ from .jobs import check_new_job
 router = APIRouter(prefix="/api", tags=["review"])
 
 ERRORS = {403: {"description": "role too low"}, 404: {"description": "not found"},
-          409: {"description": "exists already, nothing to learn from, or a job is queued"},
+          409: {"description": "exists already, nothing to learn from, or a job is queued or running"},
           422: {"description": "invalid input, or an example that cannot be used"},
           423: {"description": "project signed off"}}
 
@@ -78,6 +79,8 @@ def learn_and_search_again(pid: int, user: Reviewer, db: DB, jobs: Jobs, setting
         if p.current_job_id is None:
             raise HTTPException(409, f"project {pid} has no results to learn from yet")
         check_new_job(s, p, user, reviewed_ok=True)
+        if s.scalar(select(func.count(Job.id)).where(Job.project_id == pid, Job.status == "running")):
+            raise HTTPException(409, f"project {pid} has a job running; learn from its results once it has finished")
         current = s.get(Job, p.current_job_id)
         source = models_dir(s, current.models_id, settings.data_dir)
         try:
