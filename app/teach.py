@@ -41,7 +41,10 @@ def project_classes(data_dir: Path, pid: int) -> dict[str, dict]:
     path = classes_path(data_dir, pid)
     if not path.is_file():
         return {}
-    doc = json.loads(path.read_text(encoding="utf-8"))
+    try:  # written atomically by save_project_classes; a file edited by hand may be broken
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
     return doc if isinstance(doc, dict) else {}
 
 
