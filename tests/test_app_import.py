@@ -9,6 +9,7 @@ import app.viewer.lod as lod_mod
 from app.auth import create_user
 from app.cli import REGISTRARS
 from app.config import AppSettings
+from app.membership import set_member
 from app.sample import find_sample_project
 from app.server import create_app, start_page
 from sbsc_core.cli import main
@@ -59,6 +60,7 @@ def test_import_makes_a_project_with_its_scene_prepared(tmp_path, monkeypatch, c
     with TestClient(create_app(settings, start_jobs=False)) as client:
         with client.app.state.db.write() as s:
             _, token = create_user(s, "rita", "reviewer")
+            set_member(s, pid, "rita", "reviewer", None)  # an imported project has only the admins as members
         p = client.get(f"/api/projects/{pid}", headers={"Authorization": f"Bearer {token}"}).json()
         assert p["name"] == "Floor 2" and p["scans"][0]["points"] == 5000
         assert p["jobs"][0]["status"] == "succeeded"
