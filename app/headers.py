@@ -6,7 +6,7 @@ SHA-256 (computed from ``app/static/*.html`` when the app is made), and no other
 script. Styles may be inline (the pages use ``style`` attributes). Images may be ``blob:``
 URLs (thumbnails fetched with the API token) and the comparison report opens as a blob.
 The 3D scenes are served by their own viser servers on other ports, not by this app: the
-pages open them in a new tab (never in a frame).
+pages open them in a new tab (never in a frame), and those servers send :data:`SCENE_HEADERS`.
 """
 
 from __future__ import annotations
@@ -19,6 +19,16 @@ from pathlib import Path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 _INLINE_SCRIPT = re.compile(r"<script(?![^>]*\bsrc\s*=)[^>]*>(.*?)</script>", re.S | re.I)
+
+
+# The 3D scenes' own viser servers (app.viewer.gate): no framing, no sniffing, no referrer, and a
+# policy that forbids being framed, plugins and other bases without restricting viser's own client.
+SCENE_HEADERS = (
+    ("Content-Security-Policy", "frame-ancestors 'none'; object-src 'none'; base-uri 'self'"),
+    ("X-Frame-Options", "DENY"),
+    ("X-Content-Type-Options", "nosniff"),
+    ("Referrer-Policy", "no-referrer"),
+)
 
 
 def inline_script_hashes(static_dir: Path) -> list[str]:

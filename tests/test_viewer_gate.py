@@ -59,9 +59,15 @@ def test_scene_refuses_without_login_or_from_a_foreign_origin(gated):
     url = manager.url_for(1)
     scene = manager.wait_ready(1, 30)
     port = manager.viewer(1).port
-    assert httpx.get(url).status_code == 403
+    refused = httpx.get(url)
+    assert refused.status_code == 403
     ticket = gate.issue(1, "alice", "reviewer", project=1)
-    assert httpx.get(url, cookies={cookie_name(1): ticket}).status_code == 200
+    page = httpx.get(url, cookies={cookie_name(1): ticket})
+    assert page.status_code == 200
+    for answer in (refused, page):  # the scene's own answers carry the security headers too
+        assert "frame-ancestors 'none'" in answer.headers["content-security-policy"]
+        assert answer.headers["x-content-type-options"] == "nosniff"
+        assert answer.headers["x-frame-options"] == "DENY" and answer.headers["referrer-policy"] == "no-referrer"
     # a ticket of another project (or of none) does not open this scene, under any cookie name
     other, unbound = gate.issue(1, "alice", "reviewer", project=2), gate.issue(1, "alice", "reviewer")
     for name, t in ((cookie_name(1), other), (cookie_name(2), other), (cookie_name(1), unbound),

@@ -29,6 +29,8 @@ from typing import Any
 
 import viser
 
+from ..headers import SCENE_HEADERS
+
 COOKIE = "sbsc_viewer"
 TICKET_TTL_S = 3600.0  # asked again each time a page opens the scene; an open scene stays connected
 _SERVE_LOCK = threading.Lock()  # the request filter is put in place while one viser server starts
@@ -135,14 +137,24 @@ class ViewerGate:
         def check(connection: Any, request: Any) -> Any:
             return gate.check(connection, request, project)
 
-        def serve(handler: Callable, *args: Any, process_request: Callable | None = None, **kw: Any):
+        def serve(handler: Callable, *args: Any, process_request: Callable | None = None,
+                  process_response: Callable | None = None, **kw: Any):
             def gated(connection: Any, request: Any) -> Any:
                 refused = check(connection, request)
                 if refused is not None:
                     return refused
                 return process_request(connection, request) if process_request else None
 
-            return original(handler, *args, process_request=gated, **kw)
+            def secured(connection: Any, request: Any, response: Any) -> Any:
+                out = process_response(connection, request, response) if process_response else None
+                for name, value in SCENE_HEADERS:  # every answer of the scene: pages, files, refusals
+                    target = (out or response).headers
+                    if name in target:
+                        del target[name]
+                    target[name] = value
+                return out
+
+            return original(handler, *args, process_request=gated, process_response=secured, **kw)
 
         with _SERVE_LOCK:
             wss.serve = serve
