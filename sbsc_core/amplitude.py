@@ -52,7 +52,8 @@ def scene_amplitude(relief: np.ndarray, shape: tuple[int, int], centre: tuple[fl
 Models = dict[str, "np.ndarray | list[np.ndarray]"]  # class -> its depth model, or one per design
 
 
-def _designs(m: np.ndarray | list[np.ndarray]) -> list[np.ndarray]:
+def designs(m: np.ndarray | list[np.ndarray]) -> list[np.ndarray]:
+    """A class's models as a list: its one model, or one per design."""
     return list(m) if isinstance(m, list) else [m]
 
 
@@ -69,9 +70,9 @@ def amplitude_compatible(relief: np.ndarray, models: Models,
     measured here counts as compatible.
     """
     out = {}
-    for c, designs in models.items():
+    for c, designs_of in models.items():
         out[c] = False
-        for m in _designs(designs):
+        for m in designs(designs_of):
             own = relief_amplitude(m)
             seen = scene_amplitude(relief, m.shape[:2], centres[c], rotation_deg)
             if own is None or seen is None or own <= 0 or gain_range[0] <= seen / own <= gain_range[1]:
@@ -111,15 +112,15 @@ def colour_where_relief_allows(colour: list[Candidate], relief: np.ndarray | Non
     centre_of = lambda cand: shifted_centre(cand.centre, offsets.get(cand.class_id), cand.rotation_deg)  # noqa: E731
     for cand in colour:
         flat: list[FlatRefusal] = []
-        designs = _designs(models[cand.class_id]) if cand.class_id in models else []
-        for m in designs:
+        per_design = designs(models[cand.class_id]) if cand.class_id in models else []
+        for m in per_design:
             own = relief_amplitude(m)
             seen = None if own is None or own <= 0 else scene_amplitude(relief, m.shape[:2], centre_of(cand),
                                                                         cand.rotation_deg)
             if seen is None or seen >= gain_range[0] * own:
                 break
             flat.append(FlatRefusal(cand, own, seen))
-        if designs and len(flat) == len(designs):
+        if per_design and len(flat) == len(per_design):
             refused.append(flat[0])
         else:
             kept.append(cand)

@@ -65,7 +65,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from .amplitude import amplitude_compatible
+from .amplitude import amplitude_compatible, designs
 from .amplitude import shifted_centre as _shifted
 from .colour_recognition import ColourImage, ColourPrototypes, prototype_distance
 from .matching import box_at, crop_padded, ncc_map, nms, padded_template, rotate_template
@@ -152,12 +152,19 @@ def _has_relief(t: ModelTemplate) -> bool:
     return m.size > 0 and float(m.std()) >= _FLAT_M * max(float(np.abs(m).max()), 1e-9)
 
 
+def learnt_view_count(t: ModelTemplate) -> int:
+    """How many of a model's last front views are learnt designs (``model.json``
+    ``learnt_views``, written by ``sbsc learn``); 0 when it gives none or no whole number."""
+    k = t.extra.get("learnt_views", 0)
+    return k if isinstance(k, int) and not isinstance(k, bool) and k > 0 else 0
+
+
 def design_templates(t: ModelTemplate) -> list[ModelTemplate]:
     """A class's model and each of its learnt designs (``model.json`` ``learnt_views``: the
     last so many front views, written by ``sbsc learn``) as a model of its own: that view,
     and the further depth model of the same rank from the end (else the reference one)."""
-    k = t.extra.get("learnt_views", 0)
-    if not isinstance(k, int) or isinstance(k, bool) or k <= 0 or len(t.colour_views) <= 1:
+    k = learnt_view_count(t)
+    if k <= 0 or len(t.colour_views) <= 1:
         return [t]
     k = min(k, len(t.colour_views) - 1)
     out = [replace(t, colour_views=t.colour_views[:-k], extra_depths=[])]
@@ -261,7 +268,7 @@ def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[st
     parts: list[dict[str, float]] = []
     if all(c in views for c in seen):
         parts.append({c: max(print_score(diff, v, _shifted(cand.centre, offsets.get(c), cand.rotation_deg),
-                                         cand.rotation_deg, search_px=search_px) for v in _designs(views[c]))
+                                         cand.rotation_deg, search_px=search_px) for v in designs(views[c]))
                       for c in seen})
     with_relief = False
     if relief is not None and all(c in models for c in seen):
@@ -275,10 +282,6 @@ def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[st
     return {c: float(np.mean([p[c] for p in parts])) for c in seen}, with_relief
 
 
-def _designs(x: np.ndarray | list[np.ndarray]) -> list[np.ndarray]:
-    return x if isinstance(x, list) else [x]
-
-
 def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, threshold: float
                   ) -> dict[str, list[np.ndarray]]:
     """The front views of the further designs of each class that has some (the last
@@ -289,8 +292,8 @@ def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, thr
     out: dict[str, list[np.ndarray]] = {}
     wall = cv2.cvtColor(np.asarray(wall_rgb, np.float32).reshape(1, 1, 3) / 255.0, cv2.COLOR_RGB2Lab).reshape(3)
     for c, t in templates.items():
-        k = t.extra.get("learnt_views", 0)
-        if not isinstance(k, int) or isinstance(k, bool) or k <= 0 or not t.colour_views:
+        k = learnt_view_count(t)
+        if k <= 0 or not t.colour_views:
             continue
         b = content_box(t)
         prints = []
@@ -313,8 +316,7 @@ def _best_design(relief: np.ndarray, model: np.ndarray | list[np.ndarray], centr
     the reference model and the further ones, e.g. learnt by ``sbsc learn``). None when one of
     them is flat inside its content (a sign): the class may be a flat plate, which its relief
     cannot tell from another."""
-    models = model if isinstance(model, list) else [model]
-    scores = [relief_score(relief, m, centre, rotation_deg, search_px=search_px) for m in models]
+    scores = [relief_score(relief, m, centre, rotation_deg, search_px=search_px) for m in designs(model)]
     if any(x is None for x in scores):
         return None
     return max(scores)
@@ -432,6 +434,16 @@ def relief_models(templates: dict[str, ModelTemplate]
     return models, offsets
 
 
+def library_relief_models(prototypes: ColourPrototypes
+                          ) -> tuple[dict[str, np.ndarray | list[np.ndarray]], dict[str, tuple[float, float]]]:
+    """:func:`relief_models` of the library's templates, made once per library (cached on
+    ``prototypes``, like the look-alike sets)."""
+    key = ("relief_models",)
+    if key not in prototypes._cache:
+        prototypes._cache[key] = relief_models(prototypes.templates)  # type: ignore[assignment]
+    return prototypes._cache[key]  # type: ignore[return-value]
+
+
 def same_size_pairs(templates: dict[str, ModelTemplate], settings: LookalikeSettings) -> list[tuple[str, str]]:
     """The pairs of classes whose contents have the same size (:func:`content_box`, ``size_tolerance``)."""
     ids = sorted(templates)
@@ -488,10 +500,7 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
     for c, prints in design_prints(prototypes.templates, image.wall_rgb, image.threshold).items():
         if c in views:  # a class's further designs (sbsc learn): the best of its prints speaks for it
             views[c] = [views[c], *prints]  # type: ignore[list-item]
-    mkey = ("relief_models",)
-    if mkey not in prototypes._cache:
-        prototypes._cache[mkey] = relief_models(prototypes.templates)  # type: ignore[assignment]
-    models, model_offsets = prototypes._cache[mkey]  # type: ignore[misc]
+    models, model_offsets = library_relief_models(prototypes)
     diff = np.ascontiguousarray(image.lab - image.background, dtype=np.float32)
     np.copyto(diff, 0.0, where=~image.foreground[..., None])  # in place: most of the image
     kw = {"offsets": offsets, "relief": relief, "models": models, "model_offsets": model_offsets,

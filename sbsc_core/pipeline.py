@@ -63,7 +63,7 @@ from .depth_recognition import depth_images, depth_rois, match_depth
 from .errors import InputError, SbscError
 from .io.atomic import atomic_output_dir
 from .io.crs import georeference_fields, scan_crs
-from .lookalikes import relief_models, resolve_on_wall
+from .lookalikes import library_relief_models, resolve_on_wall
 from .mounting import within_wall_height
 from .orthoimage import build_orthoimage
 from .partition import (
@@ -177,7 +177,7 @@ def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], p
     d_cands, c_cands = resolve_on_wall(d_cands, c_cands, c_img, prototypes, s.lookalikes,
                                        relief=d_img.levelled, gain_range=s.depth.gain_range)
     if s.colour.relief_must_allow:  # a print without its object's relief is not the object
-        c_cands, _ = colour_where_relief_allows(c_cands, d_img.levelled, *relief_models(templates),
+        c_cands, _ = colour_where_relief_allows(c_cands, d_img.levelled, *library_relief_models(prototypes),
                                                 s.depth.gain_range)
     t_stage["colour"] = time.perf_counter() - t
     return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
