@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 
 from app.config import AppSettings  # noqa: E402
 from app.users import add_user  # noqa: E402
-from tests.test_app_support import ServerProcess, auth  # noqa: E402
+from tests.app_support import ServerProcess, auth  # noqa: E402
 
 PLY_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("r", "u1"), ("g", "u1"), ("b", "u1")])
 

@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT))
 from app.config import AppSettings  # noqa: E402
 from app.sample import find_sample_project  # noqa: E402
 from app.users import add_user  # noqa: E402
-from tests.test_app_support import ServerProcess  # noqa: E402
+from tests.app_support import ServerProcess  # noqa: E402
 
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--use-gl=swiftshader",
         "--enable-unsafe-swiftshader"]

@@ -19,7 +19,7 @@ import numpy as np
 
 from sbsc_core.paths import bundled_models_dir
 
-from .test_bim_fixtures import detections_document, truth_document
+from .bim_fixtures import detections_document, truth_document
 
 
 @dataclass

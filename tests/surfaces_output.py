@@ -1,6 +1,6 @@
 """A finished ``sbsc detect`` output with a ceiling and two columns (issue 11), for the app tests.
 
-Two walls with a few objects (as ``test_app_support._fake_output``), plus contract 4's
+Two walls with a few objects (as ``app_support._fake_output``), plus contract 4's
 ``surfaces``: the room's ceiling ``C01`` seen from below, the four faces of a rectangular column
 ``COL1`` and the unrolled face of a round column ``COL2``, each with its orthoimages and an
 object on it (``"surface": "ceiling"`` / ``"column"``).
@@ -16,7 +16,7 @@ import numpy as np
 
 from sbsc_core.columns import FoundColumn, column_faces
 
-from .test_app_support import PIXEL_M, _fake_output
+from .app_support import PIXEL_M, _fake_output
 
 ROOM_H = 2.5
 CEILING = {"id": "C01", "kind": "ceiling", "origin": [0.0, 3.0, ROOM_H], "axis_u": [1.0, 0.0, 0.0],

@@ -17,6 +17,8 @@ import numpy as np
 
 from sbsc_core.types import Orthoimage, PointCloud, Wall, WallFrame
 
+ORIGIN = (1000.0, -2000.0, 50.0)  # world = xyz + ORIGIN (the storeys' scenes)
+
 RGB = tuple[int, int, int]
 
 
@@ -265,3 +267,16 @@ def make_ortho(width_m: float = 4.0, height_m: float = 2.7, pixel_m: float = 0.0
     d32 = depth.astype(np.float32)
     d32[~mask] = np.nan
     return Orthoimage(wall_id=wall_id, frame=fr, pixel_m=pixel_m, colour=colour, depth=d32, mask=mask)
+
+
+def _stack(*clouds: PointCloud) -> PointCloud:
+    assert all(np.array_equal(c.origin, clouds[0].origin) for c in clouds)
+    return PointCloud(np.concatenate([c.xyz for c in clouds]), np.concatenate([c.rgb for c in clouds]),
+                      clouds[0].origin)
+
+
+def _two_rooms(floor_z: float, heights: tuple[float, float], seed: int) -> list[PointCloud]:
+    a = Room([(0, 0), (4, 0), (4, 3.5), (0, 3.5)], {1: [Hole("door", 1.0, 1.9, 0, 2.1)]})
+    b = Room([(4.15, 0), (8, 0), (8, 3.5), (4.15, 3.5)], {3: [Hole("door", 1.6, 2.5, 0, 2.1)]})
+    return [make_scene([room], height=h, floor_z=floor_z, spacing=0.03, noise_m=0.002, see_through_m=0.0,
+                       origin=ORIGIN, seed=seed + i)[0] for i, (room, h) in enumerate(zip((a, b), heights, strict=True))]

@@ -22,17 +22,21 @@ import pytest
 from app.config import AppSettings
 from app.users import add_user
 
-from .test_app_support import (
+from .app_support import (
     ServerProcess,
     auth,
+    db_rows_at,
     fake_control,
     pid_alive,
     wait_job,
+    worker_pid,
     write_library_zip,
     write_small_ply,
 )
 
-RUNNER = "tests.test_app_support:fake_detect_to_dir"
+pytestmark = pytest.mark.slow
+
+RUNNER = "tests.app_support:fake_detect_to_dir"
 LIMIT = 1 << 20  # scan size limit of the shared server
 
 
@@ -461,14 +465,8 @@ def test_server_restart_mid_job(tmp_path):
         server.stop()
 
 
-def worker_pid(data: Path, jid: int) -> int | None:
-    """The process id of a job's worker, from the database (the API does not show it)."""
-    return db_rows_at(data, f"SELECT worker_pid FROM jobs WHERE id = {int(jid)}")[0][0]
 
 
-def db_rows_at(data: Path, sql: str) -> list:
-    with sqlite3.connect(data / "sbsc.db") as con:
-        return con.execute(sql).fetchall()
 
 
 def test_huge_upload_streams_with_flat_server_memory(tmp_path):

@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
-import subprocess
 import tempfile
 from pathlib import Path
 
@@ -21,7 +19,7 @@ from app.config import AppSettings
 from app.sample import SAMPLE_NAME, ensure_sample_project
 from app.users import add_user
 
-from .test_app_support import (
+from .app_support import (
     ROOT,
     ServerProcess,
     auth,
@@ -31,43 +29,11 @@ from .test_app_support import (
     write_small_ply,
 )
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.slow, pytest.mark.browser]
 
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run"]
 # docs/images only when asked (SBSC_SAVE_SCREENSHOTS=1): a test run never changes the tree
 SCREENSHOT = (ROOT / "docs" / "images" if os.environ.get("SBSC_SAVE_SCREENSHOTS") == "1"
               else Path(tempfile.gettempdir()) / "sbsc-screenshots") / "review_gallery.png"
-
-
-def chromium_path() -> str | None:
-    """Debian's chromium; installed with apt-get (we run as root) when it is missing."""
-    found = shutil.which("chromium") or shutil.which("chromium-browser")
-    if found:
-        return found
-    if os.geteuid() != 0 or not shutil.which("apt-get"):
-        return None
-    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-    for cmd in (["apt-get", "install", "-y", "-qq", "chromium"],
-                ["sh", "-c", "apt-get update -qq && apt-get install -y -qq chromium"]):
-        if subprocess.run(cmd, env=env, capture_output=True, timeout=900).returncode == 0:
-            break
-    return shutil.which("chromium")
-
-
-@pytest.fixture(scope="module")
-def browser():
-    exe = chromium_path()
-    if exe is None:
-        pytest.skip("Debian chromium is not installed and apt-get could not install it")
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        pytest.skip("the playwright package is missing (pip install playwright; no 'playwright install' needed)")
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS, headless=True)
-        yield b
-        b.close()
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +53,7 @@ def sample_server(tmp_path_factory):
     assert ensure_sample_project(sim / "scan.ply", out, settings=settings) == pid  # idempotent
     token = add_user(settings, "rita", "reviewer")
     join(settings, pid, "rita", "reviewer")  # projects belong to their members
-    server = ServerProcess(data, {"SBSC_JOB_RUNNER": "tests.test_app_support:fake_detect_to_dir"}).start()
+    server = ServerProcess(data, {"SBSC_JOB_RUNNER": "tests.app_support:fake_detect_to_dir"}).start()
     fake_control(data, mode="ok", delay_s=3.0, detections=5)
     server.token, server.pid, server.base, server.n = token, pid, base, n
     yield server

@@ -1,6 +1,6 @@
 """The review app's as-designed model: IFC upload, comparison JSON, HTML report and BCF.
 
-The project's results are the hand-written room of ``tests/test_bim_fixtures`` (every
+The project's results are the hand-written room of ``tests/bim_fixtures`` (every
 object built and detected); the design is written from the same room with deliberate
 differences (two moved, two left out, two added), which the comparison must report.
 """
@@ -24,8 +24,8 @@ from app.sample import ensure_sample_project
 from app.server import create_app
 from sbsc_core.bim.design import write_as_designed_ifc
 
-from .test_app_support import write_small_ply
-from .test_bim_fixtures import HEIGHT, OBJECTS, detections_document, truth_document
+from .app_support import write_small_ply
+from .bim_fixtures import HEIGHT, OBJECTS, detections_document, truth_document
 
 PIXEL_M = 0.01
 

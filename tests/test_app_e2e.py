@@ -20,7 +20,7 @@ import pytest
 from app.config import AppSettings
 from app.users import add_user
 
-from .test_app_support import (
+from .app_support import (
     ServerProcess,
     auth,
     join,

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from .test_app_browser import browser  # noqa: F401 - the fixture (Debian chromium + Playwright)
-from .test_app_pages import VIEWPORT, site  # noqa: F401 - a server with a sample project
+from .browser_support import VIEWPORT
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.slow, pytest.mark.browser]
 
 
-def test_one_login_serves_every_tab_until_logout(browser, site) -> None:  # noqa: F811
+def test_one_login_serves_every_tab_until_logout(browser, site) -> None:
     ctx = browser.new_context(viewport=VIEWPORT)
     try:
         first = ctx.new_page()
@@ -47,7 +46,7 @@ def _login(page, site) -> None:  # noqa: ANN001, F811
     page.wait_for_selector("#projects", state="visible")
 
 
-def test_signoff_page_has_every_export(browser, site) -> None:  # noqa: F811
+def test_signoff_page_has_every_export(browser, site) -> None:
     page = browser.new_page(viewport={"width": 1280, "height": 800})
     try:
         _login(page, site)
@@ -67,7 +66,7 @@ def test_signoff_page_has_every_export(browser, site) -> None:  # noqa: F811
         page.close()
 
 
-def test_add_missed_from_the_top_and_the_panel_pending_until_confirmed(browser, site) -> None:  # noqa: F811
+def test_add_missed_from_the_top_and_the_panel_pending_until_confirmed(browser, site) -> None:
     page = browser.new_page(viewport={"width": 1280, "height": 800})
     try:
         _login(page, site)
@@ -113,7 +112,7 @@ def test_add_missed_from_the_top_and_the_panel_pending_until_confirmed(browser, 
         page.close()
 
 
-def test_relabel_in_the_gallery_accepts_and_says_so(browser, site) -> None:  # noqa: F811
+def test_relabel_in_the_gallery_accepts_and_says_so(browser, site) -> None:
     page = browser.new_page(viewport={"width": 1280, "height": 800})
     try:
         _login(page, site)
@@ -135,10 +134,10 @@ def test_relabel_in_the_gallery_accepts_and_says_so(browser, site) -> None:  # n
         page.close()
 
 
-def test_project_page_puts_results_first_and_locks_after_signoff(browser, site) -> None:  # noqa: F811
+def test_project_page_puts_results_first_and_locks_after_signoff(browser, site) -> None:
     import httpx
 
-    from .test_app_support import auth
+    from .app_support import auth
 
     page = browser.new_page(viewport={"width": 1280, "height": 800})
     try:

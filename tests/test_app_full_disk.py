@@ -24,7 +24,7 @@ from app.jobs import describe_exit
 from app.server import create_app
 from app.storage import _FilePart
 
-from .test_app_support import write_small_ply
+from .app_support import write_small_ply
 
 
 @pytest.fixture()
@@ -55,6 +55,7 @@ def _fill(path: Path) -> None:
                 fh.write(b"\0" * 512)
 
 
+@pytest.mark.slow
 def test_full_disk_is_507_leaves_nothing_and_recovers_without_restart(small_disk, tmp_path):
     settings = AppSettings(data_dir=small_disk / "data", viewer=False)
     small = write_small_ply(tmp_path / "small.ply", n=2000)

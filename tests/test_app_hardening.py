@@ -22,7 +22,7 @@ import pytest
 from app.config import AppSettings
 from app.users import add_user
 
-from .test_app_support import (
+from .app_support import (
     ServerProcess,
     auth,
     fake_control,
@@ -104,6 +104,7 @@ def live(tmp_path_factory):
 # --------------------------------------------------------------------------- bounds
 
 
+@pytest.mark.slow
 def test_bounds_ids_bodies_names_and_methods(live):
     h = auth(live.tokens["rita"])
     big = str(2**63)
@@ -145,6 +146,7 @@ def test_bounds_ids_bodies_names_and_methods(live):
         assert "worker_pid" not in job
 
 
+@pytest.mark.slow
 def test_openapi_declares_bearer_and_the_error_body(live):
     doc = httpx.get(live.url + "/openapi.json", timeout=30).json()
     assert doc["components"]["securitySchemes"]["bearerAuth"] == {
@@ -162,6 +164,7 @@ def test_openapi_declares_bearer_and_the_error_body(live):
                 assert schema == {"$ref": "#/components/schemas/Error"}
 
 
+@pytest.mark.slow
 def test_schemathesis_finds_no_server_error_and_no_schema_violation(live, tmp_path):
     """Property-based fuzzing from /openapi.json, with ids of real resources; bounded."""
     if not ST.is_file():
@@ -200,6 +203,7 @@ def _ply(n_header: int, n_body: int) -> bytes:
     return head + arr.tobytes()
 
 
+@pytest.mark.slow
 def test_upload_point_count_comes_from_the_header_and_must_match_the_size(live):
     h = auth(live.tokens["rita"])
     pid = live.ids["pid"]
@@ -224,6 +228,7 @@ def test_upload_point_count_comes_from_the_header_and_must_match_the_size(live):
 # --------------------------------------------------------------------------- faults
 
 
+@pytest.mark.slow
 def test_job_processes_die_with_the_job_and_with_the_server(tmp_path):
     """Each job's processes are one process group: a killed worker takes its pool along; after
     a SIGKILL of the server (its worker frozen, so only the restart can clean up) the new
@@ -293,6 +298,7 @@ def test_job_processes_die_with_the_job_and_with_the_server(tmp_path):
         shutil.rmtree(data / "projects", ignore_errors=True)
 
 
+@pytest.mark.slow
 def test_concurrent_uploads_per_user_are_limited(live):
     """A second upload of the same user while the first still streams: 429 (limit 1 here)."""
     import threading

@@ -16,7 +16,7 @@ from sbsc_core.cli import main
 from sbsc_core.io.ply import write_ply
 from sbsc_core.io.scans import read_scan
 
-from .test_app_support import _fake_output
+from .app_support import _fake_output
 
 
 def _sbsc(*argv: str) -> int:

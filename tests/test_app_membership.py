@@ -19,7 +19,7 @@ from app.models import Project, ProjectEvent, SuggestionRow
 from app.sample import ensure_sample_project
 from app.server import create_app
 
-from .test_app_support import _fake_output, write_small_ply
+from .app_support import _fake_output, write_small_ply
 
 # routes that need no project: checked on their own below
 OUTSIDE = {"/api/health", "/api/me", "/api/users", "/api/projects", "/api/session"}
@@ -134,6 +134,7 @@ def test_project_list_creator_roles_and_audit(world):
     assert by["member_added"] == "olga" and by["member_removed"] == "olga"
 
 
+@pytest.mark.slow
 def test_sbsc_user_adds_and_removes_members(world, tmp_path):
     data = tmp_path / "d"
     settings = AppSettings(data_dir=data)

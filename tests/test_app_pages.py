@@ -8,9 +8,6 @@ exists, and the sample project comes with the simulator's as-designed model.
 
 from __future__ import annotations
 
-import json
-import os
-import tempfile
 from pathlib import Path
 
 import cv2
@@ -18,57 +15,17 @@ import httpx
 import numpy as np
 import pytest
 
-from app.config import AppSettings
-from app.sample import ensure_sample_project
-from app.users import add_user
-from sbsc_core.bim.design import write_as_designed_ifc
+from .app_support import auth
+from .browser_support import DISPLAY_NAMES, LONG_CLASSES, SHOTS, VIEWPORT
 
-from .test_app_browser import browser  # noqa: F401 - the fixture (Debian chromium + Playwright)
-from .test_app_support import ROOT, ServerProcess, _fake_output, auth, join, write_small_ply
-from .test_bim_fixtures import truth_document
-
-pytestmark = pytest.mark.browser
-
-VIEWPORT = {"width": 1440, "height": 900}
-LONG_CLASSES = ("fire_alarm_switch_sign", "extinguisher_sign", "electrical_panel", "builtin_socket")
-DISPLAY_NAMES = {c: json.loads((ROOT / "sbsc_core" / "data" / "models" / c / "model.json").read_text())["name"]
-                 for c in LONG_CLASSES}
-SHOTS = (ROOT / "docs" / "images" if os.environ.get("SBSC_SAVE_SCREENSHOTS") == "1"
-         else Path(tempfile.gettempdir()) / "sbsc-screenshots")
+pytestmark = [pytest.mark.slow, pytest.mark.browser]
 
 
-@pytest.fixture(scope="module")
-def site(tmp_path_factory):
-    """A server with a sample project (results with long class names, the simulator's
-    as_designed.ifc beside its scan) and an empty project without a design."""
-    base = tmp_path_factory.mktemp("pages")
-    data = base / "data"
-    settings = AppSettings(data_dir=data, viewer=False)
-    out = base / "out"
-    _fake_output(out, 8, lambda stage, f: None, 0.0)
-    doc = json.loads((out / "detections.json").read_text())
-    for i, d in enumerate(doc["detections"]):
-        d["class"] = LONG_CLASSES[i % len(LONG_CLASSES)]
-    doc["detections"][1]["rho_colour"] = None
-    doc["detections"][1]["source"] = "depth"
-    (out / "detections.json").write_text(json.dumps(doc))
-    sim = base / "sim"
-    sim.mkdir()
-    write_as_designed_ifc(truth_document(), sim / "as_designed.ifc", seed=0, n_moved=1, n_removed=1, n_added=1)
-    pid = ensure_sample_project(write_small_ply(sim / "scan.ply", n=200), out, settings=settings, points=200)
-    token = add_user(settings, "max", "manager")
-    join(settings, pid, "max", "manager")
-    server = ServerProcess(data, {"SBSC_VIEWER": "false"}).start()
-    with httpx.Client(base_url=server.url, timeout=30) as c:
-        empty = c.post("/api/projects", json={"name": "Empty"}, headers=auth(token)).json()["id"]
-    server.token, server.pid, server.empty = token, pid, empty
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    yield server
-    server.stop()
+
 
 
 @pytest.fixture
-def page(browser, site):  # noqa: F811
+def page(browser, site):
     p = browser.new_page(viewport=VIEWPORT)
     yield p
     p.close()
@@ -98,7 +55,7 @@ def test_favicon_is_served(site) -> None:
     assert r.status_code == 200 and r.content[:4] == b"\x00\x00\x01\x00"  # an ICO file
 
 
-def test_index_login_then_projects(browser, site) -> None:  # noqa: F811
+def test_index_login_then_projects(browser, site) -> None:
     page = browser.new_page(viewport=VIEWPORT)
     try:
         page.goto(site.url + "/index.html")

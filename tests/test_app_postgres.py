@@ -26,7 +26,7 @@ from app.membership import set_member
 from app.sample import ensure_sample_project
 from app.server import create_app
 
-from .test_app_support import _fake_output, free_port, write_small_ply
+from .app_support import _fake_output, free_port, write_small_ply
 
 
 def _run_as_postgres(cmd: list[str]) -> subprocess.CompletedProcess:
@@ -67,6 +67,7 @@ def pg_url():
         shutil.rmtree(base, ignore_errors=True)
 
 
+@pytest.mark.slow
 def test_review_flow_on_postgresql(pg_url, tmp_path):
     settings = AppSettings(data_dir=tmp_path / "d", database_url=pg_url)
     out = tmp_path / "out"

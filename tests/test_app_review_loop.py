@@ -7,11 +7,7 @@ cancellation and the one-queued-job cap, sign-off and reopening, the review summ
 
 from __future__ import annotations
 
-import json
-import os
 import time
-from collections.abc import Sequence
-from pathlib import Path
 
 import httpx
 import numpy as np
@@ -21,40 +17,23 @@ from app.config import AppSettings
 from app.snap import snap_to_relief
 from app.users import add_user
 
-from .test_app_api import worker_pid
-from .test_app_support import (
-    _fake_output,
+from .app_support import (
     auth,
     fake_control,
     pid_alive,
     wait_job,
+    worker_pid,
     write_small_ply,
 )
 
-RUNNER = "tests.test_app_review_loop:fake_with_suggestions"
+RUNNER = "tests.app_support:fake_with_suggestions"
 
 
-def fake_with_suggestions(scans: Sequence[Path], models: Path, *, expected=None, out: Path,  # noqa: ANN001
-                          settings_file=None, log=None, progress=None) -> dict:  # noqa: ANN001
-    """The fake runner of ``test_app_support`` plus a ``suggestions.json`` of two possible misses."""
-    control = {"delay_s": 0.2, "detections": 6}
-    path = Path(os.environ.get("SBSC_DATA_DIR", ".")) / "fake_control.json"
-    if path.is_file():
-        control.update(json.loads(path.read_text()))
-    summary = _fake_output(Path(out), int(control["detections"]), progress or (lambda s, f: None),
-                           float(control["delay_s"]))
-    sugg = [{"class": "switch", "wall": "W01", "u": 3.5, "v": 1.1, "width_m": 0.08, "height_m": 0.08,
-             "source": "depth", "score": 0.81, "reason": "not_kept_by_consensus"},
-            {"class": "socket_x1", "wall": "W02", "u": 2.5, "v": 0.4, "width_m": 0.08, "height_m": 0.08,
-             "source": "colour", "score": 0.2, "reason": "not_kept_by_consensus"}]
-    (Path(out) / "suggestions.json").write_text(json.dumps({"schema": "sbsc.suggestions/1",
-                                                            "suggestions": sugg}))
-    return summary
 
 
 @pytest.fixture(scope="module")
 def srv(tmp_path_factory):
-    from .test_app_support import ServerProcess
+    from .app_support import ServerProcess
 
     base = tmp_path_factory.mktemp("review_loop")
     data = base / "data"
@@ -106,6 +85,7 @@ def test_snap_moves_a_click_onto_the_relief_of_the_model():
     assert not s.snapped and (s.u, s.v) == (0.2, 0.2)
 
 
+@pytest.mark.slow
 def test_add_a_missed_object_and_bulk_accept_by_filter(c, srv):
     pid, doc = project(c, srv, "add_bulk")
     rita = auth(srv.tokens["rita"])
@@ -170,6 +150,7 @@ def test_add_a_missed_object_and_bulk_accept_by_filter(c, srv):
     assert batch
 
 
+@pytest.mark.slow
 def test_promote_a_suggestion(c, srv):
     pid, _ = project(c, srv, "suggest")
     rita = auth(srv.tokens["rita"])
@@ -187,6 +168,7 @@ def test_promote_a_suggestion(c, srv):
     assert hist[0]["action"] == "promote"
 
 
+@pytest.mark.slow
 def test_a_second_job_keeps_decisions_cancel_and_cap(c, srv):
     pid, doc = project(c, srv, "rerun")
     rita, boss = auth(srv.tokens["rita"]), auth(srv.tokens["max"])
@@ -260,6 +242,7 @@ def test_a_second_job_keeps_decisions_cancel_and_cap(c, srv):
     assert final.status_code == 200 and final.json()["job"] == j1.json()["id"], final.text[:300]
 
 
+@pytest.mark.slow
 def test_signoff_then_admin_reopens_with_a_reason(c, srv):
     pid, _ = project(c, srv, "reopen")
     rita, boss, ada = auth(srv.tokens["rita"]), auth(srv.tokens["max"]), auth(srv.tokens["ada"])
@@ -288,6 +271,7 @@ def test_signoff_then_admin_reopens_with_a_reason(c, srv):
     assert events[1]["data"]["signoff"]["comment"] == "first"
 
 
+@pytest.mark.slow
 def test_learn_exemplars_from_decisions(c, srv, tmp_path):
     import io
     import zipfile
@@ -322,6 +306,7 @@ def test_learn_exemplars_from_decisions(c, srv, tmp_path):
     assert c.get(f"/api/projects/{pid}", headers=rita).json()["models"]["id"] == r.json()["library"]
 
 
+@pytest.mark.slow
 def test_relabel_means_accept_as_the_new_class_and_bulk_skips_relabelled(c, srv):
     """Issue 29: relabel is the same decision from every page (the gallery, the 3D scene, a
     script): the object is accepted as the new class; bulk decisions leave relabelled ones alone."""

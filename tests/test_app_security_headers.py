@@ -11,8 +11,7 @@ from app.config import AppSettings
 from app.headers import inline_script_hashes
 from app.server import create_app
 
-from .test_app_browser import browser  # noqa: F401 - the fixture
-from .test_app_support import ServerProcess
+from .app_support import ServerProcess
 
 
 @pytest.fixture(scope="module")
@@ -45,8 +44,9 @@ def test_the_policy_allows_exactly_the_pages_inline_scripts(client):
     assert len(hashes) >= 4  # one inline script per page
 
 
+@pytest.mark.slow
 @pytest.mark.browser
-def test_pages_run_under_the_policy(browser, tmp_path):  # noqa: F811
+def test_pages_run_under_the_policy(browser, tmp_path):
     server = ServerProcess(tmp_path / "d", {"SBSC_VIEWER": "false"}).start()
     page = browser.new_page()
     violations: list[str] = []

@@ -13,7 +13,7 @@ import pytest
 from app.config import AppSettings
 from app.users import add_user
 
-from .test_app_support import ServerProcess, auth, write_small_ply
+from .app_support import ServerProcess, auth, write_small_ply
 
 HEADER_S, BODY_S = 2.0, 2.0
 

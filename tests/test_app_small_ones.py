@@ -19,7 +19,7 @@ from app.server import create_app
 from app.storage import safe_filename
 from app.users import add_user
 
-from .test_app_support import ServerProcess, auth, write_small_ply
+from .app_support import ServerProcess, auth, write_small_ply
 
 
 def scratch_runner(scans: Sequence[Path], models: Path, *, expected=None, out: Path,  # noqa: ANN001

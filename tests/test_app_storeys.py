@@ -21,8 +21,7 @@ from app.users import add_user
 from app.viewer.scene import wall_label
 from sbsc_core.types import WallFrame
 
-from .test_app_browser import browser  # noqa: F401 - the fixture (Debian chromium + Playwright)
-from .test_app_support import (
+from .app_support import (
     ServerProcess,
     _fake_output,
     auth,
@@ -85,8 +84,9 @@ def test_scene_names_the_storey() -> None:
     assert wall_label("W02", f, None) == "W02  4.00 m"
 
 
+@pytest.mark.slow
 @pytest.mark.browser
-def test_gallery_filters_by_storey(project, browser) -> None:  # noqa: F811
+def test_gallery_filters_by_storey(project, browser) -> None:
     settings, pid, doc = project
     token = add_user(settings, "sam", "manager")
     join(settings, pid, "sam", "manager")

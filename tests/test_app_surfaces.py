@@ -19,8 +19,8 @@ from app.server import create_app
 from app.surfaces import point_on
 from app.users import create_user
 
+from .app_support import auth, served_fake_sample, write_small_ply
 from .surfaces_output import CEILING, SURFACE_OBJECTS, surfaces, write_surfaces_output
-from .test_app_support import auth, served_fake_sample, write_small_ply
 
 
 @pytest.fixture(scope="module")

@@ -10,16 +10,20 @@ from __future__ import annotations
 import httpx
 import pytest
 
-from .test_app_browser import browser  # noqa: F401 - the fixture (Debian chromium + Playwright)
-from .test_app_support import auth
-from .test_app_teach import READERS, WALL_H, project, srv  # noqa: F401 - srv: the server fixture
+from .app_support import auth
+from .teach_support import READERS, WALL_H, project
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.slow, pytest.mark.browser]
+
+@pytest.fixture(scope="module")
+def srv(teach_srv):
+    return teach_srv
+
 
 WALL_W = 4.0  # W01 of the fake runner
 
 
-def test_create_a_class_mark_two_examples_learn_and_search_again(browser, srv) -> None:  # noqa: F811
+def test_create_a_class_mark_two_examples_learn_and_search_again(browser, srv) -> None:
     with httpx.Client(base_url=srv.url, timeout=60) as c:
         pid = project(c, srv, "teach_browser")
         rita = auth(srv.tokens["rita"])

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import zipfile
-from pathlib import Path
 
 import pytest
 from lxml import etree
@@ -12,12 +11,10 @@ from lxml import etree
 from sbsc_core.bim import bundled_typings
 from sbsc_core.bim.design import write_as_designed_ifc
 from sbsc_core.cli import main
+from tests.bim_fixtures import SCHEMAS, bcf_errors, detections_document, truth_document
 from tests.shared_data import shared_data
-from tests.test_bim_fixtures import detections_document, truth_document
 
 # the schema of each kind of file in a BCF 2.1 zip
-SCHEMAS = {"markup.bcf": "markup.xsd", ".bcfv": "visinfo.xsd", "project.bcfp": "project.xsd",
-           "bcf.version": "version.xsd"}
 
 
 @pytest.fixture(scope="module")
@@ -26,26 +23,8 @@ def xsd() -> dict[str, etree.XMLSchema]:
     return {name: etree.XMLSchema(etree.parse(str(folder / name))) for name in set(SCHEMAS.values())}
 
 
-def _schema_for(name: str) -> str | None:
-    for key, schema in SCHEMAS.items():
-        if name.endswith(key):
-            return schema
-    return None
 
 
-def bcf_errors(path: Path, xsd: dict[str, etree.XMLSchema]) -> tuple[list[str], dict[str, int]]:
-    """XSD errors of every XML file of a BCF zip, and how many files of each schema were checked."""
-    errors, checked = [], {}
-    with zipfile.ZipFile(path) as z:
-        for name in z.namelist():
-            schema = _schema_for(name)
-            if schema is None:
-                continue
-            checked[schema] = checked.get(schema, 0) + 1
-            doc = etree.fromstring(z.read(name))
-            if not xsd[schema].validate(doc):
-                errors += [f"{name}:{e.line}: {e.message}" for e in xsd[schema].error_log]
-    return errors, checked
 
 
 @pytest.mark.parametrize("with_images", [False, True])

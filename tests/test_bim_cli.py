@@ -10,7 +10,7 @@ import pytest
 from sbsc_core.bim import bundled_typings
 from sbsc_core.bim.design import write_as_designed_ifc
 from sbsc_core.cli import main
-from tests.test_bim_fixtures import detections_document, truth_document
+from tests.bim_fixtures import detections_document, truth_document
 
 
 @pytest.fixture

@@ -15,7 +15,7 @@ from bcf.v2.bcfxml import BcfXml
 from sbsc_core.bim import bundled_typings
 from sbsc_core.bim.compare import compare, compare_to_dir
 from sbsc_core.bim.design import read_as_designed, write_as_designed_ifc
-from tests.test_bim_fixtures import OBJECTS, detections_document, truth_document
+from tests.bim_fixtures import OBJECTS, detections_document, truth_document
 
 TYPINGS = bundled_typings()
 

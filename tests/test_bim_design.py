@@ -18,7 +18,7 @@ from sbsc_core.bim import bundled_typings
 from sbsc_core.bim.design import read_as_designed, write_as_designed_ifc
 from sbsc_core.errors import InputError
 from sbsc_core.types import WallFrame
-from tests.test_bim_fixtures import truth_document
+from tests.bim_fixtures import truth_document
 
 TYPINGS = bundled_typings()
 

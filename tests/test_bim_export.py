@@ -12,7 +12,7 @@ from sbsc_core.bim import PSET_RECOGNITION, bundled_typings
 from sbsc_core.bim.design import read_as_designed
 from sbsc_core.bim.export import export_ifc, wall_thicknesses
 from sbsc_core.errors import InputError
-from tests.test_bim_fixtures import OBJECTS, detections_document, frames
+from tests.bim_fixtures import OBJECTS, detections_document, frames
 
 SIGNOFF = {"by": "maria", "at": "2024-05-03T17:30:00", "comment": "checked on site",
            "counts": {"accepted": 6, "rejected": 1}}
@@ -34,6 +34,7 @@ def _validate(model_or_path) -> list:
     return logger.statements
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("schema", ["IFC4", "IFC4X3"])
 def test_export_passes_validation_and_reads_back(tmp_path, schema):
     doc, path = _export(tmp_path, schema, signoff=SIGNOFF)
@@ -113,6 +114,7 @@ def test_export_passes_validation_and_reads_back(tmp_path, schema):
     assert f.by_type("IfcProject")[0] in related and len(related) == 1 + 7
 
 
+@pytest.mark.slow
 def test_validator_catches_a_broken_rule(tmp_path):
     """Negative control: the EXPRESS rules really run (USERDEFINED type without ElementType)."""
     _, path = _export(tmp_path, "IFC4")

@@ -19,9 +19,8 @@ from sbsc_core.bim.export import export_ifc
 from sbsc_core.cli import main
 from sbsc_core.errors import InputError
 from sbsc_core.io.crs import CRS, e57_crs, las_crs, parse_crs, scan_crs
-from tests.test_bim_fixtures import detections_document
+from tests.bim_fixtures import UTM, _turned, detections_document, map_conversion, world_positions
 
-UTM = np.array([412359.27, 5612351.81, 78.4])
 WKT_25832 = ('PROJCS["ETRS89 / UTM zone 32N",GEOGCS["ETRS89",DATUM["European_Terrestrial_Reference_System_1989",'
              'SPHEROID["GRS 1980",6378137,298.257222101,AUTHORITY["EPSG","7019"]],AUTHORITY["EPSG","6258"]],'
              'PRIMEM["Greenwich",0],UNIT["degree",0.0174532925199433],AUTHORITY["EPSG","4258"]],'
@@ -31,51 +30,10 @@ WKT_25832 = ('PROJCS["ETRS89 / UTM zone 32N",GEOGCS["ETRS89",DATUM["European_Ter
              'AXIS["Northing",NORTH],AUTHORITY["EPSG","25832"]]')
 
 
-def _turned(doc: dict, deg: float, shift: np.ndarray) -> dict:
-    """The document turned by ``deg`` in plan and moved by ``shift`` (a survey's coordinates)."""
-    a = math.radians(deg)
-    r = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
-    doc = json.loads(json.dumps(doc))
-    for w in doc["walls"]:
-        w["origin"] = list(r @ np.asarray(w["origin"]) + shift)
-        for k in ("axis_u", "axis_v", "normal"):
-            w[k] = list(r @ np.asarray(w[k]))
-    for d in doc["detections"]:
-        d["position"] = list(r @ np.asarray(d["position"]) + shift)
-    return doc
 
 
-def map_conversion(model: ifcopenshell.file) -> tuple[str, np.ndarray, float, float]:
-    """(CRS name, [E, N, H], XAxisAbscissa, XAxisOrdinate) as written (IFC4 entities or IFC2X3 psets)."""
-    if model.schema == "IFC2X3":
-        project = model.by_type("IfcProject")[0]
-        crs = ifcopenshell.util.element.get_pset(project, "ePSet_ProjectedCRS")
-        mc = ifcopenshell.util.element.get_pset(project, "ePSet_MapConversion")
-        return crs["Name"], np.array([mc["Eastings"], mc["Northings"], mc["OrthogonalHeight"]]), \
-            mc["XAxisAbscissa"], mc["XAxisOrdinate"]
-    mc = model.by_type("IfcMapConversion")[0]
-    assert mc.TargetCRS.is_a("IfcProjectedCRS") and mc.SourceCRS.is_a("IfcGeometricRepresentationContext")
-    assert (mc.Scale or 1.0) == 1.0
-    return mc.TargetCRS.Name, np.array([mc.Eastings, mc.Northings, mc.OrthogonalHeight]), \
-        mc.XAxisAbscissa, mc.XAxisOrdinate
 
 
-def world_positions(model: ifcopenshell.file) -> tuple[dict[str, np.ndarray], float]:
-    """Each tagged object's placement origin taken to map coordinates by the file's own map
-    conversion (formula of IfcMapConversion), and the largest local plan coordinate."""
-    _, enh, ab, ord_ = map_conversion(model)
-    scale = math.hypot(ab, ord_)
-    c, s = ab / scale, ord_ / scale
-    out, largest = {}, 0.0
-    for e in model.by_type("IfcProduct"):
-        if e.ObjectPlacement is None:
-            continue
-        p = ifcopenshell.util.placement.get_local_placement(e.ObjectPlacement)[:3, 3]
-        largest = max(largest, float(np.abs(p[:2]).max()))
-        tag = getattr(e, "Tag", None) if e.is_a("IfcElement") else None
-        if (tag or "").startswith("D"):
-            out[tag] = np.array([enh[0] + c * p[0] - s * p[1], enh[1] + s * p[0] + c * p[1], enh[2] + p[2]])
-    return out, largest
 
 
 @pytest.mark.parametrize("schema", ["IFC4", "IFC4X3", "IFC2X3"])
@@ -225,6 +183,7 @@ def test_e57_coordinate_metadata(tmp_path) -> None:
     assert e57_crs(tmp_path / "none.e57") is None and scan_crs([tmp_path / "none.e57"]) is None
 
 
+@pytest.mark.slow
 def test_detect_records_the_scan_crs_and_export_puts_every_object_back(tmp_path) -> None:
     """A simulated room turned in plan, at UTM coordinates, as LAS with a WKT: detect writes
     ``crs`` and ``origin``; the IFC's map conversion brings every object back within 1 mm."""

@@ -119,6 +119,7 @@ def test_surfaces_refused_with_the_entry_named():
         export_ifc(doc)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("schema", SCHEMAS)
 def test_export_ceiling_and_column_objects(tmp_path, schema):
     t = truth()
@@ -158,6 +159,7 @@ def test_export_ceiling_and_column_objects(tmp_path, schema):
     assert worst <= 0.001
 
 
+@pytest.mark.slow
 def test_export_storeys(tmp_path):
     """Two storeys: one IfcBuildingStorey each; walls, ceilings, columns and objects in their own."""
     one = detections_of(truth())
@@ -203,6 +205,7 @@ def _design(tmp_path: Path, schema: str = "IFC4", seed: int = 0) -> tuple[Path, 
     return path, res
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("schema", SCHEMAS)
 def test_as_designed_holds_ceilings_and_columns_with_their_objects(tmp_path, schema):
     from sbsc_core.bim.design import read_as_designed
@@ -237,8 +240,9 @@ def test_compare_finds_the_differences_per_kind_of_surface_and_bcf_validates(tmp
     from sbsc_core.bim.bcf import write_bcf
     from sbsc_core.bim.compare import compare
     from sbsc_core.bim.design import read_as_designed
-    from tests.test_bim_bcf import SCHEMAS as BCF_SCHEMAS
-    from tests.test_bim_bcf import bcf_errors, shared_data
+    from tests.bim_fixtures import SCHEMAS as BCF_SCHEMAS
+    from tests.bim_fixtures import bcf_errors
+    from tests.shared_data import shared_data
 
     t = truth()
     path, res = _design(tmp_path, seed=3)
@@ -291,6 +295,7 @@ def test_bcf_viewpoints_from_below_a_ceiling_and_beside_a_column(tmp_path):
     assert seen == {"wall", "ceiling", "column"}
 
 
+@pytest.mark.slow
 def test_commands_with_ceilings_and_columns(tmp_path, capsys):
     """``sbsc export-ifc`` counts ceilings and columns; ``sbsc compare`` writes the report and
     the BCF and gives the verdicts per kind of surface."""
@@ -321,7 +326,7 @@ def test_turned_survey_frame_puts_surface_objects_back(tmp_path):
     walls, and every object comes back within 1 mm through the map conversion."""
     import math
 
-    from tests.test_bim_georeference import UTM, _turned, world_positions
+    from tests.bim_fixtures import UTM, _turned, world_positions
 
     doc = detections_of(truth())
     turned = _turned(doc, 23.5, UTM)

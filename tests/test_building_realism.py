@@ -21,6 +21,8 @@ from sbsc_core.io.scans import read_scans
 from sbsc_core.simulate.building_scenario import build_storey, plan_building, simulate_building
 from sbsc_core.simulate.survey import UTM_LIKE_OFFSET
 
+pytestmark = pytest.mark.slow
+
 # sha256 over the station PLYs, ground_truth.json and expected.json of the plain 2-storey
 # one_room building at 2 degrees, seed 0, as written before the realism options existed
 # (main at d50b2bb). If you change the plain simulator on purpose, update it.
@@ -143,6 +145,7 @@ def test_build_storey_lays_out_distractors_per_storey() -> None:
     assert s2.mesh.vertices[:, 2].min() >= plans[1].floor_z - 1e-6
 
 
+@pytest.mark.slow
 def test_detect_and_evaluate_run_on_a_realistic_two_storey_building(tmp_path: Path) -> None:
     sim = _simulate(tmp_path / "sim", "--all-realism", step="0.4")
     out = tmp_path / "det"

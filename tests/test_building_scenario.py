@@ -16,6 +16,8 @@ from sbsc_core.io.scans import read_scans
 from sbsc_core.simulate.building_scenario import SLAB_M, build_storey, plan_building
 from sbsc_core.simulate.raycast import MeshRaycaster
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def two_storeys(tmp_path_factory) -> Path:

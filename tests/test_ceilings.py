@@ -214,6 +214,7 @@ def test_surfaces_are_searched_where_the_library_mounts_a_searched_class():
     assert not searched_surfaces(s, lib, ExpectedCounts({"smoke_detector": 1})).ceilings.enabled
 
 
+@pytest.mark.slow
 def test_detect_no_ceilings_leaves_the_ceiling_unsearched(tmp_path):
     from sbsc_core.cli import main
 

@@ -25,7 +25,7 @@ import pytest
 import sbsc_core
 from sbsc_core.cli import Commands, Console, build_parser, main
 from sbsc_core.paths import sample_projects_dir
-from tests.test_bim_fixtures import detections_document, truth_document
+from tests.bim_fixtures import detections_document, truth_document
 
 ROOT = Path(__file__).resolve().parent.parent
 COMMANDS = ("simulate", "detect", "evaluate", "export-ifc", "compare")
@@ -173,6 +173,7 @@ def test_verbose_adds_debug_messages_and_quiet_removes_info() -> None:
 # --------------------------------------------------------------------------- progress
 
 
+@pytest.mark.slow
 def test_detect_shows_progress_per_stage_and_wall_on_a_terminal(detected_on_tty) -> None:
     code, stdout, stderr, out = detected_on_tty
     assert code == 0, stderr
@@ -182,6 +183,7 @@ def test_detect_shows_progress_per_stage_and_wall_on_a_terminal(detected_on_tty)
     assert (out / "detections.json").is_file()
 
 
+@pytest.mark.slow
 def test_detect_json_summary_on_stdout(detected_on_tty) -> None:
     code, stdout, _, out = detected_on_tty
     summary = json.loads(stdout)  # stdout holds the JSON only
@@ -206,6 +208,7 @@ def test_progress_only_on_a_terminal_and_not_with_quiet(monkeypatch, tty, quiet,
     assert ("2/2 walls" in err.getvalue()) == shown, err.getvalue()
 
 
+@pytest.mark.slow
 def test_simulate_reports_each_station_and_quiet_silences_it(tmp_path) -> None:
     res = _run("simulate", "--scene", "one_room", "--out", str(tmp_path / "a"), "--step", "0.5")
     assert res.returncode == 0, res.stderr
@@ -232,6 +235,7 @@ def test_simulate_names_the_bundled_scenes_when_one_is_unknown(tmp_path, capsys)
 # --------------------------------------------------------------------------- --json, success lines
 
 
+@pytest.mark.slow
 def test_evaluate_json_dash_writes_stdout_not_a_file(small_room, detected_on_tty, tmp_path) -> None:
     out = detected_on_tty[3]
     res = _run("evaluate", "--detections", str(out / "detections.json"),
@@ -360,6 +364,7 @@ def test_bad_settings_file_is_one_line_error(tmp_path) -> None:
 # --------------------------------------------------------------------------- library vs web layer
 
 
+@pytest.mark.slow
 def test_the_library_never_imports_the_web_layer() -> None:
     offenders = [str(p.relative_to(ROOT)) for p in (ROOT / "sbsc_core").rglob("*.py")
                  if re.search(r"^\s*(import app\b|from app\b|from app\.)", p.read_text(), re.M)

@@ -106,7 +106,7 @@ def _group(pgid: int) -> list[int]:
 @pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc")
 def test_sigterm_stops_the_whole_detect(tmp_path):
-    from .test_app_support import simulate_one_room
+    from .app_support import simulate_one_room
 
     scan = simulate_one_room(tmp_path / "sim", step_deg=0.3) / "scan.ply"
     scratch = tmp_path / "scratch"

@@ -18,6 +18,8 @@ from sbsc_core.cli import main
 from sbsc_core.paths import sample_projects_dir
 from sbsc_core.simulate.scenarios import simulate_scene
 
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[1]
 DASK = Path(sys.executable).with_name("dask")
 

@@ -81,6 +81,7 @@ def test_standard_library_is_unchanged_by_the_builder_argument(tmp_path: Path) -
         assert match == names and not mismatch and not errors
 
 
+@pytest.mark.slow
 def test_cli_threads_the_design_sets(monkeypatch, tmp_path: Path) -> None:
     calls = []
     monkeypatch.setattr(scenarios, "simulate_scenario", lambda *a, **kw: calls.append((a, kw)))
@@ -114,6 +115,7 @@ def alt_room(tmp_path_factory) -> tuple[Path, Path]:
     return scan, out
 
 
+@pytest.mark.slow
 def test_scene_library_is_rendered_with_the_scene_designs(alt_room) -> None:
     scan, _ = alt_room
     for cls in ("radiator", "exit_light"):
@@ -122,6 +124,7 @@ def test_scene_library_is_rendered_with_the_scene_designs(alt_room) -> None:
         assert not np.array_equal(lib, render_model(cls, seed=1).depth)
 
 
+@pytest.mark.slow
 def test_detect_on_alt_designs(alt_room) -> None:
     """Every object of one_room in the alternative designs is found and placed.
 

@@ -98,6 +98,7 @@ def test_reliefs_and_look_alikes_arise_across_families():
     assert np.any((np.abs(n[:, 2]) > 0.9) & (np.abs(n[:, 2]) < 0.9999))
 
 
+@pytest.mark.slow
 def test_bundled_scenes_take_every_family():
     scenes = [load_scene(sample_projects_dir() / "one_room.yaml"),
               parse_scene(scenario_description("I"), "Scenario I")]

@@ -12,7 +12,7 @@ from sbsc_core.errors import InputError
 from sbsc_core.io.detections_model import parse_detections, validate_detections
 from sbsc_core.io.safe_json import loads_bounded
 
-from .test_bim_fixtures import detections_document
+from .bim_fixtures import detections_document
 
 
 def _full() -> dict:

@@ -12,7 +12,7 @@ import pytest
 
 from sbsc_core.io.schemas import json_schemas, schema_text
 
-from .test_app_support import ROOT, _fake_output, served_fake_sample
+from .app_support import ROOT, _fake_output, served_fake_sample
 
 
 def test_readme_is_short_and_refers_only_to_files_of_the_repository() -> None:
@@ -67,7 +67,7 @@ def test_sbsc_detect_output_follows_the_schema(tmp_path) -> None:
     """The real pipeline on the bundled one-room scene."""
     from sbsc_core.pipeline import detect_to_dir
 
-    from .test_app_support import simulate_one_room
+    from .app_support import simulate_one_room
 
     sim = simulate_one_room(tmp_path / "sim", step_deg=0.5)
     detect_to_dir([sim / "scan.ply"], sim / "models", expected=sim / "expected.json", out=tmp_path / "out")

@@ -17,7 +17,7 @@ from sbsc_core.cli import main
 from sbsc_core.paths import bundled_models_dir
 
 from . import hostile_corpus as hc
-from .test_bim_fixtures import truth_document
+from .bim_fixtures import truth_document
 
 # Scans whose points lie 1e30-1e38 m away: contract 1 says such stray points are ignored and
 # counted, which the segmentation does since sbsc_core.stray_points (the 'building' work);
@@ -69,9 +69,8 @@ def _check(case: hc.Case, root: Path, before: set[Path]) -> str | None:
 
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory) -> tuple[Path, list[hc.Case]]:
+    from sbsc_core.bim import bundled_typings
     from sbsc_core.bim.design import write_as_designed_ifc
-
-    from .test_bim_compare import bundled_typings
 
     root = tmp_path_factory.mktemp("hostile")
     models = str(bundled_models_dir())
@@ -151,6 +150,7 @@ def test_corpus_is_large_enough(corpus) -> None:
     assert len(files) >= 128 and len(cases) >= 128
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["detect", "evaluate", "export-ifc", "compare", "simulate"])
 def test_every_command_refuses_hostile_input_in_one_line(corpus, command, monkeypatch) -> None:
     root, cases = corpus

@@ -11,6 +11,7 @@ from sbsc_core.errors import InputError
 from sbsc_core.io.ply import write_ply
 from sbsc_core.io.scans import colours_16_to_8, read_scan, read_scans
 
+from .scan_files import _write_ply_struct
 from .shared_data import shared_data
 
 RNG = np.random.default_rng(7)
@@ -30,21 +31,6 @@ def _check(cloud, xyz: np.ndarray, rgb: np.ndarray, tol: float = 1e-5) -> None:
     np.testing.assert_array_equal(cloud.rgb, rgb)
 
 
-def _write_ply_struct(path: Path, rec: np.ndarray, fmt: str, extra_elements: str = "",
-                      tail: bytes = b"") -> None:
-    """Write any structured array as the vertex element of a PLY (ascii or binary)."""
-    names = {"f4": "float", "f8": "double", "u1": "uchar", "u2": "ushort", "i2": "short", "i4": "int", "u4": "uint"}
-    props = "".join(f"property {names[rec.dtype[n].str[1:]]} {n}\n" for n in rec.dtype.names)
-    header = f"ply\nformat {fmt} 1.0\ncomment test\nelement vertex {len(rec)}\n{props}{extra_elements}end_header\n"
-    with open(path, "wb") as fh:
-        fh.write(header.encode())
-        if fmt == "ascii":
-            for r in rec:
-                fh.write((" ".join(repr(float(v)) if isinstance(v, np.floating) else str(v) for v in r) + "\n").encode())
-        else:
-            endian = "<" if fmt == "binary_little_endian" else ">"
-            rec.astype(rec.dtype.newbyteorder(endian)).tofile(fh)
-        fh.write(tail)
 
 
 # --------------------------------------------------------------------------- real files

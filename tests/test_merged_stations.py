@@ -15,8 +15,8 @@ from sbsc_core.partition import part_chunks, plan_parts, sample_part, station_na
 from sbsc_core.registration import refine_registration
 from sbsc_core.settings import RegistrationSettings
 
-from .test_io_scans import _write_ply_struct
-from .test_registration import _disagreement_mm, _motion, _stations
+from .scan_files import _write_ply_struct
+from .stations import _disagreement_mm, _motion, _stations
 
 
 def _grey(n: int) -> np.ndarray:
@@ -166,6 +166,7 @@ def test_bad_merged_files_refused_with_one_line(tmp_path):
         write_ply(tmp_path / "w.ply", xyz, _grey(4_000), station=np.zeros(3, np.uint16))
 
 
+@pytest.mark.slow
 def test_detect_refines_the_stations_of_a_simulated_merged_scan(tmp_path):
     """The realistic simulator's merged ``scan.ply`` keeps each point's station; ``sbsc detect``
     refines them (records named ``scan.ply#k``) and takes most of the simulated error away."""

@@ -87,6 +87,7 @@ def test_a_points_nearest_plane_wins_over_a_brute_force_check(scene):
     np.testing.assert_array_equal(owner[pick], want)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("band_pixels", [1 << 19, 3000])
 def test_partition_orthoimage_equals_the_in_memory_one(scene, tmp_path, monkeypatch, band_pixels):
     monkeypatch.setattr(partition, "BAND_PIXELS", band_pixels)  # 3000: a few rows a band, many bands
@@ -134,6 +135,7 @@ def test_spilled_formats_are_decoded_once(scene, tmp_path):
     assert (tmp_path / f"spill-{parts[0].key}.xyz").stat().st_size == 20_000 * 12
 
 
+@pytest.mark.slow
 def test_pool_workers_start_with_the_worker_environment(monkeypatch):
     from sbsc_core import pipeline
 

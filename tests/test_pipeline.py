@@ -33,6 +33,7 @@ def detected(one_room: Path) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_detect_finds_the_objects_of_a_room(one_room: Path, detected: Path) -> None:
     doc = read_detections(detected / "detections.json")
     table = evaluate(doc, read_truth(one_room / "ground_truth.json"))
@@ -43,6 +44,7 @@ def test_detect_finds_the_objects_of_a_room(one_room: Path, detected: Path) -> N
     assert total.h_mean_mm <= 5.0 and total.v_mean_mm <= 5.0
 
 
+@pytest.mark.slow
 def test_detect_writes_walls_openings_and_images(one_room: Path, detected: Path) -> None:
     doc = json.loads((detected / "detections.json").read_text())
     # a scan without registration error is written without stations: one station, nothing refined
@@ -59,6 +61,7 @@ def test_detect_writes_walls_openings_and_images(one_room: Path, detected: Path)
     assert depth.dtype == np.float32 and np.isnan(depth).any() and np.isfinite(depth).mean() > 0.5
 
 
+@pytest.mark.slow
 def test_without_expected_every_class_is_searched(one_room: Path, tmp_path: Path) -> None:
     out = tmp_path / "all"
     assert main(["-q", "detect", str(one_room / "scan.ply"), "--models", str(one_room / "models"),
@@ -77,6 +80,7 @@ def _refused(capsys, args: list[str], out: Path, needle: str) -> None:
     assert not (out / "detections.json").exists()
 
 
+@pytest.mark.slow
 def test_bad_scans_are_refused_with_one_line(tmp_path: Path, capsys) -> None:
     models = str(bundled_models_dir())
     garbage = tmp_path / "garbage.ply"
@@ -94,6 +98,7 @@ def test_bad_scans_are_refused_with_one_line(tmp_path: Path, capsys) -> None:
     _refused(capsys, [str(tmp_path / "missing.ply"), "--models", models], tmp_path / "o5", "missing.ply")
 
 
+@pytest.mark.slow
 def test_scan_without_walls_is_refused(tmp_path: Path, capsys) -> None:
     rng = np.random.default_rng(0)
     xyz = np.column_stack([rng.uniform(0, 5, 50_000), rng.uniform(0, 5, 50_000), np.zeros(50_000)])
@@ -103,6 +108,7 @@ def test_scan_without_walls_is_refused(tmp_path: Path, capsys) -> None:
              tmp_path / "o", "wall")
 
 
+@pytest.mark.slow
 def test_empty_or_malformed_library_is_refused(one_room: Path, tmp_path: Path, capsys) -> None:
     scan = str(one_room / "scan.ply")
     (tmp_path / "empty_lib").mkdir()
@@ -119,6 +125,7 @@ def test_empty_or_malformed_library_is_refused(one_room: Path, tmp_path: Path, c
              tmp_path / "o3", "toaster")
 
 
+@pytest.mark.slow
 def test_compare_finds_every_deliberate_design_difference(one_room: Path, detected: Path) -> None:
     from sbsc_core.bim.compare import compare_to_dir
 

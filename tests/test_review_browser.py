@@ -18,12 +18,11 @@ import pytest
 from app.config import AppSettings
 from app.users import add_user
 
-from .test_app_browser import CHROMIUM_ARGS, chromium_path
-from .test_app_support import ServerProcess, auth, fake_control, wait_job, write_small_ply
+from .app_support import ServerProcess, auth, fake_control, wait_job, write_small_ply
+from .browser_support import GL, VIEW, login
 
-pytestmark = pytest.mark.browser
-VIEW = {"width": 1400, "height": 900}
-GL = ["--use-gl=swiftshader", "--enable-unsafe-swiftshader"]
+pytestmark = [pytest.mark.slow, pytest.mark.browser]
+BROWSER_ARGS = GL  # the 3D scene needs WebGL: software rendering
 WS_TRY = """([url, proto]) => new Promise(res => {
     const ws = new WebSocket(url, proto);
     ws.onopen = () => { ws.close(); res("open"); };
@@ -33,24 +32,12 @@ WS_TRY = """([url, proto]) => new Promise(res => {
 
 
 @pytest.fixture(scope="module")
-def browser():
-    exe = chromium_path()
-    if exe is None:
-        pytest.skip("Debian chromium is not installed and apt-get could not install it")
-    sync_api = pytest.importorskip("playwright.sync_api")
-    with sync_api.sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS + GL, headless=True)
-        yield b
-        b.close()
-
-
-@pytest.fixture(scope="module")
 def srv(tmp_path_factory):
     base = tmp_path_factory.mktemp("review_browser")
     data = base / "data"
     settings = AppSettings(data_dir=data)
     token = add_user(settings, "rita", "reviewer")
-    server = ServerProcess(data, {"SBSC_JOB_RUNNER": "tests.test_app_review_loop:fake_with_suggestions"}).start()
+    server = ServerProcess(data, {"SBSC_JOB_RUNNER": "tests.app_support:fake_with_suggestions"}).start()
     fake_control(data, delay_s=0.2, detections=8)
     server.token, server.base = token, base
     yield server
@@ -71,13 +58,6 @@ def new_project(srv, name: str) -> int:  # noqa: ANN001
 
 def detections(srv, pid: int) -> list[dict]:  # noqa: ANN001
     return httpx.get(f"{srv.url}/api/projects/{pid}/detections", headers=auth(srv.token)).json()["detections"]
-
-
-def login(page, srv) -> None:  # noqa: ANN001
-    page.goto(srv.url + "/")
-    page.fill("#token", srv.token)
-    page.click("#login-form button[type=submit]")
-    page.wait_for_selector("#new-name")
 
 
 def test_gallery_add_promote_and_bulk_accept(browser, srv):

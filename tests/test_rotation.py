@@ -59,6 +59,7 @@ def turned_room(tmp_path_factory) -> tuple[Path, Path]:
     return scan, out
 
 
+@pytest.mark.slow
 def test_turned_objects_are_found_with_their_turn(turned_room) -> None:
     scan, out = turned_room
     doc = read_detections(out / "detections.json")

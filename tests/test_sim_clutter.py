@@ -98,6 +98,7 @@ def test_furniture_layout_keeps_doors_and_stations_free() -> None:
         assert np.min(np.linalg.norm(b.stations[:, :2] - centre, axis=1)) > 0.5
 
 
+@pytest.mark.slow
 def test_survey_frame_moves_scan_and_truth_alike(tmp_path: Path) -> None:
     out = tmp_path / "sim"
     simulate_scene(ONE_ROOM, out, seed=2, angular_step_deg=0.8, design=False, survey_frame=True, clutter=True)

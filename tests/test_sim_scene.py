@@ -243,6 +243,7 @@ def test_shipped_file_is_what_the_generator_writes(name: str) -> None:
     assert text == scenarios.scenario_yaml(name)
 
 
+@pytest.mark.slow
 def test_scenarios_differ_only_in_paint() -> None:
     a = yaml.safe_load((sample_projects_dir() / "scenario_I.yaml").read_text())
     b = yaml.safe_load((sample_projects_dir() / "scenario_II.yaml").read_text())
@@ -253,6 +254,7 @@ def test_scenarios_differ_only_in_paint() -> None:
     assert [r["paint"] for r in ra] != [r["paint"] for r in rb]
 
 
+@pytest.mark.slow
 def test_scenario_ii_paints_are_close_to_object_colours() -> None:
     objects = pytest.importorskip("sbsc_core.simulate.objects")
     scene = load_scene(sample_projects_dir() / "scenario_II.yaml")

@@ -107,6 +107,7 @@ def test_description_keys_and_errors(tmp_path):
         parse_scene(_hall(columns="yes"), "hall.yaml")
 
 
+@pytest.mark.slow
 def test_simulate_scene_writes_the_surfaces(tmp_path):
     path = tmp_path / "hall.yaml"
     path.write_text(yaml.safe_dump(_hall(scanner={"angular_step_deg": 0.5})))
@@ -120,6 +121,7 @@ def test_simulate_scene_writes_the_surfaces(tmp_path):
     assert model["mount"] == ["wall", "ceiling"]
 
 
+@pytest.mark.slow
 def test_building_storeys_put_ceiling_objects_under_their_own_ceilings():
     from sbsc_core.simulate.building_scenario import build_storey, plan_building
 

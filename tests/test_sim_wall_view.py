@@ -73,6 +73,7 @@ def _blocked(building, wall_id, view, margin):
     return mask
 
 
+@pytest.mark.slow
 def test_every_object_shows_in_colour_or_depth_where_the_truth_says(room) -> None:
     building, views = room
     walls = sorted({o.wall for o in building.objects})
@@ -116,6 +117,7 @@ def test_every_object_shows_in_colour_or_depth_where_the_truth_says(room) -> Non
     assert checked == len(building.objects)
 
 
+@pytest.mark.slow
 def test_plain_wall_is_sampled_densely_enough_for_5mm_pixels(room) -> None:
     building, views = room
     fractions = []
@@ -141,6 +143,7 @@ def _fake_library(monkeypatch) -> None:
         monkeypatch.setitem(sys.modules, "sbsc_core.simulate.library", fake)
 
 
+@pytest.mark.slow
 def test_simulate_scene_writes_the_contracts_deterministically(tmp_path: Path, monkeypatch) -> None:
     _fake_library(monkeypatch)
     builder = _builder()

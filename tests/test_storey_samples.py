@@ -19,7 +19,7 @@ from sbsc_core.segmentation import (
 from sbsc_core.settings import SegmentationSettings
 from sbsc_core.storey_samples import storey_cloud, storey_part, storey_steps
 from sbsc_core.types import PointCloud
-from tests.test_storeys import _stack, _two_rooms
+from tests.synthetic_rooms import _stack, _two_rooms
 
 
 def _frames(seg, sid: str | None = None) -> list[tuple]:

@@ -10,22 +10,7 @@ from sbsc_core.segmentation import assign_points_to_walls, find_storeys, segment
 from sbsc_core.settings import SegmentationSettings
 from sbsc_core.stray_points import dense_box
 from sbsc_core.types import PointCloud
-from tests.synthetic_rooms import Block, Hole, Room, make_scene
-
-ORIGIN = (1000.0, -2000.0, 50.0)  # world = xyz + ORIGIN
-
-
-def _stack(*clouds: PointCloud) -> PointCloud:
-    assert all(np.array_equal(c.origin, clouds[0].origin) for c in clouds)
-    return PointCloud(np.concatenate([c.xyz for c in clouds]), np.concatenate([c.rgb for c in clouds]),
-                      clouds[0].origin)
-
-
-def _two_rooms(floor_z: float, heights: tuple[float, float], seed: int) -> list[PointCloud]:
-    a = Room([(0, 0), (4, 0), (4, 3.5), (0, 3.5)], {1: [Hole("door", 1.0, 1.9, 0, 2.1)]})
-    b = Room([(4.15, 0), (8, 0), (8, 3.5), (4.15, 3.5)], {3: [Hole("door", 1.6, 2.5, 0, 2.1)]})
-    return [make_scene([room], height=h, floor_z=floor_z, spacing=0.03, noise_m=0.002, see_through_m=0.0,
-                       origin=ORIGIN, seed=seed + i)[0] for i, (room, h) in enumerate(zip((a, b), heights, strict=True))]
+from tests.synthetic_rooms import ORIGIN, Block, Hole, Room, _stack, _two_rooms, make_scene
 
 
 @pytest.fixture(scope="module")
@@ -223,6 +208,7 @@ def small_scan(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_detections_with_01_percent_of_points_scattered_10_km_away_are_the_same(small_scan) -> None:
     from sbsc_core.io.models import load_model_library
     from sbsc_core.io.scans import read_scans
@@ -244,6 +230,7 @@ def test_detections_with_01_percent_of_points_scattered_10_km_away_are_the_same(
         np.testing.assert_allclose(a.position, b.position, atol=1e-4)
 
 
+@pytest.mark.slow
 def test_a_sparse_las_spanning_kilometres_is_refused_in_one_line(tmp_path, capsys) -> None:
     import laspy
 

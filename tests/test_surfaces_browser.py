@@ -17,11 +17,12 @@ from app.config import AppSettings
 from app.sample import ensure_sample_project
 from app.users import add_user
 
+from .app_support import ServerProcess, auth, join, write_small_ply
+from .browser_support import GL, VIEW, login
 from .surfaces_output import write_surfaces_output
-from .test_app_support import ServerProcess, auth, join, write_small_ply
-from .test_review_browser import VIEW, browser, login  # noqa: F401 - the browser fixture
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.slow, pytest.mark.browser]
+BROWSER_ARGS = GL  # the 3D scene needs WebGL: software rendering
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +53,7 @@ def detections(srv, pid: int) -> list[dict]:  # noqa: ANN001
     return httpx.get(f"{srv.url}/api/projects/{pid}/detections", headers=auth(srv.token)).json()["detections"]
 
 
-def test_ceiling_object_reviewed_and_added_in_the_gallery(browser, srv):  # noqa: F811
+def test_ceiling_object_reviewed_and_added_in_the_gallery(browser, srv):
     pid = srv.pids["gallery"]
     page = browser.new_page(viewport=VIEW)
     try:
@@ -100,7 +101,7 @@ def test_ceiling_object_reviewed_and_added_in_the_gallery(browser, srv):  # noqa
         page.close()
 
 
-def test_ceiling_object_reviewed_in_the_scene(browser, srv):  # noqa: F811
+def test_ceiling_object_reviewed_in_the_scene(browser, srv):
     pid = srv.pids["scene"]
     ctx = browser.new_context(viewport=VIEW)
     page = ctx.new_page()

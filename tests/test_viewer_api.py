@@ -57,6 +57,7 @@ def test_viewer_errors(client):
     assert manager.running() == []  # nothing started for an unknown project
 
 
+@pytest.mark.slow
 def test_viewer_router_with_manager_object(tmp_path):
     backend = InMemoryBackend()
     backend.add_project(ProjectData(pid=1, name="empty", detections={"schema": "sbsc.detections/1",

@@ -21,7 +21,9 @@ from app.viewer.manager import ViewerManager
 from app.viewer.scene import STATUS_RGB, SceneSettings
 from app.viewer.synthetic import write_synthetic_project
 
-from .test_viewer_scene import FakeTab, wait_for
+from .viewer_support import FakeTab, wait_for
+
+pytestmark = pytest.mark.slow
 
 
 @pytest.fixture()

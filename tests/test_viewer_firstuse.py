@@ -37,6 +37,7 @@ def test_spread_labels_stacks_close_labels_only() -> None:
             assert not near or abs(out[a][2] - out[b][2]) >= 0.34, (a, b)
 
 
+@pytest.mark.slow
 def test_scene_of_a_floor_stacks_wall_names_and_sizes_spots(tmp_path) -> None:
     sp = write_synthetic_project(tmp_path / "out", rooms=6, columns=3, walls_per_room=4, objects_per_wall=1,
                                  points=20_000, room_size=(7.6, 9.7), height_m=3.0)

@@ -54,6 +54,7 @@ def _ws(port: int, origin: str, cookie: str | None):
                    subprotocols=[f"viser-v{viser.__version__}"], open_timeout=10)
 
 
+@pytest.mark.slow
 def test_scene_refuses_without_login_or_from_a_foreign_origin(gated):
     manager, gate = gated
     url = manager.url_for(1)
@@ -124,6 +125,7 @@ def test_scene_refuses_without_login_or_from_a_foreign_origin(gated):
     assert manager.running() == []
 
 
+@pytest.mark.slow
 def test_ray_from_behind_a_wall_misses_it(gated):
     manager, _ = gated
     scene = manager.wait_ready(1, 30)

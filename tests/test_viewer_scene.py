@@ -6,18 +6,12 @@ scene-node click, GUI updates), so the scene's own callbacks run exactly as in a
 
 from __future__ import annotations
 
-import threading
 import time
 from pathlib import Path
 
-import msgspec
 import numpy as np
 import pytest
-import viser
 import viser.transforms as vtf
-import zstandard
-from viser import _messages as vm
-from websockets.sync.client import connect
 
 from app.viewer.backend import (
     Forbidden,
@@ -31,71 +25,12 @@ from app.viewer.scene import (
     COLOUR_ROI_RGB,
     DEPTH_ROI_RGB,
     STATUS_RGB,
-    SceneSettings,
     rect_segments,
 )
 from app.viewer.synthetic import write_synthetic_project
 from sbsc_core.types import WallFrame
 
-FAST = SceneSettings(poll_s=0.05, fly_s=0.02, fly_steps=2, scan_delay_s=0.2, overview_points=3000)
-
-
-def wait_for(cond, timeout: float = 5.0, what: str = "condition"):
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout:
-        v = cond()
-        if v:
-            return v
-        time.sleep(0.01)
-    raise AssertionError(f"timed out waiting for {what}")
-
-
-class FakeTab:
-    """A browser tab as viser's server sees it: one websocket speaking viser's messages."""
-
-    def __init__(self, port: int) -> None:
-        self.ws = connect(f"ws://127.0.0.1:{port}", subprotocols=[f"viser-v{viser.__version__}"],
-                          max_size=None)
-        self.received: list[tuple[float, dict]] = []
-        self._dctx = zstandard.ZstdDecompressor()
-        self._stop = False
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-        self.send(vm.ViewerCameraMessage(
-            wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, -10.0, 10.0), fov=1.0, near=0.01,
-            far=1000.0, image_height=600, image_width=800, look_at=(0.0, 0.0, 0.0),
-            up_direction=(0.0, 0.0, 1.0)))
-
-    def _read(self) -> None:
-        while not self._stop:
-            try:
-                raw = self.ws.recv(timeout=0.2)
-            except TimeoutError:
-                continue
-            except Exception:
-                return
-            n = int.from_bytes(raw[8:16], "little")
-            inner = msgspec.msgpack.decode(self._dctx.decompress(raw[16:16 + n]))
-            for m in inner["messages"]:
-                self.received.append((time.monotonic(), m))
-
-    def send(self, message: vm.Message) -> None:
-        self.ws.send(msgspec.msgpack.encode(message.as_serializable_dict()))
-
-    def click_node(self, name: str) -> None:
-        self.send(vm.SceneNodeClickMessage(name=name, instance_index=None, ray_origin=(0, 0, 0),
-                                           ray_direction=(0, 0, 1), screen_pos=(0.5, 0.5),
-                                           modifier=None))
-
-    def set_gui(self, handle, value) -> None:
-        self.send(vm.GuiUpdateMessage(uuid=handle._impl.uuid, updates={"value": value}))
-
-    def press(self, button) -> None:
-        self.set_gui(button, True)
-
-    def close(self) -> None:
-        self._stop = True
-        self.ws.close()
+from .viewer_support import FAST, FakeTab, wait_for
 
 
 @pytest.fixture(scope="module")
@@ -118,6 +53,7 @@ def setup(project):
     manager.stop_all()
 
 
+@pytest.mark.slow
 def test_scene_nodes_match_detections(setup):
     backend, manager, sp = setup
     scene = manager.wait_ready(1, 30)
@@ -178,6 +114,7 @@ def test_scene_nodes_match_detections(setup):
     assert "4 pending" in scene.status_text().replace("*", "")
 
 
+@pytest.mark.slow
 def test_click_accept_records_decision_and_syncs(setup):
     backend, manager, sp = setup
     scene = manager.wait_ready(1, 30)
@@ -234,6 +171,7 @@ def test_click_accept_records_decision_and_syncs(setup):
         tab.close()
 
 
+@pytest.mark.slow
 def test_scan_is_sent_per_tab_after_the_scene(setup):
     backend, manager, sp = setup
     scene = manager.wait_ready(1, 30)
@@ -258,6 +196,7 @@ def test_scan_is_sent_per_tab_after_the_scene(setup):
         tab.close()
 
 
+@pytest.mark.slow
 def test_backend_rules(setup):
     backend, _, sp = setup
     alice, guest = backend.resolve_token("tok-alice"), backend.resolve_token("tok-guest")
@@ -280,6 +219,7 @@ def test_backend_rules(setup):
         backend.decide(1, did, "rejected", None, 2, alice)
 
 
+@pytest.mark.slow
 def test_stale_decision_in_scene_refreshes(setup):
     backend, manager, sp = setup
     scene = manager.wait_ready(1, 30)
@@ -298,6 +238,7 @@ def test_stale_decision_in_scene_refreshes(setup):
         tab.close()
 
 
+@pytest.mark.slow
 def test_projects_are_separate(project, tmp_path):
     out, sp = project
     out2 = write_synthetic_project(tmp_path / "p2", rooms=1, walls_per_room=1, objects_per_wall=1,
@@ -326,6 +267,7 @@ def test_projects_are_separate(project, tmp_path):
     assert manager.running() == []
 
 
+@pytest.mark.slow
 def test_wildcard_host_uses_request_host(project):
     out, sp = project
     backend = InMemoryBackend()

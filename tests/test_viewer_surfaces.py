@@ -16,7 +16,7 @@ from app.viewer.scene import STATUS_RGB, column_meshes, surface_hit
 from sbsc_core.types import WallFrame
 
 from .surfaces_output import CEILING, ROOM_H, SURFACE_OBJECTS, surfaces, write_surfaces_output
-from .test_viewer_scene import FAST, FakeTab, wait_for
+from .viewer_support import FAST, FakeTab, wait_for
 
 
 @pytest.fixture(scope="module")
@@ -68,6 +68,7 @@ def test_column_meshes_and_hits() -> None:
     assert hit[0] == "COL1-S" and hit[1] == pytest.approx(0.2) and hit[2] == pytest.approx(1.0)
 
 
+@pytest.mark.slow
 def test_scene_draws_ceilings_and_columns(setup) -> None:
     backend, manager = setup
     scene = manager.wait_ready(1, 30)
@@ -91,6 +92,7 @@ def test_scene_draws_ceilings_and_columns(setup) -> None:
     assert lab[2] < ROOM_H - 0.05 and "ceiling tile" in scene.status_text() and "2 column(s)" in scene.status_text()
 
 
+@pytest.mark.slow
 def test_ceiling_seen_from_below_reviewed_in_the_scene(setup) -> None:
     backend, manager = setup
     scene = manager.wait_ready(1, 30)
@@ -139,6 +141,7 @@ def test_ceiling_seen_from_below_reviewed_in_the_scene(setup) -> None:
         tab.close()
 
 
+@pytest.mark.slow
 def test_shift_click_adds_on_a_ceiling_and_a_round_column(setup) -> None:
     backend, manager = setup
     scene = manager.wait_ready(1, 30)

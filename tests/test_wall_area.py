@@ -114,6 +114,7 @@ def test_closed_door_of_another_colour_and_a_wall_without_openings() -> None:
     assert area.openings == [] and not area.opening_mask.any()
 
 
+@pytest.mark.slow
 def test_one_room_simulated_scan() -> None:
     """The simulator's one-room scene scanned coarsely: 4 walls and the door and window.
 

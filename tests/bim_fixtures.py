@@ -9,8 +9,16 @@ room, ``axis_u`` to the right, ``normal`` into the room (u x v = normal).
 from __future__ import annotations
 
 import copy
+import json
+import math
+import zipfile
+from pathlib import Path
 
+import ifcopenshell
+import ifcopenshell.util.element
+import ifcopenshell.util.placement
 import numpy as np
+from lxml import etree
 
 from sbsc_core.types import WallFrame
 
@@ -84,3 +92,79 @@ def detections_document(objects=None, *, noise_m: float = 0.0, seed: int = 0,
         dets.append(det)
     return {"schema": "sbsc.detections/1", "walls": copy.deepcopy(WALLS),
             "openings": copy.deepcopy(OPENINGS), "detections": dets}
+
+
+UTM = np.array([412359.27, 5612351.81, 78.4])
+
+
+def _turned(doc: dict, deg: float, shift: np.ndarray) -> dict:
+    """The document turned by ``deg`` in plan and moved by ``shift`` (a survey's coordinates)."""
+    a = math.radians(deg)
+    r = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    doc = json.loads(json.dumps(doc))
+    for w in doc["walls"]:
+        w["origin"] = list(r @ np.asarray(w["origin"]) + shift)
+        for k in ("axis_u", "axis_v", "normal"):
+            w[k] = list(r @ np.asarray(w[k]))
+    for d in doc["detections"]:
+        d["position"] = list(r @ np.asarray(d["position"]) + shift)
+    return doc
+
+
+def map_conversion(model: ifcopenshell.file) -> tuple[str, np.ndarray, float, float]:
+    """(CRS name, [E, N, H], XAxisAbscissa, XAxisOrdinate) as written (IFC4 entities or IFC2X3 psets)."""
+    if model.schema == "IFC2X3":
+        project = model.by_type("IfcProject")[0]
+        crs = ifcopenshell.util.element.get_pset(project, "ePSet_ProjectedCRS")
+        mc = ifcopenshell.util.element.get_pset(project, "ePSet_MapConversion")
+        return crs["Name"], np.array([mc["Eastings"], mc["Northings"], mc["OrthogonalHeight"]]), \
+            mc["XAxisAbscissa"], mc["XAxisOrdinate"]
+    mc = model.by_type("IfcMapConversion")[0]
+    assert mc.TargetCRS.is_a("IfcProjectedCRS") and mc.SourceCRS.is_a("IfcGeometricRepresentationContext")
+    assert (mc.Scale or 1.0) == 1.0
+    return mc.TargetCRS.Name, np.array([mc.Eastings, mc.Northings, mc.OrthogonalHeight]), \
+        mc.XAxisAbscissa, mc.XAxisOrdinate
+
+
+def world_positions(model: ifcopenshell.file) -> tuple[dict[str, np.ndarray], float]:
+    """Each tagged object's placement origin taken to map coordinates by the file's own map
+    conversion (formula of IfcMapConversion), and the largest local plan coordinate."""
+    _, enh, ab, ord_ = map_conversion(model)
+    scale = math.hypot(ab, ord_)
+    c, s = ab / scale, ord_ / scale
+    out, largest = {}, 0.0
+    for e in model.by_type("IfcProduct"):
+        if e.ObjectPlacement is None:
+            continue
+        p = ifcopenshell.util.placement.get_local_placement(e.ObjectPlacement)[:3, 3]
+        largest = max(largest, float(np.abs(p[:2]).max()))
+        tag = getattr(e, "Tag", None) if e.is_a("IfcElement") else None
+        if (tag or "").startswith("D"):
+            out[tag] = np.array([enh[0] + c * p[0] - s * p[1], enh[1] + s * p[0] + c * p[1], enh[2] + p[2]])
+    return out, largest
+
+
+SCHEMAS = {"markup.bcf": "markup.xsd", ".bcfv": "visinfo.xsd", "project.bcfp": "project.xsd",
+           "bcf.version": "version.xsd"}
+
+
+def _schema_for(name: str) -> str | None:
+    for key, schema in SCHEMAS.items():
+        if name.endswith(key):
+            return schema
+    return None
+
+
+def bcf_errors(path: Path, xsd: dict[str, etree.XMLSchema]) -> tuple[list[str], dict[str, int]]:
+    """XSD errors of every XML file of a BCF zip, and how many files of each schema were checked."""
+    errors, checked = [], {}
+    with zipfile.ZipFile(path) as z:
+        for name in z.namelist():
+            schema = _schema_for(name)
+            if schema is None:
+                continue
+            checked[schema] = checked.get(schema, 0) + 1
+            doc = etree.fromstring(z.read(name))
+            if not xsd[schema].validate(doc):
+                errors += [f"{name}:{e.line}: {e.message}" for e in xsd[schema].error_log]
+    return errors, checked

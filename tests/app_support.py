@@ -3,7 +3,7 @@
 The fake runners have the signature of ``sbsc_core.pipeline.detect_to_dir`` and write a
 complete, valid output directory (contract 4 document, orthoimages), so the app can be
 tested without depending on recognition quality; the end-to-end test uses the real one.
-They are selected with ``SBSC_JOB_RUNNER=tests.test_app_support:NAME``.
+They are selected with ``SBSC_JOB_RUNNER=tests.app_support:NAME``.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import re
 import shutil
 import signal
 import socket
+import sqlite3
 import subprocess
 import sys
 import time
@@ -337,3 +338,31 @@ def pid_alive(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
     except (FileNotFoundError, ProcessLookupError):  # gone while /proc was read (ESRCH)
         return False
+
+
+def worker_pid(data: Path, jid: int) -> int | None:
+    """The process id of a job's worker, from the database (the API does not show it)."""
+    return db_rows_at(data, f"SELECT worker_pid FROM jobs WHERE id = {int(jid)}")[0][0]
+
+
+def db_rows_at(data: Path, sql: str) -> list:
+    with sqlite3.connect(data / "sbsc.db") as con:
+        return con.execute(sql).fetchall()
+
+
+def fake_with_suggestions(scans: Sequence[Path], models: Path, *, expected=None, out: Path,  # noqa: ANN001
+                          settings_file=None, log=None, progress=None) -> dict:  # noqa: ANN001
+    """The fake runner of ``app_support`` plus a ``suggestions.json`` of two possible misses."""
+    control = {"delay_s": 0.2, "detections": 6}
+    path = Path(os.environ.get("SBSC_DATA_DIR", ".")) / "fake_control.json"
+    if path.is_file():
+        control.update(json.loads(path.read_text()))
+    summary = _fake_output(Path(out), int(control["detections"]), progress or (lambda s, f: None),
+                           float(control["delay_s"]))
+    sugg = [{"class": "switch", "wall": "W01", "u": 3.5, "v": 1.1, "width_m": 0.08, "height_m": 0.08,
+             "source": "depth", "score": 0.81, "reason": "not_kept_by_consensus"},
+            {"class": "socket_x1", "wall": "W02", "u": 2.5, "v": 0.4, "width_m": 0.08, "height_m": 0.08,
+             "source": "colour", "score": 0.2, "reason": "not_kept_by_consensus"}]
+    (Path(out) / "suggestions.json").write_text(json.dumps({"schema": "sbsc.suggestions/1",
+                                                            "suggestions": sugg}))
+    return summary
