@@ -23,23 +23,14 @@ from sqlalchemy.orm import Session
 
 from .auth import Principal
 from .db import Database
-from .errors import Conflict, Invalid, Locked, NotFound
+from .errors import Conflict, Invalid
 from .models import REVIEW_STATUSES, DetectionRow, Project, ReviewDecision, utcnow
-from .review_service import ACTIONS, BULK_MAX, RELABELLED, Filter, select_detections
+from .review_service import ACTIONS, BULK_MAX, RELABELLED, Filter, open_project, select_detections
 
 BATCH = 100  # detections per write transaction (~5-15 ms on SQLite; 250 gave a longer tail)
 YIELD_S = 0.002  # between batches at least: other writers waiting on the lock get it first
 PACE = 0.5  # and this times the batch's own time: the other requests keep most of the CPU
 _IN = 500  # ids per IN (...) of a read
-
-
-def _project(s: Session, pid: int) -> Project:
-    p = s.get(Project, pid)
-    if p is None:
-        raise NotFound(f"project {pid} not found")
-    if p.status != "open":
-        raise Locked(f"project {pid} is signed off; it can no longer be changed")
-    return p
 
 
 def _select_ids(s: Session, p: Project, ids: Sequence[int | str], status: str) -> tuple[list[int], list[dict]]:
@@ -138,7 +129,7 @@ def bulk_decide(db: Database, pid: int, status: str, user: Principal, *,
     if (ids is None) == (flt is None):
         raise Invalid("give either ids or filter")
     with db.read() as s:
-        p = _project(s, pid)
+        p = open_project(s, pid, lock=False)
         if ids is not None:
             rows, skipped = _select_ids(s, p, ids, status)
         else:
@@ -164,7 +155,7 @@ def bulk_decide(db: Database, pid: int, status: str, user: Principal, *,
         t0 = time.monotonic()
         with db.write() as s:
             if i == 0:  # as one request: a project locked before anything changed is a 423
-                _project(s, pid)
+                open_project(s, pid, lock=False)
             done, late = _write_batch(s, pid, rows[i:i + batch_size], status, user, batch=batch, now=now,
                                       comment=comment)
         changed += done

@@ -40,6 +40,8 @@ from typing import Any
 from sqlalchemy import select, update
 
 from sbsc_core.errors import InputError, SbscError
+from sbsc_core.io.documents import CountLimits, parse_expected_field
+from sbsc_core.stages import Stage, stage_spans
 
 from .config import AppSettings
 from .db import Database
@@ -49,11 +51,10 @@ from .results import import_results
 
 log = logging.getLogger("sbsc.jobs")
 
-# Overall progress: the span of 0..1 each stage of the pipeline covers.
+# Overall progress: the span of 0..1 each stage covers: the worker's start, the pipeline's stages
+# (sbsc_core.stages, every one of them), then importing the results.
 STAGE_SPANS: dict[str, tuple[float, float]] = {
-    "starting": (0.0, 0.02), "reading": (0.02, 0.15), "segmentation": (0.15, 0.22),
-    "partition": (0.22, 0.3), "walls": (0.3, 0.85), "consensus": (0.85, 0.92), "writing": (0.92, 0.96),
-    "done": (0.96, 0.96), "importing": (0.96, 1.0),
+    "starting": (0.0, 0.02), **stage_spans(0.02, 0.96), "importing": (0.96, 1.0),
 }
 TERMINAL = ("succeeded", "failed", "cancelled")
 MAX_EXPECTED_CLASSES = 200  # keys of a job's ``expected`` counts
@@ -360,7 +361,7 @@ def _finish_succeeded(db: Database, settings: AppSettings, job_id: int, owner: s
             job.finished_at = job.updated_at = utcnow()
             return
         import_results(s, job, out, settings.data_dir)
-        job.status, job.stage, job.progress = "succeeded", "done", 1.0
+        job.status, job.stage, job.progress = "succeeded", Stage.DONE.value, 1.0
         job.finished_at = job.updated_at = utcnow()
         s.flush()
         from .review_service import carry_over
@@ -536,55 +537,23 @@ class JobManager:
         return [jid for jid, p in self.procs.items() if p.is_alive()]
 
 
+EXPECTED_LIMITS = CountLimits(classes=MAX_EXPECTED_CLASSES, count=MAX_EXPECTED_COUNT, storeys=MAX_EXPECTED_STOREYS)
+
+
 def parse_expected(value: object) -> dict[str, int] | None:
     """``{"socket_x1": 20}`` or a whole contract-3 document ``{"schema", "counts"}``."""
-    if value is None:
-        return None
-    if isinstance(value, dict) and "counts" in value:
-        value = value["counts"]
-    return _parse_counts(value, "expected")
-
-
-def _parse_counts(value: object, where: str) -> dict[str, int]:
-    if not isinstance(value, dict):
-        raise InputError(where, "must be an object of class id -> count")
-    if len(value) > MAX_EXPECTED_CLASSES:
-        raise InputError(where, f"{len(value):,} classes; at most {MAX_EXPECTED_CLASSES} allowed")
-    out: dict[str, int] = {}
-    for k, v in value.items():
-        if not isinstance(k, str) or not re.fullmatch(r"[a-z0-9_]+", k):
-            raise InputError(f"{where}.{k}", "class ids are lower case letters, digits and '_'")
-        if isinstance(v, bool) or not isinstance(v, int) or v < 0 or v > MAX_EXPECTED_COUNT:
-            raise InputError(f"{where}.{k}", f"count must be a whole number >= 0, not {v!r}")
-        out[k] = v
-    return out
+    parsed = parse_expected_field(value, "expected", limits=EXPECTED_LIMITS)
+    return None if parsed is None else parsed.counts
 
 
 def parse_expected_storeys(value: object) -> dict[str, dict[str, int]] | None:
     """The per-storey counts of a whole contract-3 document (``storeys``: ``{"S1": {...}, ...}``).
 
-    As ``sbsc detect --expected`` reads them: storey ids ``S1``, ``S2``, ... whose counts add
-    up to ``counts`` class by class. None when the document has no ``storeys``.
+    As ``sbsc detect --expected`` reads them (the same parser): storey ids ``S1``, ``S2``, ...
+    whose counts add up to ``counts`` class by class. None when the document has no ``storeys``.
     """
-    if not isinstance(value, dict) or "counts" not in value or value.get("storeys") is None:
-        return None
-    counts = parse_expected(value)
-    storeys = value["storeys"]
-    if not isinstance(storeys, dict):
-        raise InputError("expected.storeys", "must be an object of storey id -> counts")
-    if len(storeys) > MAX_EXPECTED_STOREYS:
-        raise InputError("expected.storeys", f"{len(storeys):,} storeys; at most {MAX_EXPECTED_STOREYS} allowed")
-    out: dict[str, dict[str, int]] = {}
-    for sid, st in storeys.items():
-        if not isinstance(sid, str) or not re.fullmatch(r"S[0-9]+", sid):
-            raise InputError(f"expected.storeys.{sid}", "storey ids are S1, S2, ... (bottom up, as in the detections)")
-        out[sid] = _parse_counts(st, f"expected.storeys.{sid}")
-    for cls in sorted(set(counts or {}) | {c for st in out.values() for c in st}):
-        total = sum(st.get(cls, 0) for st in out.values())
-        if total != (counts or {}).get(cls, 0):
-            raise InputError(f"expected.storeys.*.{cls}", f"the storeys hold {total} in all, counts.{cls} is "
-                                                          f"{(counts or {}).get(cls, 0)}")
-    return out or None
+    parsed = parse_expected_field(value, "expected", limits=EXPECTED_LIMITS)
+    return None if parsed is None else parsed.storeys
 
 
 def runner_expected(counts: dict | None, storeys: dict | None) -> object:

@@ -96,14 +96,24 @@ def models_dir(s: Session, models_id: int | None, data_dir: Path) -> Path:
     return data_dir / row.path if row is not None else bundled_models_dir()
 
 
+def review_score(confidence: float | None, alpha: float | None) -> float | None:
+    """How sure recognition is: the calibrated ``confidence`` when there is one, else ``alpha``
+    (None for an object a reviewer added). The gallery's order and filter, and the 3D scene's."""
+    return confidence if confidence is not None else alpha
+
+
 def score(d: DetectionRow) -> float | None:
-    """How sure recognition is: the calibrated ``confidence`` when there is one, else ``alpha``."""
-    return d.confidence if d.confidence is not None else d.alpha
+    """:func:`review_score` of a stored detection."""
+    return review_score(d.confidence, d.alpha)
 
 
-def open_project(s: Session, pid: int) -> Project:
-    """The project, locked for this transaction; 423 once it is signed off."""
-    p = s.get(Project, pid, with_for_update=True)
+def open_project(s: Session, pid: int, *, lock: bool = True) -> Project:
+    """The project, locked for this transaction (unless ``lock`` is false); 423 once it is signed off.
+
+    The one place of the rule "nothing changes after sign-off": every change of a project's
+    review, scans, models, design or jobs goes through here.
+    """
+    p = s.get(Project, pid, with_for_update=True if lock else None)
     if p is None:
         raise NotFound(f"project {pid} not found")
     if p.status != "open":

@@ -27,6 +27,7 @@ from .api.deps import TokenCache
 from .bounds import BoundsMiddleware
 from .config import AppSettings
 from .db import Database, upgrade
+from .errors import ReviewError
 from .failures import DISK_FULL, disk_full
 from .headers import SecurityHeadersMiddleware
 from .jobs import JobManager
@@ -111,6 +112,13 @@ def create_app(settings: AppSettings | None = None, *, start_jobs: bool = True) 
     @app.exception_handler(RequestValidationError)
     async def _on_validation(_: Request, exc: RequestValidationError) -> JSONResponse:
         return JSONResponse({"detail": _validation_detail(exc)}, status_code=422)
+
+    @app.exception_handler(ReviewError)
+    async def _on_review_error(_: Request, exc: ReviewError) -> JSONResponse:
+        # the one mapping of the review rules (app.errors: 403, 404, 409, 422, 423) to HTTP;
+        # a stale decision also shows the detection as it now stands
+        content = {"detail": str(exc)} if exc.current is None else {"detail": str(exc), "current": exc.current}
+        return JSONResponse(content, status_code=exc.status)
 
     @app.exception_handler(SbscError)
     async def _on_sbsc_error(_: Request, exc: SbscError) -> JSONResponse:

@@ -32,7 +32,6 @@ from sbsc_core.errors import InputError
 
 from .failures import DISK_FULL, disk_full
 
-SCAN_SUFFIXES = (".ply", ".e57", ".las", ".laz", ".pcd", ".xyz", ".pts", ".txt")
 ZIP_SUFFIXES = (".zip",)
 MULTIPART_OVERHEAD = 64 * 1024  # boundaries and part headers beyond the file's own bytes
 MAX_FIELD_BYTES = 64 * 1024  # a non-file form field

@@ -42,6 +42,7 @@ from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
 from .partition import ScanPart, append_records, folder_records
 from .partition import part_chunks as file_chunks
 from .settings import CeilingSettings, OrthoimageSettings
+from .stages import Stage
 from .types import Candidate, Orthoimage, PointCloud, Segmentation, WallFrame
 
 CEILING_SKIN_M = 0.01  # points this close to the ceiling plane are the ceiling's, even at a wall
@@ -359,14 +360,14 @@ def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg:
     classes = _search_classes(library, expected, kind="ceiling")
     if not tiles or not classes:
         return CeilingResults({}, {}, classes, [])
-    progress("ceilings", 0.0)
+    progress(Stage.CEILINGS, 0.0)
     walls = [w.frame for w in seg.walls]
     jobs = [(part, origin, tiles, walls, str(scratch), s.orthoimage, s.ceilings.wall_clear_m) for part in parts]
     kept, results, templates = surface_stage(
-        executor, stage="ceilings", part_fn=ceiling_part, part_jobs=jobs, job_fn=ceiling_tile_job, surfaces=tiles,
+        executor, stage=Stage.CEILINGS, part_fn=ceiling_part, part_jobs=jobs, job_fn=ceiling_tile_job, surfaces=tiles,
         library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress,
         part_executor=part_executor)
-    timings["ceilings"] = time.perf_counter() - t0
+    timings[Stage.CEILINGS] = time.perf_counter() - t0
     lower = [f"{lv.storey + ' ' if lv.storey else ''}{z:.2f} m" for lv in levels or [] for z in lv.z]
     log(f"{len(results)} ceiling tiles" + (f" (lower ceilings at {', '.join(lower)})" if lower else "")
         + f": {int(kept.sum()):,} points, searched for {', '.join(classes)} in {timings['ceilings']:.1f} s")

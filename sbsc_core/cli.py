@@ -39,6 +39,7 @@ from typing import Any
 
 from . import __version__
 from .errors import InputError, SbscError
+from .stages import Stage
 
 ENTRY_POINT_GROUP = "sbsc.commands"
 LOGGER = "sbsc"
@@ -199,9 +200,11 @@ def _add_simulate(cmds: Commands) -> None:
 
 
 def _add_detect(cmds: Commands) -> None:
+    from .io.scans import scan_extensions
+
     d = cmds.add("detect", func=_cmd_detect, help="recognize objects on the walls of a scan")
     d.add_argument("scans", nargs="+", metavar="SCAN",
-                   help="scan files of one building (.ply .e57 .las .laz .pcd .xyz .pts .txt), registered")
+                   help=f"scan files of one building ({' '.join(scan_extensions())}), registered")
     d.add_argument("--models", required=True, metavar="DIR", help="model library directory (contract 2)")
     d.add_argument("--expected", metavar="FILE", help="expected.json (contract 3); default: search every class")
     output_option(d, "dir")
@@ -342,10 +345,10 @@ class Console:
         if stage != self._stage:
             self.close()
             self._stage = stage
-            if stage == "done":
+            if stage == Stage.DONE:
                 return
             total, unit = 100, "%"
-            if stage == "walls" and fraction > 0:
+            if stage == Stage.WALLS and fraction > 0:
                 n = 1.0 / fraction
                 if abs(n - round(n)) < 1e-6:
                     total, unit = round(n), " walls"

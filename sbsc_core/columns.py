@@ -40,6 +40,7 @@ from .ceilings import MemoryPart, part_chunks
 from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
 from .partition import ScanPart, append_records, folder_records
 from .settings import ColumnSettings, OrthoimageSettings
+from .stages import Stage
 from .types import CylinderFrame, Orthoimage, PointCloud, Segmentation, WallFrame
 
 _UP = np.array([0.0, 0.0, 1.0])
@@ -343,15 +344,15 @@ def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray, colum
     classes = _search_classes(library, expected, kind="column")
     if not faces or not classes:
         return ColumnResults({}, {}, classes, columns, [])
-    progress("columns", 0.0)
+    progress(Stage.COLUMNS, 0.0)
     by_id = {c.id: c for c in columns}
     reach = [max(by_id[f.column].size_m) / 2 * math.sqrt(2) + s.orthoimage.depth_range_m[1] + 0.05 for f in faces]
     jobs = [(part, origin, faces, reach, str(scratch), s.orthoimage) for part in parts]
     kept, results, templates = surface_stage(
-        executor, stage="columns", part_fn=column_part, part_jobs=jobs, job_fn=column_face_job, surfaces=faces,
+        executor, stage=Stage.COLUMNS, part_fn=column_part, part_jobs=jobs, job_fn=column_face_job, surfaces=faces,
         library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress,
         part_executor=part_executor)
-    timings["columns"] = time.perf_counter() - t0
+    timings[Stage.COLUMNS] = time.perf_counter() - t0
     log(f"{len(columns)} columns ({', '.join(c.shape for c in columns)}), {len(faces)} faces: "
         f"{int(kept.sum()):,} points, searched for {', '.join(classes)} in {timings['columns']:.1f} s")
     return ColumnResults(results, templates, classes, columns, [f for f in faces if f.id in results])

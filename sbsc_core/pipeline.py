@@ -89,6 +89,7 @@ from .segmentation import (
     segment_storeys,
 )
 from .settings import DetectionSettings, load_settings
+from .stages import Progress, Stage, no_progress
 from .storey_samples import storey_cloud, storey_part, storey_steps
 from .suggestions import suggestions_document
 from .templates import ModelTemplate, make_templates
@@ -106,7 +107,6 @@ from .types import (
 )
 from .wall_area import find_wall_area
 
-Progress = Callable[[str, float], None]
 _TALL_STOREY_M = 5.0  # a storey higher than this is named in a warning (several storeys taken as one?)
 
 
@@ -136,10 +136,6 @@ class DetectionResult:
     def openings(self):
         beyond = {sf["id"] for sf in self.surfaces}
         return [o for wid, w in self.walls.items() if wid not in beyond for o in w.area.openings]
-
-
-def _noop_progress(stage: str, fraction: float) -> None:
-    return None
 
 
 WALL_STAGES = ("orthoimage", "colour_prep", "wall_area", "depth", "colour")
@@ -352,7 +348,7 @@ def _collect_walls(results: Iterator[tuple[str, WallResult, dict[str, float]]], 
     walls: dict[str, WallResult] = {}
     stage_t = dict.fromkeys(WALL_STAGES, 0.0)
     for i, (wid, res, t_wall) in enumerate(results):
-        progress("walls", (i + 1) / max(1, n_walls))
+        progress(Stage.WALLS, (i + 1) / max(1, n_walls))
         walls[wid] = res
         for k, v in t_wall.items():
             stage_t[k] += v
@@ -402,7 +398,7 @@ def consensus_by_storey(depth: list[Candidate], colour: list[Candidate], wall_st
 def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[str, ModelTemplate],
                classes: list[str], expected: ExpectedCounts | None, s: DetectionSettings, progress: Progress,
                timings: dict[str, float], log: Callable[[str], None] | None = None) -> DetectionResult:
-    progress("consensus", 0.0)
+    progress(Stage.CONSENSUS, 0.0)
     t = time.perf_counter()
     orthos = {k: w.ortho for k, w in walls.items()}
     margin = s.consensus.mount_margin_m
@@ -422,8 +418,8 @@ def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[
     if s.confidence.enabled and s.confidence.report_unknown:  # regions like no class, for review
         chosen += unexplained_regions({k: w.depth_rois for k, w in walls.items()}, chosen, templates)
     detections = place_hits(chosen, orthos, templates)
-    timings["consensus"] = time.perf_counter() - t
-    progress("consensus", 1.0)
+    timings[Stage.CONSENSUS] = time.perf_counter() - t
+    progress(Stage.CONSENSUS, 1.0)
     return DetectionResult(seg, walls, detections, timings, classes)
 
 
@@ -447,16 +443,16 @@ def detect(
     :func:`detect_scans` does the same on scan files without holding the cloud.
     """
     s = settings or DetectionSettings()
-    progress = progress or _noop_progress
+    progress = progress or no_progress
     timings: dict[str, float] = {}
     expected = _as_expected(expected)
     s = searched_surfaces(s, library, expected)
     classes = _search_classes(library, None if expected is None else expected.counts)
 
     t0 = time.perf_counter()
-    progress("segmentation", 0.0)
+    progress(Stage.SEGMENTATION, 0.0)
     seg = segment_floor_ceiling_walls(cloud, s.segmentation)
-    timings["segmentation"] = time.perf_counter() - t0
+    timings[Stage.SEGMENTATION] = time.perf_counter() - t0
 
     t = time.perf_counter()
     templates = make_templates(library, s.orthoimage.pixel_m, classes)
@@ -726,7 +722,7 @@ def detect_scans(
     and the number of points read.
     """
     s = settings or DetectionSettings()
-    progress = progress or _noop_progress
+    progress = progress or no_progress
     log = log or (lambda msg: None)
     timings: dict[str, float] = {}
     expected = _as_expected(expected)
@@ -735,7 +731,7 @@ def detect_scans(
     workers = max(1, _worker_count(s))
     t0 = time.perf_counter()
 
-    progress("reading", 0.0)
+    progress(Stage.READING, 0.0)
     parts, estimate = plan_parts([Path(p) for p in scans])
     origin = scan_origin(scans[0]) if origin is None else np.asarray(origin, np.float64)
     step = sample_step(estimate, s)
@@ -753,7 +749,7 @@ def detect_scans(
         if stations is not None:
             stations.add(parts[k].station, smp.xyz)
         samples[k] = gathered.add(k, smp)
-        progress("reading", (i + 1) / len(parts))
+        progress(Stage.READING, (i + 1) / len(parts))
     points = sum(smp.points for smp in samples)
     sources = [str(p) for p in scans]
     records: list[dict] = []
@@ -775,12 +771,12 @@ def detect_scans(
     cloud = gathered.cloud(samples, origin, sources, 2 * s.segmentation.fit_max_points)
     sample_meta = [(smp.points, smp.spilled) for smp in samples]
     samples.clear()
-    timings["reading"] = time.perf_counter() - t0
+    timings[Stage.READING] = time.perf_counter() - t0
     log(f"read {points:,} points from {len(scans)} file(s) in {timings['reading']:.1f} s "
         f"(sample of {len(cloud):,} for segmentation)")
 
     t = time.perf_counter()
-    progress("segmentation", 0.0)
+    progress(Stage.SEGMENTATION, 0.0)
     # the workers are idle while segmentation runs here: they import the per-wall stages and
     # make the templates now
     warm = [executor.submit(_ready) for _ in range(workers)] if workers > 1 else []
@@ -814,22 +810,22 @@ def detect_scans(
         wall.point_index = np.zeros(0, np.int64)
     for f in warm:
         f.cancel()  # not started yet: not needed (a worker that imports it runs a wall task later)
-    timings["segmentation"] = time.perf_counter() - t
+    timings[Stage.SEGMENTATION] = time.perf_counter() - t
     if len(seg.storeys) > 1:  # named before the long stages start
         log(f"{len(seg.storeys)} storeys: " + ", ".join(
             f"{st.id} (z {st.floor_z:.2f} to {st.ceiling_z:.2f} m, {sum(w.storey == st.id for w in seg.walls)} walls)"
             for st in seg.storeys))
 
     t = time.perf_counter()
-    progress("partition", 0.0)
+    progress(Stage.PARTITION, 0.0)
     index = WallIndex.build(seg.walls, origin, s.segmentation)
     part_jobs = [(part, origin, index, str(scratch), n, spilled, s.orthoimage)
                  for part, (n, spilled) in zip(parts, sample_meta, strict=True)]
     kept = np.zeros(len(seg.walls), np.int64)
     for i, (_, written) in enumerate(_as_done(executor, part_jobs, partition_part, 2 * workers)):
         kept += np.asarray(written, np.int64)
-        progress("partition", (i + 1) / len(parts))
-    timings["partition"] = time.perf_counter() - t
+        progress(Stage.PARTITION, (i + 1) / len(parts))
+    timings[Stage.PARTITION] = time.perf_counter() - t
     log(f"{len(seg.walls)} walls: {int(kept.sum()):,} points binned into their partitions "
         f"in {timings['partition']:.1f} s")
 
@@ -886,9 +882,9 @@ def detect_to_dir(
     output's parent folder) holds the partitions while the command runs.
     """
     log = log or (lambda msg: None)
-    progress = progress or _noop_progress
+    progress = progress or no_progress
     s = settings or load_settings(settings_file)
-    progress("reading", 0.0)
+    progress(Stage.READING, 0.0)
     paths = [Path(p) for p in scans]
     if not paths:
         raise InputError("scans", "no scan files given")
@@ -923,10 +919,10 @@ def detect_to_dir(
                     "storeys, no slab between them was seen (check the scan)")
         log(f"{len(seg.walls)} walls, {len(result.openings)} openings, "
             f"{len(result.detections)} objects in {result.timings['total']:.1f} s")
-        progress("writing", 0.0)
+        progress(Stage.WRITING, 0.0)
         with atomic_output_dir(out) as tmp:
             write_outputs(result, tmp, s.orthoimage.pixel_m, extra=georef, parked=work / "images", executor=ex)
-    progress("done", 1.0)
+    progress(Stage.DONE, 1.0)
     return {
         "points": points,
         "walls": len(result.segmentation.walls),

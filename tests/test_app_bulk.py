@@ -12,11 +12,12 @@ from app import bulk
 from app.auth import Principal, create_user
 from app.config import AppSettings
 from app.db import Database, upgrade
+from app.errors import Locked
 from app.models import DetectionRow, Project, ReviewDecision
 from app.review_service import Change, Filter, decide
 from app.sample import ensure_sample_project
 
-from .test_app_support import _fake_output, write_small_ply
+from .app_support import _fake_output, write_small_ply
 
 
 @pytest.fixture()
@@ -86,5 +87,5 @@ def test_bulk_by_filter_dry_run_expect_and_lock(project):
     assert out["changed"] == 12 and len(out["ids"]) == 12
     with db.write() as s:
         s.get(Project, pid).status = "signed_off"
-    with pytest.raises(bulk.Locked):
+    with pytest.raises(Locked):
         bulk.bulk_decide(db, pid, "pending", user, ids=ids)

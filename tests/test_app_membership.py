@@ -22,7 +22,7 @@ from app.server import create_app
 from .app_support import _fake_output, write_small_ply
 
 # routes that need no project: checked on their own below
-OUTSIDE = {"/api/health", "/api/me", "/api/users", "/api/projects", "/api/session"}
+OUTSIDE = {"/api/health", "/api/me", "/api/users", "/api/projects", "/api/session", "/api/scan-formats"}
 ADMIN_ONLY = {"/api/admin/jobs/{jid}/log", "/api/projects/{pid}/reopen"}
 
 

@@ -21,7 +21,7 @@ from sqlalchemy import inspect, select
 from app.auth import authenticate, create_user, hash_token
 from app.config import AppSettings
 from app.db import Database, alembic_config, upgrade
-from app.jobs import JobManager, describe_exit, overall_progress, parse_expected
+from app.jobs import STAGE_SPANS, JobManager, describe_exit, overall_progress, parse_expected
 from app.membership import set_member
 from app.models import Base, DetectionRow, Job, Project, ReviewDecision
 from app.sample import ensure_sample_project, find_sample_project
@@ -30,8 +30,9 @@ from app.storage import UploadRefused, check_zip, safe_filename
 from app.thumbnails import ImageCache, thumbnail
 from app.users import add_user_cli
 from sbsc_core.errors import InputError
+from sbsc_core.stages import Stage
 
-from .test_app_support import _fake_output, write_small_ply
+from .app_support import _fake_output, write_small_ply
 
 
 @pytest.fixture()
@@ -136,10 +137,15 @@ def test_expected_counts_progress_and_exit_reasons():
     p = 0.0
     seen = []
     for stage, f in [("reading", 0), ("segmentation", 0), ("walls", 0.5), ("walls", 0.9),
-                     ("unknown", 0.1), ("consensus", 1), ("writing", 0), ("done", 1), ("importing", 0)]:
+                     ("unknown", 0.1), ("ceilings", 0.5), ("columns", 0.5), ("consensus", 1), ("writing", 0),
+                     ("done", 1), ("importing", 0)]:
         p = overall_progress(stage, f, p)
         seen.append(p)
     assert seen == sorted(seen) and 0 < seen[0] < seen[-1] < 1
+    assert seen[5] > seen[3] and seen[6] > seen[5]  # ceilings and columns move the bar on
+    # every stage the pipeline reports has its span, in running order
+    spans = [STAGE_SPANS[stage] for stage in Stage]
+    assert all(a[1] == pytest.approx(b[0]) for a, b in zip(spans, spans[1:], strict=False))
     assert "SIGKILL" in describe_exit(-9) and "code 3" in describe_exit(3)
 
 

@@ -17,7 +17,6 @@ from ..db import Database
 from ..jobs import JobManager
 from ..membership import allows, project_in_path
 from ..models import ROLES, Project
-from ..review_service import bundled_classes
 from ..sessions import COOKIE as SESSION_COOKIE
 from ..sessions import principal_of, same_origin
 from ..thumbnails import ImageCache
@@ -174,23 +173,3 @@ def get_project(session: Session, pid: int, *, for_update: bool = False) -> Proj
     return project
 
 
-def open_project(session: Session, pid: int) -> Project:
-    """The project, locked for this transaction; 423 once it is signed off."""
-    project = get_project(session, pid, for_update=True)
-    if project.status != "open":
-        raise HTTPException(423, f"project {pid} is signed off; it can no longer be changed")
-    return project
-
-
-def library_classes(request: Request, session: Session, models_id: int | None) -> dict:
-    """Class id -> model.json fields of an uploaded library, or of the bundled one."""
-    from ..models import ModelLibraryRow
-
-    if models_id is not None:
-        row = session.get(ModelLibraryRow, models_id)
-        if row is not None:
-            return dict(row.classes)
-    state = request.app.state
-    if getattr(state, "bundled_classes", None) is None:
-        state.bundled_classes = bundled_classes()
-    return state.bundled_classes

@@ -27,8 +27,9 @@ from ..config import AppSettings
 from ..db import Database
 from ..models import DesignRow, Job, Project
 from ..results import project_document
+from ..review_service import open_project
 from ..storage import ReceivedFile, UploadRefused, move_into_place, project_file, removed_on_failure
-from .deps import DB, ReadSession, Reviewer, Settings, get_project, open_project
+from .deps import DB, ReadSession, Reviewer, Settings, get_project
 from .export import _library
 from .uploads import MULTIPART_FILE, handle_upload
 

@@ -12,9 +12,8 @@ from sbsc_core.errors import SbscError
 
 from ..models import Job, ModelLibraryRow, Project
 from ..results import project_document
-from ..review_service import current_signoff
+from ..review_service import current_signoff, signoff_dict
 from .deps import ReadSession, Reviewer, Settings, get_project
-from .projects import signoff_dict
 
 router = APIRouter(prefix="/api", tags=["export"])
 

@@ -23,8 +23,8 @@ from ..auth import Principal
 from ..jobs import TERMINAL, parse_expected, parse_expected_storeys
 from ..models import Job, Project, ProjectEvent, Scan, utcnow
 from ..results import job_dict
-from ..review_service import is_reviewed
-from .deps import DB, Jobs, Manager, ReadSession, Reviewer, Settings, get_project, open_project
+from ..review_service import is_reviewed, open_project
+from .deps import DB, Jobs, Manager, ReadSession, Reviewer, Settings, get_project
 
 router = APIRouter(prefix="/api", tags=["jobs"])
 

@@ -13,10 +13,10 @@ from sbsc_core.io.detections_model import bad_text
 
 from ..auth import create_user
 from ..membership import add_creator, member_ids
-from ..models import DesignRow, Job, ModelLibraryRow, Project, Scan, SignOff, User, iso
+from ..models import DesignRow, Job, ModelLibraryRow, Project, Scan, User, iso
 from ..results import job_dict, review_counts
-from ..review_service import current_signoff
-from .deps import DB, Admin, ReadSession, Reviewer, Settings, get_project, library_classes
+from ..review_service import current_signoff, library_classes, signoff_dict
+from .deps import DB, Admin, ReadSession, Reviewer, Settings, get_project
 
 router = APIRouter(prefix="/api")
 
@@ -101,13 +101,6 @@ def create_project(body: NewProject, user: Reviewer, db: DB) -> dict:
         return project_summary(s, p)
 
 
-def signoff_dict(so: SignOff | None) -> dict | None:
-    if so is None:
-        return None
-    return {"by": so.user_name, "at": iso(so.at), "comment": so.comment, "counts": so.counts,
-            "job": so.job_id}
-
-
 @router.get("/projects/{pid}", tags=["projects"])
 def get_project_detail(pid: int, _: Reviewer, s: ReadSession) -> dict:
     """The project with its scans, model library, jobs, review counts, sign-off and design."""
@@ -143,7 +136,7 @@ def project_classes(pid: int, request: Request, _: Reviewer, s: ReadSession) -> 
     models_id = p.models_id
     if p.current_job_id is not None:
         models_id = s.get(Job, p.current_job_id).models_id
-    classes = library_classes(request, s, models_id)
+    classes = library_classes(s, models_id)
     created = project_classes(request.app.state.settings.data_dir, pid)
     return {**{cid: taught_class_fields(spec) for cid, spec in created.items() if cid not in classes}, **classes}
 

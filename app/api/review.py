@@ -100,15 +100,10 @@ ERRORS: dict[int | str, dict[str, Any]] = {
 
 
 def run(db: Any, op: Callable[[Any], Any]) -> Any:
-    """Run a service operation in one write transaction; its errors become JSON 4xx answers."""
-    try:
-        with db.write() as s:
-            return op(s)
-    except svc.ServiceError as exc:
-        content: dict[str, Any] = {"detail": str(exc)}
-        if exc.current is not None:
-            content["current"] = exc.current
-        return JSONResponse(status_code=exc.status, content=content)
+    """Run a service operation in one write transaction; its errors (:mod:`app.errors`) become
+    JSON 4xx answers in the app's one handler of them (``app.server``)."""
+    with db.write() as s:
+        return op(s)
 
 
 def _get_detection(s, did: int, *, for_update: bool = False) -> DetectionRow:  # noqa: ANN001
@@ -118,10 +113,8 @@ def _get_detection(s, did: int, *, for_update: bool = False) -> DetectionRow:  #
     return d
 
 
-def review_score(d: dict) -> float | None:
-    """Confidence when recognition gave one, else alpha (None for an added object)."""
-    c = d.get("confidence")
-    return c if c is not None else d.get("alpha")
+def _score(d: dict) -> float | None:
+    return svc.review_score(d.get("confidence"), d.get("alpha"))
 
 
 @router.get("/projects/{pid}/detections")
@@ -141,11 +134,10 @@ def list_detections(pid: int, _: Reviewer, s: ReadSession,
         doc["detections"] = [d for d in doc["detections"]
                              if (not status or d["review"]["status"] == status)
                              and (not class_ or d["class"] == class_)
-                             and (min_confidence is None or (review_score(d) or 0.0) >= min_confidence)]
+                             and (min_confidence is None or (_score(d) or 0.0) >= min_confidence)]
     if order != "id":
         sign = 1.0 if order == "uncertain" else -1.0
-        doc["detections"].sort(key=lambda d: sign * (review_score(d) if review_score(d) is not None
-                                                     else 2.0))
+        doc["detections"].sort(key=lambda d: sign * (_score(d) if _score(d) is not None else 2.0))
     return doc
 
 
@@ -187,14 +179,12 @@ def bulk_decisions(pid: int, body: BulkDecision, user: Reviewer, db: DB):
                          review=body.filter.review)
     if (body.ids is None) == (flt is None):
         raise HTTPException(422, "give either ids or filter")
-    try:  # in bounded batches, each its own short transaction (app.bulk)
-        out = bulk.bulk_decide(db, pid, body.status, user, ids=body.ids, flt=flt, dry_run=body.dry_run,
-                               expect=body.expect, comment=body.comment)
-        # rendered here, in the worker thread: FastAPI's encoder would spend ~0.4 s of the event
-        # loop on 100,000 ids, holding up every other request
-        return JSONResponse(out)
-    except svc.ServiceError as exc:
-        return JSONResponse(status_code=exc.status, content={"detail": str(exc)})
+    # in bounded batches, each its own short transaction (app.bulk)
+    out = bulk.bulk_decide(db, pid, body.status, user, ids=body.ids, flt=flt, dry_run=body.dry_run,
+                           expect=body.expect, comment=body.comment)
+    # rendered here, in the worker thread: FastAPI's encoder would spend ~0.4 s of the event
+    # loop on 100,000 ids, holding up every other request
+    return JSONResponse(out)
 
 
 @router.get("/projects/{pid}/suggestions")
@@ -212,10 +202,7 @@ def promote_suggestion(sid: int, user: Reviewer, db: DB, settings: Settings):
 @router.get("/projects/{pid}/summary")
 def review_summary(pid: int, _: Reviewer, s: ReadSession) -> dict:
     """Decisions per minute, how many in bulk, objects added: in all and per reviewer."""
-    try:
-        return svc.review_summary(s, pid)
-    except svc.ServiceError as exc:
-        raise HTTPException(exc.status, str(exc)) from None
+    return svc.review_summary(s, pid)
 
 
 @router.get("/projects/{pid}/events")
@@ -309,9 +296,7 @@ def learn_exemplars(pid: int, user: Manager, db: DB, settings: Settings) -> dict
     from ..storage import library_summary
 
     with db.write() as s:
-        p = get_project(s, pid, for_update=True)
-        if p.status != "open":
-            raise HTTPException(423, f"project {pid} is signed off; it can no longer be changed")
+        p = svc.open_project(s, pid)
         if p.current_job_id is None:
             raise HTTPException(409, f"project {pid} has no reviewed results yet")
         job = s.get(Job, p.current_job_id)

@@ -20,8 +20,8 @@ from sbsc_core.errors import InputError
 
 from ..models import Job, ModelLibraryRow
 from ..results import job_dict
-from ..review_service import models_dir
-from .deps import DB, Jobs, Reviewer, Settings, library_classes, open_project
+from ..review_service import library_classes, models_dir, open_project
+from .deps import DB, Jobs, Reviewer, Settings
 from .jobs import check_new_job
 
 router = APIRouter(prefix="/api", tags=["review"])
@@ -51,7 +51,7 @@ def create_class(pid: int, body: NewClass, request: Request, _: Reviewer, db: DB
         raise HTTPException(422, "mount: each kind of surface once")
     with db.write() as s:
         p = open_project(s, pid)
-        if body.id in library_classes(request, s, p.models_id):
+        if body.id in library_classes(s, p.models_id):
             raise HTTPException(409, f"class '{body.id}' is in the project's model library already")
         classes = project_classes(settings.data_dir, pid)
         if body.id in classes:

@@ -15,16 +15,18 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import anyio
-from fastapi import APIRouter, HTTPException, Request
+from fastapi import APIRouter, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
+
+from sbsc_core.io.scans import scan_extensions
 
 from ..auth import Principal
 from ..config import AppSettings
 from ..db import Database
-from ..models import ModelLibraryRow, Project, Scan
+from ..models import ModelLibraryRow, Scan
+from ..review_service import open_project
 from ..storage import (
-    SCAN_SUFFIXES,
     ZIP_SUFFIXES,
     ReceivedFile,
     UploadRefused,
@@ -36,9 +38,15 @@ from ..storage import (
     removed_on_failure,
     unpack_library,
 )
-from .deps import DB, Reviewer, Settings, open_project
+from .deps import DB, Reviewer, Settings
 
 router = APIRouter(prefix="/api", tags=["uploads"])
+
+
+@router.get("/scan-formats")
+def scan_formats(user: Reviewer) -> dict:
+    """The scan formats an upload may be (contract 1): the extensions of the library's readers."""
+    return {"extensions": list(scan_extensions())}
 
 
 def _refusal(exc: UploadRefused) -> JSONResponse:
@@ -47,11 +55,7 @@ def _refusal(exc: UploadRefused) -> JSONResponse:
 
 def _check_open(db: Database, pid: int) -> None:
     with db.read() as s:
-        p = s.get(Project, pid)
-        if p is None:
-            raise HTTPException(404, f"project {pid} not found")
-        if p.status != "open":
-            raise HTTPException(423, f"project {pid} is signed off; it can no longer be changed")
+        open_project(s, pid, lock=False)
 
 
 async def _receive(request: Request, settings: AppSettings, max_bytes: int,
@@ -133,7 +137,7 @@ async def upload_scan(pid: int, request: Request, user: Reviewer, settings: Sett
         points = check_scan(got.path, got.filename, settings.scan_check_timeout_s)
         return _store_scan(db, settings, pid, got, points, user)
 
-    return await handle_upload(request, settings, db, pid, settings.max_scan_bytes, SCAN_SUFFIXES, store,
+    return await handle_upload(request, settings, db, pid, settings.max_scan_bytes, scan_extensions(), store,
                                user)
 
 

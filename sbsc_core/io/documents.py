@@ -147,13 +147,34 @@ class ExpectedCounts:
     storeys: dict[str, dict[str, int]] | None = None
 
 
-def _counts(check: _Checker, value: Any, where: str) -> dict[str, int]:
+@dataclass(frozen=True)
+class CountLimits:
+    """Upper bounds on an expected-counts document from outside (the review app's jobs)."""
+
+    classes: int | None = None  # keys of ``counts`` (and of each storey's)
+    count: int | None = None  # instances of one class
+    storeys: int | None = None  # storeys of ``storeys``
+
+
+class _FieldChecker(_Checker):
+    """A checker of a document that is a field itself: errors read ``field.key: reason``."""
+
+    def fail(self, where: str, reason: str) -> InputError:
+        return InputError(f"{self.label}.{where}" if where else self.label, reason)
+
+
+def _counts(check: _Checker, value: Any, where: str, limits: CountLimits) -> dict[str, int]:
+    value = check.obj(value, where)
+    if limits.classes is not None and len(value) > limits.classes:
+        raise check.fail(where, f"{len(value):,} classes; at most {limits.classes} allowed")
     out: dict[str, int] = {}
-    for cls, n in check.obj(value, where).items():
-        at = f"{where}.{cls}"
+    for cls, n in value.items():
+        at = f"{where}.{cls}" if where else str(cls)
         check.string(cls, at, pattern=CLASS_ID_RE)
         if isinstance(n, bool) or not isinstance(n, int) or n < 0:
             raise check.fail(at, f"expected a non-negative integer, got {_show(n)}")
+        if limits.count is not None and n > limits.count:
+            raise check.fail(at, f"must be at most {limits.count:,}, got {_show(n)}")
         out[cls] = n
     return out
 
@@ -161,28 +182,68 @@ def _counts(check: _Checker, value: Any, where: str) -> dict[str, int]:
 STOREY_ID_RE = re.compile(r"^S[0-9]+$")
 
 
-def read_expected_counts(path: Path | str) -> ExpectedCounts:
-    """``expected.json`` (contract 3) with its optional per-storey counts.
+def parse_expected_counts(doc: Any, check: _Checker, *, limits: CountLimits = CountLimits(),
+                          schema: bool = True) -> ExpectedCounts:
+    """Contract 3's document ``{"schema", "counts", "storeys"?}`` checked field by field.
 
+    The one parser of expected counts (``sbsc detect --expected`` and the review app's jobs).
     ``storeys`` (an extension: ``{"S1": {"socket_x1": 20, ...}, "S2": {...}}``) must add up
     to ``counts`` class by class (a class missing from a storey counts 0 there).
+
+    Parameters
+    ----------
+    doc
+        The decoded JSON document.
+    check
+        Names the document in errors (a file, or a field of a request).
+    limits
+        Upper bounds on classes, counts and storeys.
+    schema
+        Whether ``schema`` must be present (a file must say it; a request's field need not).
+
+    Returns
+    -------
+    ExpectedCounts
+        ``counts`` and ``storeys`` (None without storeys).
     """
-    doc, check = _load_json(Path(path))
-    check.schema(doc, EXPECTED_SCHEMA)
-    counts = _counts(check, check.key(doc, "counts", ""), "counts")
+    doc = check.obj(doc, "")
+    if schema:
+        check.schema(doc, EXPECTED_SCHEMA)
+    counts = _counts(check, check.key(doc, "counts", ""), "counts", limits)
     if doc.get("storeys") is None:
         return ExpectedCounts(counts)
+    value = check.obj(doc["storeys"], "storeys")
+    if limits.storeys is not None and len(value) > limits.storeys:
+        raise check.fail("storeys", f"{len(value):,} storeys; at most {limits.storeys} allowed")
     storeys = {}
-    for sid, value in check.obj(doc["storeys"], "storeys").items():
+    for sid, st in value.items():
         if not STOREY_ID_RE.match(sid):
             raise check.fail(f"storeys.{sid}", "storey ids are S1, S2, ... (bottom up, as in the detections)")
-        storeys[sid] = _counts(check, value, f"storeys.{sid}")
+        storeys[sid] = _counts(check, st, f"storeys.{sid}", limits)
     for cls in sorted(set(counts) | {c for st in storeys.values() for c in st}):
         total = sum(st.get(cls, 0) for st in storeys.values())
         if total != counts.get(cls, 0):
             raise check.fail(f"storeys.*.{cls}", f"the storeys hold {total} in all, counts.{cls} is "
                                                  f"{counts.get(cls, 0)}")
     return ExpectedCounts(counts, storeys or None)
+
+
+def parse_expected_field(value: Any, field: str, *, limits: CountLimits = CountLimits()) -> ExpectedCounts | None:
+    """Expected counts given as a request's field: bare ``{"socket_x1": 20}`` or a whole
+    contract-3 document (its ``schema`` optional); None for None. Errors name ``field.key``."""
+    if value is None:
+        return None
+    check = _FieldChecker(field)
+    if isinstance(value, dict) and "counts" in value:
+        return parse_expected_counts(value, check, limits=limits, schema=False)
+    return ExpectedCounts(_counts(check, value, "", limits))
+
+
+def read_expected_counts(path: Path | str) -> ExpectedCounts:
+    """``expected.json`` (contract 3) with its optional per-storey counts
+    (:func:`parse_expected_counts`)."""
+    doc, check = _load_json(Path(path))
+    return parse_expected_counts(doc, check)
 
 
 def read_expected(path: Path | str) -> dict[str, int]:

@@ -32,7 +32,6 @@ import numpy as np
 from ..errors import InputError
 from ..types import PointCloud
 
-SCAN_EXTENSIONS: tuple[str, ...] = (".ply", ".e57", ".las", ".laz", ".pcd", ".xyz", ".pts", ".txt")
 CHUNK_POINTS = 1 << 21  # points per chunk handed to the caller
 BLOCK_POINTS = 1 << 16  # points a reader converts at once (bounds float64 / parsing temporaries)
 ORIGIN_SAMPLE = 100_000  # points of the first block whose median sets the origin
@@ -101,6 +100,15 @@ def scan_readers() -> dict[str, ScanReader]:
     return dict(_READERS)
 
 
+def scan_extensions() -> tuple[str, ...]:
+    """The scan formats of contract 1: every extension a reader is registered for (``".ply"``, ...).
+
+    The one list of them: the CLI's help, the review app's upload check and its upload page
+    take it from here.
+    """
+    return tuple(_READERS)
+
+
 # --------------------------------------------------------------------------- public API
 
 
@@ -128,7 +136,7 @@ def open_scan(path: Path | str) -> ScanSource:
     reader = _READERS.get(ext)
     if reader is None:
         raise InputError(path, f"unknown scan format '{ext or path.name}' "
-                               f"(expected one of {', '.join(SCAN_EXTENSIONS)})")
+                               f"(expected one of {', '.join(scan_extensions())})")
     if not path.exists():
         raise InputError(path, "no such file")
     if not path.is_file():
@@ -285,7 +293,7 @@ def read_scans(paths: Sequence[Path | str], origin: np.ndarray | None = None) ->
 
 def is_scan_file(path: str | os.PathLike[str]) -> bool:
     """True when the file's extension is one of the scan formats of contract 1."""
-    return Path(path).suffix.lower() in SCAN_EXTENSIONS
+    return Path(path).suffix.lower() in _READERS
 
 
 # --------------------------------------------------------------------------- conversions
@@ -954,5 +962,5 @@ def _pcd_open3d(path: Path, n: int) -> ScanSource:
 
 
 for _ext, _reader in ((".ply", _read_ply), (".e57", _read_e57), (".las", _read_las), (".laz", _read_las),
-                      (".pcd", _read_pcd), (".xyz", _read_xyz), (".txt", _read_xyz), (".pts", _read_pts)):
+                      (".pcd", _read_pcd), (".xyz", _read_xyz), (".pts", _read_pts), (".txt", _read_xyz)):
     register_reader(_ext, _reader)
