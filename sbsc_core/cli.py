@@ -576,7 +576,7 @@ def _cmd_export_ifc(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from .bim.compare import compare_to_dir
+    from .bim.compare_outputs import compare_to_dir
 
     con = console()
     out = output_parent(args.out)

@@ -13,7 +13,8 @@ import pytest
 from bcf.v2.bcfxml import BcfXml
 
 from sbsc_core.bim import bundled_typings
-from sbsc_core.bim.compare import compare, compare_to_dir
+from sbsc_core.bim.compare import compare
+from sbsc_core.bim.compare_outputs import compare_to_dir
 from sbsc_core.bim.design import read_as_designed, write_as_designed_ifc
 from tests.bim_fixtures import OBJECTS, detections_document, truth_document
 

@@ -127,7 +127,7 @@ def test_empty_or_malformed_library_is_refused(one_room: Path, tmp_path: Path, c
 
 @pytest.mark.slow
 def test_compare_finds_every_deliberate_design_difference(one_room: Path, detected: Path) -> None:
-    from sbsc_core.bim.compare import compare_to_dir
+    from sbsc_core.bim.compare_outputs import compare_to_dir
 
     out = one_room.parent / "compare"
     compare_to_dir(one_room / "as_designed.ifc", detected / "detections.json", out)

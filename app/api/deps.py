@@ -18,7 +18,7 @@ from ..jobs import JobManager
 from ..membership import allows, project_in_path
 from ..models import ROLES, Project
 from ..sessions import COOKIE as SESSION_COOKIE
-from ..sessions import principal_of, same_origin
+from ..sessions import SessionKeeper, principal_of, same_origin
 from ..thumbnails import ImageCache
 
 
@@ -109,8 +109,6 @@ async def current_user(request: Request, db: DB) -> Principal:
 
 async def _session_user(request: Request, db: Database) -> Principal:
     """The caller of a request that came with the session cookie alone (see app.sessions)."""
-    from .session import keeper
-
     ticket = keeper(request).check(request.cookies[SESSION_COOKIE])
     if ticket is None:
         raise _unauthorized("session expired or ended: log in again")
@@ -173,3 +171,9 @@ def get_project(session: Session, pid: int, *, for_update: bool = False) -> Proj
     return project
 
 
+def keeper(request: Request) -> SessionKeeper:
+    """The app's session keeper (made on first use, its key in the data dir)."""
+    state = request.app.state
+    if getattr(state, "sessions", None) is None:
+        state.sessions = SessionKeeper.for_data_dir(state.settings.data_dir)
+    return state.sessions

@@ -6,18 +6,12 @@ from fastapi import APIRouter, Request, Response
 from sqlalchemy import select
 
 from ..models import User
-from ..sessions import COOKIE, SessionKeeper
-from .deps import ReadSession, Reviewer, Settings
+from ..sessions import COOKIE
+from .deps import ReadSession, Reviewer, Settings, keeper
 
 router = APIRouter(prefix="/api", tags=["users"])
 
 
-def keeper(request: Request) -> SessionKeeper:
-    """The app's session keeper (made on first use, its key in the data dir)."""
-    state = request.app.state
-    if getattr(state, "sessions", None) is None:
-        state.sessions = SessionKeeper.for_data_dir(state.settings.data_dir)
-    return state.sessions
 
 
 @router.post("/session", summary="Start a browser session (sets the HttpOnly session cookie)")

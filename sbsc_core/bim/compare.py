@@ -22,23 +22,20 @@ and :meth:`Comparison.summary_by_surface` counts the verdicts per kind of surfac
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from ..errors import InputError
-from ..io.atomic import atomic_output_dir, write_json_atomic
-from ..types import ModelLibrary, Surface, WallFrame
+from ..types import Surface, WallFrame
 from .design import (
     SCAN_WALL_MARGIN_M,
     SCAN_WALL_PLANE_TOL_M,
     AsDesigned,
     DesignedObject,
     locate_on_walls,
-    read_as_designed,
 )
-from .export import load_json, parse_detections_document, selected_detections
+from .export import parse_detections_document, selected_detections
 from .surfaces import drawing_frame, surface_coords, surface_normal
 
 MAX_DISPLACEMENT_M = 1.0  # a designed object and a detection farther apart are two findings
@@ -263,28 +260,3 @@ def compare(design: AsDesigned, document: dict, tolerance_m: float = 0.10, *,
                       surfaces=surfaces)
 
 
-def compare_to_dir(as_designed: Path, detections: Path, out: Path, tolerance_m: float = 0.10,
-                   library: ModelLibrary | None = None) -> Comparison:
-    """``sbsc compare``: write ``comparison.json``, ``report.html``, ``findings.bcf`` and
-    ``expected.json`` (contract 3, from the design) into ``out``; nothing on error.
-
-    Orthoimages ``orthoimages/<wall>_colour.png`` beside the detections file are used for
-    the per-wall pictures when present.
-    """
-    from .bcf import write_bcf
-    from .report import write_report
-
-    as_designed, detections, out = Path(as_designed), Path(detections), Path(out)
-    if not tolerance_m > 0:
-        raise InputError("--tolerance", f"must be > 0, got {tolerance_m}")
-    raw = load_json(detections)
-    parse_detections_document(raw, str(detections))
-    design = read_as_designed(as_designed, library)
-    comparison = compare(design, raw, tolerance_m, detections_path=str(detections))
-    image_dir = detections.parent / "orthoimages"
-    with atomic_output_dir(out) as tmp:
-        write_json_atomic(tmp / "comparison.json", comparison.to_dict())
-        write_json_atomic(tmp / "expected.json", design.expected_document())
-        write_report(comparison, tmp / "report.html", image_dir=image_dir)
-        write_bcf(comparison, tmp / "findings.bcf", image_dir=image_dir)
-    return comparison

@@ -727,3 +727,39 @@ def _self_intersects(p: np.ndarray) -> bool:
                     and min(a0[1], a1[1]) <= max(b0[1], b1[1]) and min(b0[1], b1[1]) <= max(a0[1], a1[1])):
                 return True
     return False
+
+
+def axis_positions(a: float, b: float, spacing_m: float, clearance_m: float) -> list[float]:
+    """About (b - a) / spacing_m positions evenly over a..b, kept ``clearance_m`` from the ends."""
+    n = max(1, round((b - a) / spacing_m))
+    pos = a + (np.arange(n) + 0.5) * (b - a) / n
+    if b - a > 2 * clearance_m:
+        pos = np.clip(pos, a + clearance_m, b - clearance_m)
+    return [float(x) for x in pos]
+
+
+def merged_cells(room: RoomSpec) -> list[tuple[float, float, float, float]]:
+    """The room split into few rectangles: grid cells merged along x, then runs along y."""
+    cells = outline_cells(room.outline)
+    rows: dict[tuple[float, float], list[tuple[float, float]]] = {}
+    for x0, y0, x1, y1 in cells:
+        rows.setdefault((y0, y1), []).append((x0, x1))
+    strips = []
+    for (y0, y1), xs in rows.items():
+        xs.sort()
+        cur = list(xs[0])
+        for a, b in xs[1:]:
+            if abs(a - cur[1]) < 1e-9:
+                cur[1] = b
+            else:
+                strips.append((cur[0], y0, cur[1], y1))
+                cur = [a, b]
+        strips.append((cur[0], y0, cur[1], y1))
+    strips.sort(key=lambda s: (s[0], s[2], s[1]))
+    merged: list[list[float]] = []
+    for s in strips:
+        if merged and merged[-1][0] == s[0] and merged[-1][2] == s[2] and abs(merged[-1][3] - s[1]) < 1e-9:
+            merged[-1][3] = s[3]
+        else:
+            merged.append(list(s))
+    return [(m[0], m[1], m[2], m[3]) for m in merged]

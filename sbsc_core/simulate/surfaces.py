@@ -38,7 +38,14 @@ from ..types import Surface, WallFrame
 from . import mesh as M
 from .catalogue import ObjectSpec
 from .mesh import ColouredMesh
-from .scene import Layout, RoomSpec, SceneDescription, point_in_outline
+from .scene import (
+    Layout,
+    RoomSpec,
+    SceneDescription,
+    axis_positions,
+    merged_cells,
+    point_in_outline,
+)
 
 SMOKE_SPACING_M = 6.0  # about one ceiling smoke detector per this many metres each way
 CEILING_MARGIN_M = 0.6  # ceiling objects keep this far from the walls
@@ -154,8 +161,6 @@ def ceiling_frame(room: RoomSpec, height_m: float) -> WallFrame:
 
 def _plan_ceilings(scene: SceneDescription, layout: Layout, stations: np.ndarray, heights: dict[str, float],
                    plan: SurfacePlan) -> None:
-    from .building import _axis_positions, _merged_cells
-
     taken: list[tuple[str, np.ndarray, np.ndarray]] = []  # room, footprint corners lo, hi in plan
     for col in plan.columns:
         c, s = np.asarray(col.centre), np.asarray(col.size_m) / 2 + 0.3
@@ -165,9 +170,9 @@ def _plan_ceilings(scene: SceneDescription, layout: Layout, stations: np.ndarray
         frame = ceiling_frame(room, heights[room.id])
         frames[room.id] = frame
         plan.surfaces.append(Surface(f"{room.id}-C", "ceiling", frame, room=room.id))
-        for x0, y0, x1, y1 in _merged_cells(room):
-            for x in _axis_positions(x0, x1, SMOKE_SPACING_M, CEILING_MARGIN_M + 0.5):
-                for y in _axis_positions(y0, y1, SMOKE_SPACING_M, CEILING_MARGIN_M + 0.5):
+        for x0, y0, x1, y1 in merged_cells(room):
+            for x in axis_positions(x0, x1, SMOKE_SPACING_M, CEILING_MARGIN_M + 0.5):
+                for y in axis_positions(y0, y1, SMOKE_SPACING_M, CEILING_MARGIN_M + 0.5):
                     xy = _away_from_stations(np.array([x, y]), stations, room, (x0, y0, x1, y1), plan.columns)
                     if xy is not None:
                         _try_ceiling(plan, taken, room, frame, "smoke_detector", xy, 0.0, scene.specs)
@@ -243,11 +248,9 @@ def _try_ceiling(plan: SurfacePlan, taken: list, room: RoomSpec, frame: WallFram
 
 def _plan_columns(scene: SceneDescription, stations: np.ndarray, heights: dict[str, float],
                   plan: SurfacePlan) -> None:
-    from .building import _merged_cells
-
     k = 0
     for room in scene.rooms:
-        cells = [c for c in _merged_cells(room)
+        cells = [c for c in merged_cells(room)
                  if min(c[2] - c[0], c[3] - c[1]) >= COLUMN_ROOM_MIN_M]
         if not cells:
             continue
