@@ -236,7 +236,8 @@ def find_openings(ortho: Orthoimage, settings: WallAreaSettings | None = None, l
             nb = len(c0s[b:b + block])
             hyp = (np.tile(r0s, nb), np.repeat(c0s[b:b + block], len(r0s)),
                    np.tile(r1s, nb), np.repeat(c1s[b:b + block], len(r0s)))
-            cands += _score(*hyp, h, w, px, floor_px, ring, cs_v, cs_h, ii_open, ii_other, ii_protr, s)
+            cands += _score(*hyp, h=h, w=w, px=px, floor_px=floor_px, ring=ring, cs_v=cs_v, cs_h=cs_h,
+                            ii_open=ii_open, ii_other=ii_other, ii_protr=ii_protr, s=s)
     cands.sort(key=lambda c: (-c[0], -(c[4] - c[2]) * (c[5] - c[3])))
     openings: list[Opening] = []
     for _, kind, r0, c0, r1, c1 in cands:
@@ -256,7 +257,7 @@ def find_openings(ortho: Orthoimage, settings: WallAreaSettings | None = None, l
     return openings, out_mask
 
 
-def _score(r0: np.ndarray, c0: np.ndarray, r1: np.ndarray, c1: np.ndarray, h: int, w: int, px: float,
+def _score(r0: np.ndarray, c0: np.ndarray, r1: np.ndarray, c1: np.ndarray, *, h: int, w: int, px: float,
            floor_px: float, ring: int, cs_v: np.ndarray, cs_h: np.ndarray, ii_open: np.ndarray,
            ii_other: np.ndarray, ii_protr: np.ndarray, s: WallAreaSettings) -> list[tuple]:
     """Accepted hypotheses (score, kind, r0, c0, r1, c1) among rectangles given as arrays."""

@@ -111,7 +111,7 @@ def angular_grid(settings: ScannerSettings, azimuth_offset: float = 0.0,
     return az, el[el <= hi + 1e-12]
 
 
-def scan_mesh(mesh: ColouredMesh, stations: Sequence[Sequence[float]], settings: ScannerSettings,
+def scan_mesh(mesh: ColouredMesh, stations: Sequence[Sequence[float]], settings: ScannerSettings, *,
               seed: int = 0, keep_labels: bool = False, keep_station: bool = False,
               log: Callable[[str], None] | None = None,
               raycaster: MeshRaycaster | None = None, effects: ScanEffects | None = None) -> Scan:

@@ -55,7 +55,7 @@ REALISM_OPTIONS = ("realistic", "clutter", "furniture", "survey_frame")
 SURFACE_OPTIONS = ("ceiling_objects", "columns")  # objects beyond walls (surfaces.py)
 
 
-def simulate_scenario(scenario: str, out: Path, seed: int = 0, angular_step_deg: float | None = None,
+def simulate_scenario(scenario: str, out: Path, *, seed: int = 0, angular_step_deg: float | None = None,
                       log: Log | None = None, object_builder: ObjectBuilder | None = None,
                       library_builder: ObjectBuilder | None = None, **realism: bool) -> SimulationSummary:
     """Scan the shipped Scenario ``"I"`` or ``"II"`` into ``out`` (see :func:`simulate_scene`)."""
@@ -91,7 +91,7 @@ def apply_realism(scene: SceneDescription, realistic: bool = False, clutter: boo
     return scene
 
 
-def simulate_scene(description_path: Path, out: Path, seed: int = 0, angular_step_deg: float | None = None,
+def simulate_scene(description_path: Path, out: Path, *, seed: int = 0, angular_step_deg: float | None = None,
                    log: Log | None = None, object_builder: ObjectBuilder | None = None,
                    design: bool = True, library_builder: ObjectBuilder | None = None,
                    realistic: bool = False, clutter: bool = False, furniture: bool = False,
