@@ -46,7 +46,7 @@ class AppSettings(BaseSettings):
     max_models_zip_bytes: int = 256 * MiB
     max_design_bytes: int = 512 * MiB  # as-designed IFC files
     upload_drain_bytes: int = 32 * MiB  # a refused body is read and dropped up to this, then cut
-    scan_check_timeout_s: float = 600.0  # header + sample check of one scan (app.scan_check)
+    scan_check_timeout_s: float = 600.0  # header + sample check of one scan (sbsc_core.io.scan_check)
     uploads_per_user: int = 2  # uploads of one user in progress at once (more: 429)
     upload_check_workers: int = 2  # checks of uploaded files run at most this many at once
     max_json_body_bytes: int = 1 * MiB  # a JSON request body (uploads have their own caps)

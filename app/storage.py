@@ -4,7 +4,7 @@ An upload is parsed as it arrives (``python-multipart``'s streaming parser): the
 part goes in 64 KiB pieces straight into a ``.partial`` file under ``<data>/tmp`` while
 its size is counted and its SHA-256 computed, so memory stays flat whatever the size.
 A refused or broken upload leaves nothing behind. Scans are checked by reading them in a
-separate process from their header and a bounded sample (:mod:`app.scan_check`; memory
+separate process from their header and a bounded sample (:mod:`sbsc_core.io.scan_check`; memory
 and crashes of the readers stay out of the server), model
 libraries by :func:`sbsc_core.io.models.library_from_zip`.
 """
@@ -243,7 +243,7 @@ async def receive_file(request: Request, *, tmp_dir: Path, max_bytes: int, drain
 def _count_points(path: str, filename: str, conn) -> None:  # noqa: ANN001 - a Connection
     """Child process: check the scan's header and a sample, send ("ok", n) or ("error", reason)."""
     try:
-        from .scan_check import ScanRefused, count_points
+        from sbsc_core.io.scan_check import ScanRefused, count_points
 
         try:
             conn.send(("ok", count_points(Path(path))))
@@ -259,7 +259,7 @@ def _count_points(path: str, filename: str, conn) -> None:  # noqa: ANN001 - a C
 
 def check_scan(path: Path, filename: str, timeout_s: float) -> int:
     """Count the points of a scan from its header and check a sample of it
-    (:mod:`app.scan_check`) in a child process; raise UploadRefused(422).
+    (:mod:`sbsc_core.io.scan_check`) in a child process; raise UploadRefused(422).
 
     Memory stays bounded by the sample whatever the file's size; a reader that crashes or
     takes longer than ``timeout_s`` refuses the file too.

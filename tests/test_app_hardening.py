@@ -342,7 +342,7 @@ def test_concurrent_uploads_per_user_are_limited(live):
 def test_text_scan_lines_are_counted_in_blocks_like_line_by_line(tmp_path, monkeypatch):
     import random
 
-    from app import scan_check
+    from sbsc_core.io import scan_check
 
     monkeypatch.setattr(scan_check, "CHUNK", 7)  # many block boundaries
     monkeypatch.setattr(scan_check, "_sample_read", lambda *a: None)
@@ -354,4 +354,4 @@ def test_text_scan_lines_are_counted_in_blocks_like_line_by_line(tmp_path, monke
         p.write_bytes("".join(parts).encode())
         slow = scan_check._count_text_lines_slow(p)
         if slow:
-            assert scan_check._text(p) == slow, parts
+            assert scan_check.text_points(p) == slow, parts

@@ -87,12 +87,24 @@ class ScanChunk:
 
 
 ScanReader = Callable[[Path], ScanSource]
+PointCount = Callable[[Path], int]
+"""A format's upload check: the point count from the header, checked against the file's size
+(see :mod:`sbsc_core.io.scan_check`)."""
 _READERS: dict[str, ScanReader] = {}
+_COUNTS: dict[str, PointCount] = {}
 
 
-def register_reader(extension: str, reader: ScanReader) -> None:
-    """Make ``reader`` the reader of files ending in ``extension`` (e.g. ``".ply"``)."""
+def register_reader(extension: str, reader: ScanReader, *, count: PointCount | None = None) -> None:
+    """Make ``reader`` the reader of files ending in ``extension`` (e.g. ``".ply"``), and ``count``
+    its upload check (the review app refuses a format without one)."""
     _READERS[extension.lower()] = reader
+    if count is not None:
+        _COUNTS[extension.lower()] = count
+
+
+def point_count_check(extension: str) -> PointCount | None:
+    """The upload check registered for ``extension``, None when there is none."""
+    return _COUNTS.get(extension.lower())
 
 
 def scan_readers() -> dict[str, ScanReader]:
@@ -960,7 +972,3 @@ def _pcd_open3d(path: Path, n: int) -> ScanSource:
 
     return ScanSource(path, n, blocks, False)
 
-
-for _ext, _reader in ((".ply", _read_ply), (".e57", _read_e57), (".las", _read_las), (".laz", _read_las),
-                      (".pcd", _read_pcd), (".xyz", _read_xyz), (".pts", _read_pts), (".txt", _read_xyz)):
-    register_reader(_ext, _reader)

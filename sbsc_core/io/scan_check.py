@@ -20,7 +20,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from sbsc_core.errors import InputError
+from ..errors import InputError
 
 SAMPLE_POINTS = 20_000
 CHUNK = 1 << 20
@@ -32,10 +32,12 @@ class ScanRefused(Exception):
 
 
 def count_points(path: Path) -> int:
-    """The number of points of the scan at ``path`` from its header / lines; raise ScanRefused."""
+    """The number of points of the scan at ``path`` from its header / lines (the format's check
+    in the reader registry, :mod:`sbsc_core.io.formats`); raise ScanRefused."""
+    from .scans import point_count_check
+
     suffix = path.suffix.lower().split(".")[-1]
-    check = {"ply": _ply, "xyz": _text, "txt": _text, "pts": _pts, "las": _las, "laz": _las,
-             "pcd": _pcd, "e57": _e57}.get(suffix)
+    check = point_count_check(f".{suffix}")
     if check is None:
         raise ScanRefused(f"unsupported file type '.{suffix}'")
     if path.stat().st_size == 0:
@@ -51,7 +53,7 @@ def count_points(path: Path) -> int:
 
 def _sample_read(path: Path, suffix: str, data: bytes) -> None:
     """Read ``data`` (a small file of the same format) with the library's reader."""
-    from sbsc_core.io.scans import read_scan
+    from .scans import read_scan
 
     with tempfile.TemporaryDirectory(prefix="sbsc-sample-") as tmp:
         sample = Path(tmp) / f"sample{suffix}"
@@ -75,10 +77,10 @@ def _data_line(line: bytes) -> bool:
 # --------------------------------------------------------------------------- PLY
 
 
-def _ply(path: Path) -> int:
+def ply_points(path: Path) -> int:
     import numpy as np
 
-    from sbsc_core.io.scans import _parse_ply_header, _ply_columns
+    from .scans import _parse_ply_header, _ply_columns
 
     size = path.stat().st_size
     with open(path, "rb") as fh:
@@ -156,7 +158,7 @@ def _ply(path: Path) -> int:
 # --------------------------------------------------------------------------- text
 
 
-def _text(path: Path) -> int:
+def text_points(path: Path) -> int:
     """Data lines of an ``x y z r g b`` file, counted in 1 MiB blocks at C speed: newlines,
     minus empty lines and ``#`` comment lines (a line of blanks only counts as data here;
     the reader of a job skips it)."""
@@ -190,7 +192,7 @@ def _count_text_lines_slow(path: Path) -> int:  # the definition the fast count 
                    and not line.startswith(b"#"))
 
 
-def _pts(path: Path) -> int:
+def pts_points(path: Path) -> int:
     total, rows, announced, got = 0, [], None, 0
     with open(path, "rb") as fh:
         for line in _lines(fh):
@@ -222,7 +224,7 @@ def _pts(path: Path) -> int:
 # --------------------------------------------------------------------------- LAS / LAZ
 
 
-def _las(path: Path) -> int:
+def las_points(path: Path) -> int:
     import laspy
 
     size = path.stat().st_size
@@ -265,7 +267,7 @@ def _las(path: Path) -> int:
 _PCD_HEAD = re.compile(rb"^DATA[ \t]+(\S+)[ \t]*\r?\n", re.M)
 
 
-def _pcd(path: Path) -> int:
+def pcd_points(path: Path) -> int:
     size = path.stat().st_size
     with open(path, "rb") as fh:
         head = fh.read(1 << 16)
@@ -334,7 +336,7 @@ def _pcd(path: Path) -> int:
 # --------------------------------------------------------------------------- E57
 
 
-def _e57(path: Path) -> int:
+def e57_points(path: Path) -> int:
     try:
         import pye57
     except ImportError:
