@@ -184,7 +184,29 @@ def _assign(dist: np.ndarray, feasible: np.ndarray) -> list[tuple[int, int]]:
 def compare(design: AsDesigned, document: dict, tolerance_m: float = 0.10, *,
             max_displacement_m: float = MAX_DISPLACEMENT_M, accepted_only: bool = False,
             detections_path: str | None = None) -> Comparison:
-    """Compare the designed objects with the detections of a contract-4 document."""
+    """Compare the designed objects with the detections of a contract-4 document.
+
+    Parameters
+    ----------
+    design
+        The as-designed model's objects (:func:`~sbsc_core.bim.design.read_as_designed`).
+    document
+        A detections document (contract 4), as written by ``sbsc detect`` or the review app.
+    tolerance_m
+        A detection within this of a designed object of its class is the same object.
+    max_displacement_m
+        Beyond ``tolerance_m`` and within this, the object is displaced; beyond, missing and
+        unexpected.
+    accepted_only
+        Only the detections a reviewer accepted.
+    detections_path
+        Names the document in errors.
+
+    Returns
+    -------
+    Comparison
+        Every designed and detected object, matched, displaced, missing or unexpected.
+    """
     if not tolerance_m > 0:
         raise InputError("tolerance", f"must be > 0, got {tolerance_m}")
     max_displacement_m = max(max_displacement_m, tolerance_m)

@@ -745,6 +745,20 @@ def export_ifc(document: dict, *, library: ModelLibrary | None = None, schema: s
     ``crs`` (``"EPSG:NNNN"``, default: the document's ``crs``) is the scan's coordinate
     system; with it, or with coordinates beyond 1 km, the model is georeferenced (see
     :mod:`.georeference`): local coordinates near the origin and an IfcMapConversion.
+
+    Parameters
+    ----------
+    document
+        A detections document (contract 4), with ``review`` when it comes from the review app.
+    library
+        The model library whose ``model.json`` give each class its IFC class and type.
+    schema
+        ``IFC4`` (default), ``IFC4X3`` or ``IFC2X3``.
+
+    Returns
+    -------
+    ifcopenshell.file
+        Walls, openings, storeys, ceilings, columns and the (accepted) objects.
     """
     schema = normalise_schema(schema)
     doc = parse_detections_document(document)

@@ -288,7 +288,23 @@ def read_truth(path: Path | str) -> TruthDocument:
 
 
 def read_detections(path: Path | str) -> dict:
-    """``detections.json`` (contract 4), checked; extra keys (e.g. ``review``) are kept."""
+    """``detections.json`` (contract 4), checked; extra keys (e.g. ``review``) are kept.
+
+    Parameters
+    ----------
+    path
+        The document's file.
+
+    Returns
+    -------
+    dict
+        The document as read, once every field passed its check.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the field, e.g. ``detections[3].position: expected 3 numbers``.
+    """
     doc, check = _load_json(Path(path))
     return validate_detections(doc, check.label)
 

@@ -62,6 +62,22 @@ def load_model_library(root: Path | str) -> ModelLibrary:
 
     Sub-directories starting with ``.`` and ``__MACOSX`` are ignored; loose files
     beside the class directories (a README, say) too.
+
+    Parameters
+    ----------
+    root
+        A model library (contract 2): one folder per class with its ``model.json``, colour
+        views and depth model.
+
+    Returns
+    -------
+    ModelLibrary
+        The classes by id, checked.
+
+    Raises
+    ------
+    InputError
+        Naming the file or field that cannot be used.
     """
     root = Path(root)
     if not root.exists():

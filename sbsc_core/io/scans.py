@@ -141,7 +141,20 @@ def _guard(path: Path):
 def open_scan(path: Path | str) -> ScanSource:
     """Open one scan file of any format of contract 1 (chosen by the extension) and read its header.
 
-    Raises :class:`InputError` when the file cannot be used.
+    Parameters
+    ----------
+    path
+        A file whose extension is one of :func:`scan_extensions`.
+
+    Returns
+    -------
+    ScanSource
+        The header's point count and the raw blocks of the file, not yet read.
+
+    Raises
+    ------
+    InputError
+        When the file cannot be used (unknown format, missing, unreadable header).
     """
     path = Path(path)
     ext = path.suffix.lower()
@@ -174,8 +187,30 @@ def iter_scan(path: Path | str | ScanSource, origin: np.ndarray | None = None,
 
     ``origin`` fixes the recentring origin (several files sharing one); without it the
     origin is the rounded median of the first points of the file (a few stray points do not
-    move it). Raises :class:`InputError` naming the file when the file cannot be used, at
-    the chunk where the problem is met.
+    move it).
+
+    Parameters
+    ----------
+    path
+        A scan file, or a source :func:`open_scan` already opened.
+    origin
+        The recentring origin (float64, 3); None: chosen from the file's first points.
+    chunk_points
+        At most this many points a chunk.
+    start, stop
+        Points ``start:stop`` only (a ``seekable`` source).
+    scan
+        Only the points of scan ``scan`` of a file of several (E57).
+
+    Returns
+    -------
+    Iterator[ScanChunk]
+        float32 ``xyz`` relative to the origin and uint8 ``rgb``, in file order.
+
+    Raises
+    ------
+    InputError
+        Naming the file, at the chunk where a problem is met.
     """
     src = path if isinstance(path, ScanSource) else open_scan(path)
     path = src.path
@@ -258,9 +293,24 @@ def sample_scan(src: ScanSource, origin: np.ndarray, every: int, first: int = 0,
 
 
 def read_scan(path: Path | str, origin: np.ndarray | None = None) -> PointCloud:
-    """Read one scan file whole (see :func:`iter_scan`); ``origin`` forces the recentring origin.
+    """Read one scan file whole (see :func:`iter_scan`).
 
-    Raises :class:`InputError` when the file cannot be used.
+    Parameters
+    ----------
+    path
+        A scan file of contract 1.
+    origin
+        The recentring origin; None: chosen from the file's first points.
+
+    Returns
+    -------
+    PointCloud
+        Every point: float32 ``xyz`` relative to ``origin``, uint8 ``rgb``.
+
+    Raises
+    ------
+    InputError
+        When the file cannot be used.
     """
     return read_scans([path], origin)
 
@@ -268,8 +318,19 @@ def read_scan(path: Path | str, origin: np.ndarray | None = None) -> PointCloud:
 def read_scans(paths: Sequence[Path | str], origin: np.ndarray | None = None) -> PointCloud:
     """Read several scan files (already registered) into one cloud with one common origin.
 
-    The origin is the one chosen for the first file. The output arrays are allocated once
-    when every header gives its point count.
+    The output arrays are allocated once when every header gives its point count.
+
+    Parameters
+    ----------
+    paths
+        Scan files of one building, in one coordinate frame.
+    origin
+        The common recentring origin; None: the one chosen for the first file.
+
+    Returns
+    -------
+    PointCloud
+        The points of every file, one after the other; ``sources`` names the files.
     """
     if not paths:
         raise InputError("scans", "no scan files given")

@@ -129,6 +129,24 @@ def simulate_scene(description_path: Path, out: Path, *, seed: int = 0, angular_
     (:mod:`sbsc_core.merged_stations`). A scan without registration error is written as
     before, so its detection does not spend the refinement's time on a registration that
     has nothing to refine.
+
+    Parameters
+    ----------
+    description_path
+        A scene description (YAML; ``sbsc_core/data/*.yaml`` are the shipped ones).
+    out
+        The output folder (made; must not hold another run).
+    seed
+        Makes the scan, the noise and the design differences (0 <= seed < 2**63).
+    angular_step_deg
+        The scanner's angular step; None: the description's.
+    log
+        Called with a line per station.
+
+    Returns
+    -------
+    SimulationSummary
+        What was written: points, objects per class, seconds.
     """
     t0 = time.perf_counter()
     say = log or (lambda msg: None)
