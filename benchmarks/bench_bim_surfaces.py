@@ -163,7 +163,7 @@ def run(scene: str, seed: int, run_dir: Path, redo: bool) -> dict:
                 shutil.rmtree(sim)
             assert main(args) == 0
         if building:
-            from sbsc_core.bim.design import write_as_designed_ifc
+            from sbsc_core.bim.design_writer import write_as_designed_ifc
             from sbsc_core.simulate.catalogue import CATALOGUE
 
             res = write_as_designed_ifc(json.loads((sim / "ground_truth.json").read_text()), sim / "as_designed.ifc",

@@ -15,7 +15,7 @@ import pytest
 from app.config import AppSettings
 from app.sample import ensure_sample_project
 from app.users import add_user
-from sbsc_core.bim.design import write_as_designed_ifc
+from sbsc_core.bim.design_writer import write_as_designed_ifc
 
 from .app_support import ServerProcess, _fake_output, auth, join, write_small_ply
 from .bim_fixtures import truth_document

@@ -22,7 +22,7 @@ from app.membership import set_member
 from app.models import DesignRow, Project
 from app.sample import ensure_sample_project
 from app.server import create_app
-from sbsc_core.bim.design import write_as_designed_ifc
+from sbsc_core.bim.design_writer import write_as_designed_ifc
 
 from .app_support import write_small_ply
 from .bim_fixtures import HEIGHT, OBJECTS, detections_document, truth_document

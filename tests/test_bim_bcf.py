@@ -9,7 +9,7 @@ import pytest
 from lxml import etree
 
 from sbsc_core.bim import bundled_typings
-from sbsc_core.bim.design import write_as_designed_ifc
+from sbsc_core.bim.design_writer import write_as_designed_ifc
 from sbsc_core.cli import main
 from tests.bim_fixtures import SCHEMAS, bcf_errors, detections_document, truth_document
 from tests.shared_data import shared_data

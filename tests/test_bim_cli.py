@@ -8,7 +8,7 @@ import ifcopenshell
 import pytest
 
 from sbsc_core.bim import bundled_typings
-from sbsc_core.bim.design import write_as_designed_ifc
+from sbsc_core.bim.design_writer import write_as_designed_ifc
 from sbsc_core.cli import main
 from tests.bim_fixtures import detections_document, truth_document
 

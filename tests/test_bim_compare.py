@@ -15,7 +15,8 @@ from bcf.v2.bcfxml import BcfXml
 from sbsc_core.bim import bundled_typings
 from sbsc_core.bim.compare import compare
 from sbsc_core.bim.compare_outputs import compare_to_dir
-from sbsc_core.bim.design import read_as_designed, write_as_designed_ifc
+from sbsc_core.bim.design import read_as_designed
+from sbsc_core.bim.design_writer import write_as_designed_ifc
 from tests.bim_fixtures import OBJECTS, detections_document, truth_document
 
 TYPINGS = bundled_typings()

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from sbsc_core.bim import bundled_typings
-from sbsc_core.bim.design import read_as_designed, write_as_designed_ifc
+from sbsc_core.bim.design import read_as_designed
+from sbsc_core.bim.design_writer import write_as_designed_ifc
 from sbsc_core.errors import InputError
 from sbsc_core.types import WallFrame
 from tests.bim_fixtures import truth_document

@@ -198,7 +198,7 @@ def test_export_storeys(tmp_path):
 
 
 def _design(tmp_path: Path, schema: str = "IFC4", seed: int = 0) -> tuple[Path, dict]:
-    from sbsc_core.bim.design import write_as_designed_ifc
+    from sbsc_core.bim.design_writer import write_as_designed_ifc
 
     path = tmp_path / f"design_{schema}.ifc"
     res = write_as_designed_ifc(truth(), path, seed=seed, schema=schema)
@@ -368,7 +368,8 @@ def _two_storey_truth(lift: float = 3.5) -> dict:
 
 def test_design_and_compare_of_two_storeys(tmp_path):
     from sbsc_core.bim.compare import compare
-    from sbsc_core.bim.design import read_as_designed, write_as_designed_ifc
+    from sbsc_core.bim.design import read_as_designed
+    from sbsc_core.bim.design_writer import write_as_designed_ifc
 
     t = _two_storey_truth()
     path = tmp_path / "design.ifc"

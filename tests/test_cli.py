@@ -262,7 +262,7 @@ def test_export_ifc_prints_a_success_line(tmp_path, detections, capsys) -> None:
 
 def test_compare_prints_a_success_line(tmp_path, detections, capsys) -> None:
     from sbsc_core.bim import bundled_typings
-    from sbsc_core.bim.design import write_as_designed_ifc
+    from sbsc_core.bim.design_writer import write_as_designed_ifc
 
     design = tmp_path / "design.ifc"
     write_as_designed_ifc(truth_document(), design, seed=2, n_moved=1, n_removed=1, n_added=1,

@@ -70,7 +70,7 @@ def _check(case: hc.Case, root: Path, before: set[Path]) -> str | None:
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory) -> tuple[Path, list[hc.Case]]:
     from sbsc_core.bim import bundled_typings
-    from sbsc_core.bim.design import write_as_designed_ifc
+    from sbsc_core.bim.design_writer import write_as_designed_ifc
 
     root = tmp_path_factory.mktemp("hostile")
     models = str(bundled_models_dir())

@@ -201,7 +201,7 @@ def simulate_scene(description_path: Path, out: Path, *, seed: int = 0, angular_
         n_points, n_rays = len(scan), scan.rays
         del scan
         if design:
-            from ..bim.design import write_as_designed_ifc
+            from ..bim.design_writer import write_as_designed_ifc
 
             res = write_as_designed_ifc(truth, tmp / "as_designed.ifc", seed=seed,
                                         mount_heights={c: spec.mount_height_m for c, spec in CATALOGUE.items()})
