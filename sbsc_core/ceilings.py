@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .io.scans import ScanChunk
+from .io.scan_source import ScanChunk
 from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
 from .partition import ScanPart, append_records, folder_records
 from .partition import part_chunks as file_chunks

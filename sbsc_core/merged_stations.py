@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .io.scans import ScanSource
+from .io.scan_source import ScanSource
 
 __all__ = ["MAX_STATION_RUNS", "MIN_RUN_POINTS", "StationRun", "station_runs", "station_label"]
 

@@ -39,7 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .io.scans import BLOCK_POINTS, CHUNK_POINTS, ScanChunk, iter_scan, open_scan, sample_scan
+from .io.scan_source import BLOCK_POINTS, CHUNK_POINTS, ScanChunk
+from .io.scans import iter_scan, open_scan, sample_scan
 from .merged_stations import station_label, station_runs
 from .occlusion import FrontLayers, stack_front
 from .orthoimage import (

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError, NoWallsError
-from .io.scans import BLOCK_POINTS, ORIGIN_SAMPLE
+from .io.scan_source import BLOCK_POINTS, ORIGIN_SAMPLE
 from .settings import SegmentationSettings
 from .stray_points import DenseBox, dense_box, inside_box
 from .types import PointCloud, Segmentation, Storey, Wall, WallFrame

@@ -9,7 +9,8 @@ import pytest
 
 from sbsc_core.errors import InputError
 from sbsc_core.io.ply import write_ply
-from sbsc_core.io.scans import colours_16_to_8, read_scan, read_scans
+from sbsc_core.io.scan_source import colours_16_to_8
+from sbsc_core.io.scans import read_scan, read_scans
 
 from .scan_files import _write_ply_struct
 from .shared_data import shared_data

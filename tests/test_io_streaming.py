@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from sbsc_core.errors import InputError
-from sbsc_core.io import scans
+from sbsc_core.io import scan_e57, scan_las, scan_pcd, scan_ply, scan_source, scan_text, scans
 from sbsc_core.io.ply import write_ply
 from sbsc_core.io.scans import iter_scan, open_scan, read_scan, scan_point_count, scan_readers
 
@@ -73,6 +73,12 @@ def _write_pcd(path: Path, xyz: np.ndarray, rgb: np.ndarray, ascii_: bool) -> No
             rec.tofile(fh)
 
 
+def _blocks_of_at_most(monkeypatch, n: int) -> None:
+    """Every reader converts at most ``n`` points at once (``BLOCK_POINTS`` of each module)."""
+    for mod in (scan_source, scan_ply, scan_text, scan_las, scan_e57, scan_pcd):
+        monkeypatch.setattr(mod, "BLOCK_POINTS", n)
+
+
 FORMATS = ["a.ply", "a.xyz", "a.pts", "a.las", "a.laz", "a.e57", "a.pcd", "a_ascii.pcd"]
 
 
@@ -81,7 +87,7 @@ def test_chunks_put_together_are_the_whole_file(tmp_path, monkeypatch, name):
     xyz, rgb = _cloud(offset=1000.0)
     path = tmp_path / name
     _write(path, xyz, rgb)
-    monkeypatch.setattr(scans, "BLOCK_POINTS", 700)  # many blocks, not aligned with the chunks
+    _blocks_of_at_most(monkeypatch, 700)  # many blocks, not aligned with the chunks
     chunks = list(iter_scan(path, chunk_points=1_000))
     assert len(chunks) == 5
     assert [c.start for c in chunks] == list(range(0, N, 1_000))
@@ -139,7 +145,7 @@ def test_reading_costs_at_most_20_bytes_a_point_beyond_the_chunk(tmp_path, monke
     path = tmp_path / name
     _write(path, xyz, rgb)
     chunk = 200_000
-    monkeypatch.setattr(scans, "BLOCK_POINTS", 1 << 14)
+    _blocks_of_at_most(monkeypatch, 1 << 14)
     it = iter_scan(path, chunk_points=chunk)
     first = next(it)  # libraries imported, files opened
     del first
@@ -162,7 +168,7 @@ def test_sample_of_a_binary_file_converts_every_kth_point(tmp_path, monkeypatch)
 
     xyz, rgb = _cloud()
     write_ply(tmp_path / "a.ply", xyz, rgb)
-    monkeypatch.setattr(scans, "BLOCK_POINTS", 333)
+    _blocks_of_at_most(monkeypatch, 333)
     whole = read_scan(tmp_path / "a.ply")
     got_xyz, got_rgb, n = sample_scan(open_scan(tmp_path / "a.ply"), whole.origin, 7, first=3, start=100, stop=4000)
     pick = np.flatnonzero((3 + np.arange(3900)) % 7 == 0) + 100

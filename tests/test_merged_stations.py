@@ -9,7 +9,8 @@ import pytest
 
 from sbsc_core.errors import InputError
 from sbsc_core.io.ply import write_ply
-from sbsc_core.io.scans import open_scan, read_scan, station_field
+from sbsc_core.io.scan_source import station_field
+from sbsc_core.io.scans import open_scan, read_scan
 from sbsc_core.merged_stations import station_runs
 from sbsc_core.partition import part_chunks, plan_parts, sample_part, station_names
 from sbsc_core.registration import refine_registration

@@ -8,7 +8,7 @@ import pytest
 import app.viewer.lod as lod_mod
 from app.viewer.lod import downsample, scan_lod, stream_downsample
 from sbsc_core.io.ply import write_ply
-from sbsc_core.io.scans import ScanChunk
+from sbsc_core.io.scan_source import ScanChunk
 
 
 def _room_points(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

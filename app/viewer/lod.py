@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from sbsc_core.errors import InputError
-from sbsc_core.io.scans import ScanChunk, iter_scan, open_scan
+from sbsc_core.io.scan_source import ScanChunk
+from sbsc_core.io.scans import iter_scan, open_scan
 
 LOD_FORMAT = 1  # bump when the cached arrays change meaning
 MAX_VOXEL_STEPS = 8

@@ -2,24 +2,29 @@
 
 The one table of them: :func:`~sbsc_core.io.scans.scan_extensions` (the CLI's help, the upload
 page, the upload's suffix check) and the readers and checks come from here. A new format is a
-reader (and its header check) and a line here. Imported with :mod:`sbsc_core.io`.
+reader module ``scan_<format>.py``, its header check (``scan_check.py``) and a line here. Imported with :mod:`sbsc_core.io`.
 """
 
 from __future__ import annotations
 
 from . import scan_check as check
-from . import scans
+from .scan_e57 import _read_e57
+from .scan_las import _read_las
+from .scan_pcd import _read_pcd
+from .scan_ply import _read_ply
+from .scan_text import _read_pts, _read_xyz
+from .scans import register_reader
 
 FORMATS = (
-    (".ply", scans._read_ply, check.ply_points),
-    (".e57", scans._read_e57, check.e57_points),
-    (".las", scans._read_las, check.las_points),
-    (".laz", scans._read_las, check.las_points),
-    (".pcd", scans._read_pcd, check.pcd_points),
-    (".xyz", scans._read_xyz, check.text_points),
-    (".pts", scans._read_pts, check.pts_points),
-    (".txt", scans._read_xyz, check.text_points),
+    (".ply", _read_ply, check.ply_points),
+    (".e57", _read_e57, check.e57_points),
+    (".las", _read_las, check.las_points),
+    (".laz", _read_las, check.las_points),
+    (".pcd", _read_pcd, check.pcd_points),
+    (".xyz", _read_xyz, check.text_points),
+    (".pts", _read_pts, check.pts_points),
+    (".txt", _read_xyz, check.text_points),
 )
 
 for _ext, _reader, _count in FORMATS:
-    scans.register_reader(_ext, _reader, count=_count)
+    register_reader(_ext, _reader, count=_count)

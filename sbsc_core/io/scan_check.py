@@ -80,7 +80,7 @@ def _data_line(line: bytes) -> bool:
 def ply_points(path: Path) -> int:
     import numpy as np
 
-    from .scans import _parse_ply_header, _ply_columns
+    from .scan_ply import _parse_ply_header, _ply_columns
 
     size = path.stat().st_size
     with open(path, "rb") as fh:
