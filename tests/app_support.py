@@ -366,3 +366,19 @@ def fake_with_suggestions(scans: Sequence[Path], models: Path, *, expected=None,
     (Path(out) / "suggestions.json").write_text(json.dumps({"schema": "sbsc.suggestions/1",
                                                             "suggestions": sugg}))
     return summary
+
+
+def project_with_job(c: httpx.Client, srv, name: str) -> int:  # noqa: ANN001
+    """A project of rita's (max its manager; ``srv.tokens`` of rita, max and ada) with one
+    finished job of the server's runner."""
+    h = auth(srv.tokens["rita"])
+    pid = c.post("/api/projects", json={"name": name}, headers=h).json()["id"]
+    assert c.post(f"/api/projects/{pid}/members", json={"user": "max", "role": "manager"},
+                  headers=auth(srv.tokens["ada"])).status_code == 201
+    ply = write_small_ply(srv.base / f"{name}.ply")
+    with open(ply, "rb") as fh:
+        assert c.post(f"/api/projects/{pid}/scans", files={"file": (ply.name, fh)}, headers=h).status_code == 201
+    r = c.post(f"/api/projects/{pid}/jobs", json={}, headers=h)
+    assert r.status_code == 202, r.text
+    assert wait_job(c, r.json()["id"], srv.tokens["rita"])["status"] == "succeeded"
+    return pid

@@ -9,10 +9,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import cv2
-import httpx
 import numpy as np
 
-from .app_support import PIXEL_M, _fake_output, auth, wait_job, write_small_ply
+from .app_support import PIXEL_M, _fake_output
 
 RUNNER = "tests.teach_support:fake_with_card_readers"
 
@@ -69,16 +68,3 @@ def fake_with_card_readers(scans: Sequence[Path], models: Path, *, expected=None
     return summary
 
 
-def project(c: httpx.Client, srv, name: str) -> int:  # noqa: ANN001
-    """A project of rita's (max its manager) with one finished job of the fake runner."""
-    h = auth(srv.tokens["rita"])
-    pid = c.post("/api/projects", json={"name": name}, headers=h).json()["id"]
-    assert c.post(f"/api/projects/{pid}/members", json={"user": "max", "role": "manager"},
-                  headers=auth(srv.tokens["ada"])).status_code == 201
-    ply = write_small_ply(srv.base / f"{name}.ply")
-    with open(ply, "rb") as fh:
-        assert c.post(f"/api/projects/{pid}/scans", files={"file": (ply.name, fh)}, headers=h).status_code == 201
-    r = c.post(f"/api/projects/{pid}/jobs", json={}, headers=h)
-    assert r.status_code == 202, r.text
-    assert wait_job(c, r.json()["id"], srv.tokens["rita"])["status"] == "succeeded"
-    return pid

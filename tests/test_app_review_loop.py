@@ -21,9 +21,9 @@ from .app_support import (
     auth,
     fake_control,
     pid_alive,
+    project_with_job,
     wait_job,
     worker_pid,
-    write_small_ply,
 )
 
 RUNNER = "tests.app_support:fake_with_suggestions"
@@ -55,17 +55,8 @@ def c(srv):
 
 
 def project(c: httpx.Client, srv, name: str) -> tuple[int, dict]:  # noqa: ANN001
-    h = auth(srv.tokens["rita"])
-    pid = c.post("/api/projects", json={"name": name}, headers=h).json()["id"]
-    assert c.post(f"/api/projects/{pid}/members", json={"user": "max", "role": "manager"},
-                  headers=auth(srv.tokens["ada"])).status_code == 201
-    ply = write_small_ply(srv.base / f"{name}.ply")
-    with open(ply, "rb") as fh:
-        assert c.post(f"/api/projects/{pid}/scans", files={"file": (ply.name, fh)}, headers=h).status_code == 201
-    r = c.post(f"/api/projects/{pid}/jobs", json={}, headers=h)
-    assert r.status_code == 202, r.text
-    assert wait_job(c, r.json()["id"], srv.tokens["rita"])["status"] == "succeeded"
-    return pid, c.get(f"/api/projects/{pid}/detections", headers=h).json()
+    pid = project_with_job(c, srv, name)
+    return pid, c.get(f"/api/projects/{pid}/detections", headers=auth(srv.tokens["rita"])).json()
 
 
 def test_snap_moves_a_click_onto_the_relief_of_the_model():

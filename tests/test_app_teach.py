@@ -18,7 +18,8 @@ import httpx
 import pytest
 
 from .app_support import auth, fake_control, wait_job
-from .teach_support import READER_SIZE, READERS, project
+from .app_support import project_with_job as project
+from .teach_support import READER_SIZE, READERS
 
 pytestmark = pytest.mark.slow
 

@@ -11,7 +11,8 @@ import httpx
 import pytest
 
 from .app_support import auth
-from .teach_support import READERS, WALL_H, project
+from .app_support import project_with_job as project
+from .teach_support import READERS, WALL_H
 
 pytestmark = [pytest.mark.slow, pytest.mark.browser]
 
