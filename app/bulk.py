@@ -24,7 +24,8 @@ from sqlalchemy.orm import Session
 from .auth import Principal
 from .db import Database
 from .errors import Conflict, Invalid
-from .models import REVIEW_STATUSES, DetectionRow, Project, ReviewDecision, utcnow
+from .models import DetectionRow, Project, ReviewDecision, utcnow
+from .review_rules import check_status
 from .review_service import ACTIONS, BULK_MAX, RELABELLED, Filter, open_project, select_detections
 
 BATCH = 100  # detections per write transaction (~5-15 ms on SQLite; 250 gave a longer tail)
@@ -124,8 +125,7 @@ def bulk_decide(db: Database, pid: int, status: str, user: Principal, *,
     Answers ``{"changed", "matched", "skipped": [{"id", "reason"}], "ids", "batch"}``; raises
     :mod:`app.errors` (404, 409, 422, 423).
     """
-    if status not in REVIEW_STATUSES:
-        raise Invalid(f"status: must be one of {', '.join(REVIEW_STATUSES)}")
+    check_status(status)
     if (ids is None) == (flt is None):
         raise Invalid("give either ids or filter")
     with db.read() as s:
@@ -134,8 +134,7 @@ def bulk_decide(db: Database, pid: int, status: str, user: Principal, *,
             rows, skipped = _select_ids(s, p, ids, status)
         else:
             assert flt is not None
-            if flt.review not in REVIEW_STATUSES:
-                raise Invalid(f"filter.review: must be one of {', '.join(REVIEW_STATUSES)}")
+            check_status(flt.review, "filter.review")
             chosen = [d for d in select_detections(s, p, flt) if d.status != status]
             rows = [d.id for d in chosen if d.class_id == d.detected_class]
             skipped = [{"id": str(d.id), "reason": RELABELLED} for d in chosen if d.class_id != d.detected_class]

@@ -25,9 +25,8 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from .auth import Principal
-from .errors import Conflict, Forbidden, Invalid, Locked, NotFound, ReviewError, StaleVersion
+from .errors import Conflict, Forbidden, Invalid, NotFound, ReviewError
 from .models import (
-    REVIEW_STATUSES,
     DetectionRow,
     Job,
     ModelLibraryRow,
@@ -41,6 +40,7 @@ from .models import (
     utcnow,
 )
 from .results import detection_dict, review_counts, wall_dict
+from .review_rules import check_open, check_status, check_version, review_score
 from .snap import Snap, depth_template, snap_to_relief
 from .surfaces import point_on
 
@@ -96,12 +96,6 @@ def models_dir(s: Session, models_id: int | None, data_dir: Path) -> Path:
     return data_dir / row.path if row is not None else bundled_models_dir()
 
 
-def review_score(confidence: float | None, alpha: float | None) -> float | None:
-    """How sure recognition is: the calibrated ``confidence`` when there is one, else ``alpha``
-    (None for an object a reviewer added). The gallery's order and filter, and the 3D scene's."""
-    return confidence if confidence is not None else alpha
-
-
 def score(d: DetectionRow) -> float | None:
     """:func:`review_score` of a stored detection."""
     return review_score(d.confidence, d.alpha)
@@ -116,8 +110,7 @@ def open_project(s: Session, pid: int, *, lock: bool = True) -> Project:
     p = s.get(Project, pid, with_for_update=True if lock else None)
     if p is None:
         raise NotFound(f"project {pid} not found")
-    if p.status != "open":
-        raise Locked(f"project {pid} is signed off; it can no longer be changed")
+    check_open(pid, p.status != "open")
     return p
 
 
@@ -175,13 +168,11 @@ def decide(s: Session, did: int, change: Change, user: Principal, *, pid: int | 
     """Accept, reject, reset, relabel or move one detection; answers the detection as it stands."""
     if change.status is None and change.class_ is None and change.u is None and change.v is None:
         raise Invalid("nothing to change: give status, class, u or v")
-    if change.status is not None and change.status not in REVIEW_STATUSES:
-        raise Invalid(f"status: must be one of {', '.join(REVIEW_STATUSES)}")
+    if change.status is not None:
+        check_status(change.status)
     d, _ = _current_detection(s, did, pid=pid)
     if d.version != change.version:
-        raise StaleVersion(f"stale version {change.version}: detection {did} is at version {d.version} "
-                           f"(last changed by {d.reviewed_by or 'nobody'}); reload and decide again",
-                           detection_dict(d))
+        check_version(did, change.version, d.version, d.reviewed_by, detection_dict(d))
     before = _state(d)
     actions = []
     if change.status is not None and change.status != d.status:

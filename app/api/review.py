@@ -24,6 +24,7 @@ from .. import bulk
 from .. import review_service as svc
 from ..models import DetectionRow, Job, ReviewDecision, WallRow, iso
 from ..results import detection_dict, project_document, review_counts
+from ..review_rules import review_score
 from ..thumbnails import thumbnail
 from .deps import (
     DB,
@@ -114,7 +115,7 @@ def _get_detection(s, did: int, *, for_update: bool = False) -> DetectionRow:  #
 
 
 def _score(d: dict) -> float | None:
-    return svc.review_score(d.get("confidence"), d.get("alpha"))
+    return review_score(d.get("confidence"), d.get("alpha"))
 
 
 @router.get("/projects/{pid}/detections")
