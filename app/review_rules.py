@@ -23,6 +23,13 @@ def review_score(confidence: float | None, alpha: float | None) -> float | None:
     return confidence if confidence is not None else alpha
 
 
+def sort_score(d: dict) -> float:
+    """:func:`review_score` of a detection dict for sorting: an object without one (added by a
+    reviewer) counts 2.0, after every score."""
+    score = review_score(d.get("confidence"), d.get("alpha"))
+    return 2.0 if score is None else float(score)
+
+
 def check_status(status: str, where: str = "status") -> None:
     if status not in REVIEW_STATUSES:
         raise Invalid(f"{where}: must be one of {', '.join(REVIEW_STATUSES)}")

@@ -24,7 +24,7 @@ from .. import bulk
 from .. import review_service as svc
 from ..models import DetectionRow, Job, ReviewDecision, WallRow, iso
 from ..results import detection_dict, project_document, review_counts
-from ..review_rules import review_score
+from ..review_rules import review_score, sort_score
 from ..thumbnails import thumbnail
 from .deps import (
     DB,
@@ -138,7 +138,7 @@ def list_detections(pid: int, _: Reviewer, s: ReadSession,
                              and (min_confidence is None or (_score(d) or 0.0) >= min_confidence)]
     if order != "id":
         sign = 1.0 if order == "uncertain" else -1.0
-        doc["detections"].sort(key=lambda d: sign * (_score(d) if _score(d) is not None else 2.0))
+        doc["detections"].sort(key=lambda d: sign * sort_score(d))
     return doc
 
 

@@ -25,6 +25,8 @@ from typing import Any, Protocol, runtime_checkable
 from sbsc_core.errors import InputError
 
 from ..errors import Conflict, Forbidden, Locked, NotFound, NotReady, ReviewError, StaleVersion
+from ..models import ROLES
+from ..review_rules import check_may_review, check_open, check_status, check_version
 from ..surfaces import point_on
 
 __all__ = ["Changes", "Conflict", "Forbidden", "InMemoryBackend", "Locked", "NotFound", "NotReady",
@@ -32,8 +34,6 @@ __all__ = ["Changes", "Conflict", "Forbidden", "InMemoryBackend", "Locked", "Not
            "load_detection_dir"]
 
 ProjectId = Hashable  # the service uses ints; the stand-alone viewer uses strings
-REVIEW_STATUSES: tuple[str, ...] = ("pending", "accepted", "rejected")
-DECIDING_ROLES: tuple[str, ...] = ("reviewer", "manager", "admin")
 
 
 @dataclass(frozen=True)
@@ -46,7 +46,7 @@ class Reviewer:
 
     @property
     def may_decide(self) -> bool:
-        return self.role in DECIDING_ROLES
+        return self.role in ROLES
 
 
 @dataclass
@@ -96,6 +96,15 @@ class ReviewBackend(Protocol):
         Raises :class:`StaleVersion` (409) when ``version`` is not the current one,
         :class:`Locked` (423) after sign-off, :class:`Forbidden` for a role that may not decide
         and :class:`NotFound` for an unknown detection.
+        """
+
+    def add_object(self, pid: ProjectId, class_id: str, wall: str, u: float, v: float,
+                   user: Reviewer, note: str | None = None) -> dict:
+        """Add an object recognition missed at ``(u, v)`` on ``wall``; return its detection dict.
+
+        Raises :class:`Locked` (423) after sign-off, :class:`Forbidden` for a role that may not
+        decide and :class:`NotFound` (or :class:`~app.errors.Invalid`) for a wall or class the
+        project does not have.
         """
 
     def changes_since(self, pid: ProjectId, cursor: Any) -> Changes:
@@ -185,20 +194,16 @@ class InMemoryBackend:
 
     def decide(self, pid: ProjectId, detection_id: str, status: str, new_class: str | None,
                version: int, user: Reviewer) -> dict:
-        if status not in REVIEW_STATUSES:
-            raise ReviewError(f"status: must be one of {', '.join(REVIEW_STATUSES)}")
-        if not user.may_decide:
-            raise Forbidden(f"{user.name}: role '{user.role}' may not review")
+        check_status(status)
+        check_may_review(user.name, user.role)
         with self._lock:
             p = self._project(pid)
             det = p.by_id.get(detection_id)
             if det is None:
                 raise NotFound(f"detection {detection_id}: not found")
-            if p.data.locked:
-                raise Locked("project is signed off", copy.deepcopy(det))
-            if int(version) != det["review"]["version"]:
-                raise StaleVersion(f"detection {detection_id}: version {version} is stale "
-                                   f"(now {det['review']['version']})", copy.deepcopy(det))
+            check_open(pid, p.data.locked, copy.deepcopy(det))
+            check_version(detection_id, version, det["review"]["version"], det["review"].get("by"),
+                          copy.deepcopy(det))
             if new_class is not None:
                 det["class"] = new_class
             det["review"] = {"status": status, "by": user.name, "at": now_iso(),
@@ -210,12 +215,10 @@ class InMemoryBackend:
     def add_object(self, pid: ProjectId, class_id: str, wall: str, u: float, v: float,
                    user: Reviewer, note: str | None = None) -> dict:
         """An object recognition missed, accepted by ``user`` (``source: reviewer``)."""
-        if not user.may_decide:
-            raise Forbidden(f"{user.name}: role '{user.role}' may not review")
+        check_may_review(user.name, user.role)
         with self._lock:
             p = self._project(pid)
-            if p.data.locked:
-                raise Locked("project is signed off")
+            check_open(pid, p.data.locked)
             doc = p.data.detections
             w = next((x for x in [*doc.get("walls", []), *(doc.get("surfaces") or [])] if x["id"] == wall), None)
             if w is None:

@@ -28,6 +28,7 @@ from ..config import AppSettings
 from ..db import Database
 from ..models import DetectionRow, Job, ModelLibraryRow, Project, ReviewDecision, Scan
 from ..results import detection_dict, project_document
+from ..review_rules import check_may_review
 from .backend import (
     Changes,
     Forbidden,
@@ -140,8 +141,9 @@ class DbReviewBackend:
         return Reviewer(name=principal.name, role=principal.role, ref=principal)
 
     def _principal(self, user: Reviewer) -> Principal:
-        if not user.may_decide or not isinstance(user.ref, Principal):
-            raise Forbidden(f"{user.name}: role '{user.role}' may not review")
+        check_may_review(user.name, user.role)
+        if not isinstance(user.ref, Principal):
+            raise Forbidden(f"{user.name}: not a user of the review app")
         return user.ref
 
     def _call(self, op: Any) -> Any:

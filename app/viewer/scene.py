@@ -52,6 +52,7 @@ import viser.transforms as vtf
 
 from sbsc_core.types import WallFrame
 
+from ..review_rules import sort_score
 from ..surfaces import is_round, kind_of
 from .backend import (
     Changes,
@@ -221,13 +222,6 @@ def class_names(models_dir: Path | None) -> dict[str, str]:
         return {cid: str(m.get("name") or cid) for cid, m in read_library_metadata(models_dir).items()}
     except (SbscError, OSError, ValueError):
         return {}
-
-
-def review_score(det: dict) -> float:
-    """How sure recognition is (confidence, else alpha); objects without one sort last."""
-    c = det.get("confidence")
-    c = det.get("alpha") if c is None else c
-    return 2.0 if c is None else float(c)
 
 
 def wall_hit(frames: dict[str, WallFrame], origin: np.ndarray, direction: np.ndarray
@@ -630,7 +624,7 @@ class ProjectScene:
 
     def review_order(self) -> list[str]:
         """Detection ids, least sure first (confidence, else alpha), then by id."""
-        return sorted(self.detections, key=lambda did: (review_score(self.detections[did]), did))
+        return sorted(self.detections, key=lambda did: (sort_score(self.detections[did]), did))
 
     def add_detection(self, det: dict) -> None:
         """Show a detection that was added (an object recognition missed); idempotent."""
@@ -1307,12 +1301,9 @@ class ReviewSession:
         if self.user is None:
             self.notify("Not signed in", "Sign in to the review app to add objects.", "red")
             return None
-        add = getattr(self.scene.backend, "add_object", None)
-        if add is None:
-            self.notify("Not available", "This viewer cannot add objects.", "red")
-            return None
         try:
-            det = add(self.scene.pid, class_id, wall, round(u, 4), round(v, 4), self.user)
+            det = self.scene.backend.add_object(self.scene.pid, class_id, wall, round(u, 4), round(v, 4),
+                                                self.user)
         except Locked:
             self.notify("Signed off", "The project is signed off: read-only.", "red")
             return None
