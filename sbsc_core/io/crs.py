@@ -135,11 +135,13 @@ def e57_crs(path: Path) -> CRS | None:
 
 def scan_crs(paths: Sequence[Path]) -> CRS | None:
     """The CRS that the scan files record (None if none does); files that disagree are refused."""
+    from .scans import crs_reader
+
     found: list[tuple[Path, CRS]] = []
     for p in map(Path, paths):
-        suffix = p.suffix.lower()
+        read = crs_reader(p.suffix)
         try:
-            crs = las_crs(p) if suffix in (".las", ".laz") else e57_crs(p) if suffix == ".e57" else None
+            crs = read(p) if read is not None else None
         except InputError:
             raise
         except Exception:  # an unreadable header is reported by the scan reader itself

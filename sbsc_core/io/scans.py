@@ -23,6 +23,7 @@ import os
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -40,16 +41,28 @@ ScanReader = Callable[[Path], ScanSource]
 PointCount = Callable[[Path], int]
 """A format's upload check: the point count from the header, checked against the file's size
 (see :mod:`sbsc_core.io.scan_check`)."""
+CrsReader = Callable[[Path], Any]
+"""A format's coordinate system, as its file records it (see :mod:`sbsc_core.io.crs`), or None."""
 _READERS: dict[str, ScanReader] = {}
 _COUNTS: dict[str, PointCount] = {}
+_CRS: dict[str, CrsReader] = {}
 
 
-def register_reader(extension: str, reader: ScanReader, *, count: PointCount | None = None) -> None:
-    """Make ``reader`` the reader of files ending in ``extension`` (e.g. ``".ply"``), and ``count``
-    its upload check (the review app refuses a format without one)."""
+def register_reader(extension: str, reader: ScanReader, *, count: PointCount | None = None,
+                    crs: CrsReader | None = None) -> None:
+    """Make ``reader`` the reader of files ending in ``extension`` (e.g. ``".ply"``), ``count``
+    its upload check (the review app refuses a format without one) and ``crs`` the reader of
+    the coordinate system its files record (none: they record none)."""
     _READERS[extension.lower()] = reader
     if count is not None:
         _COUNTS[extension.lower()] = count
+    if crs is not None:
+        _CRS[extension.lower()] = crs
+
+
+def crs_reader(extension: str) -> CrsReader | None:
+    """The reader of the coordinate system files of ``extension`` record, None when they record none."""
+    return _CRS.get(extension.lower())
 
 
 def point_count_check(extension: str) -> PointCount | None:
