@@ -838,7 +838,7 @@ def write_ifc_atomic(model: ifcopenshell.file, out: Path) -> None:
         raise
 
 
-def export_ifc_file(detections: Path, out: Path, schema: str = "IFC4", accepted_only: bool = False,
+def export_ifc_file(detections: Path, out: Path, *, schema: str = "IFC4", accepted_only: bool = False,
                     models: Path | None = None, crs: str | None = None) -> dict[str, Any]:
     """``sbsc export-ifc``: read ``detections``, write ``out`` (nothing on error).
 

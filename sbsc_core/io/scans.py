@@ -140,7 +140,7 @@ def scan_point_count(path: Path | str) -> int | None:
     return open_scan(path).count
 
 
-def iter_scan(path: Path | str | ScanSource, origin: np.ndarray | None = None,
+def iter_scan(path: Path | str | ScanSource, origin: np.ndarray | None = None, *,
               chunk_points: int = CHUNK_POINTS, start: int = 0, stop: int | None = None,
               scan: int | None = None) -> Iterator[ScanChunk]:
     """The points of one scan file as chunks of at most ``chunk_points`` points.

@@ -31,7 +31,7 @@ class RenderedModel:
     depth: np.ndarray  # (h, w) float32 metres out of the wall
 
 
-def render_model(class_id: str, pixel_m: float = 0.002, seed: int = 0, n_views: int = 3,
+def render_model(class_id: str, *, pixel_m: float = 0.002, seed: int = 0, n_views: int = 3,
                  supersample: int = 3, range_noise_m: float = 0.0008,
                  colour_noise: float = 3.0, object_builder: ObjectBuilder | None = None
                  ) -> RenderedModel:
@@ -91,7 +91,7 @@ def model_json(class_id: str, specs: Mapping[str, ObjectSpec] = CATALOGUE) -> di
     return doc
 
 
-def write_model_library(out_dir: Path, classes: Sequence[str] = CLASS_ORDER, seed: int = 0,
+def write_model_library(out_dir: Path, classes: Sequence[str] = CLASS_ORDER, *, seed: int = 0,
                         pixel_m: float = 0.002, n_views: int = 3,
                         object_builder: ObjectBuilder | None = None) -> Path:
     """Write a contract-2 library of ``classes`` into ``out_dir`` atomically; return it.
