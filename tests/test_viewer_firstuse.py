@@ -71,3 +71,58 @@ def test_spot_labels_use_the_librarys_names() -> None:
     assert spot_label(det, names) == "Socket x1 0.93"
     assert spot_label({"class": "mystery", "alpha": 0.5}, names) == "mystery α 0.50"  # unknown: its id
     assert class_names(None) == {}
+
+
+def test_class_choices_show_names_and_keep_ids() -> None:
+    from app.viewer.scene import class_choices
+
+    names = {"socket_x1": "Socket x1", "switch": "Switch", "a": "Same", "b": "Same", "c": "switch"}
+    got = class_choices(["socket_x1", "switch", "mystery", "a", "b", "c"], names)
+    assert got == {"Socket x1": "socket_x1", "Switch": "switch", "mystery": "mystery",
+                   "Same (a)": "a", "Same (b)": "b", "switch (c)": "c"}  # every option names one class
+
+
+def test_class_dropdowns_show_the_librarys_names_and_decide_by_id(tmp_path) -> None:
+    from sbsc_core.paths import bundled_models_dir
+
+    from .test_viewer_scene import FakeTab, wait_for
+
+    sp = write_synthetic_project(tmp_path / "out", rooms=1, walls_per_room=2, objects_per_wall=3, points=4000)
+    backend = InMemoryBackend()
+    backend.add_user("tok-alice", "alice", "reviewer")
+    backend.add_detection_dir(1, sp.out_dir, scans=[sp.scan], models_dir=bundled_models_dir())
+    manager = ViewerManager(backend, settings=FAST)
+    tab = None
+    try:
+        scene = manager.wait_ready(1, 60)
+        tab = FakeTab(manager.viewer(1).port)
+        session = wait_for(lambda: next(iter(scene.sessions.values()), None), what="session")
+        opts = list(session.ui_class.options)
+        assert "Socket x1" in opts and "Fire alarm switch sign" in opts and "Switch" in opts
+        assert not {"socket_x1", "fire_alarm_switch_sign", "switch"} & set(opts)  # names, not ids
+        assert opts == sorted(opts, key=str.casefold) and list(session.ui_add_class.options) == opts
+        det = next(d for d in sp.detections["detections"] if d["class"] == "socket_x1")
+        tab.click_node(f"/spots/{det['id']}")
+        wait_for(lambda: session.selected == det["id"] and session.ui_class.value == "Socket x1", what="select")
+        assert "Socket x1" in session.ui_info.content and "socket_x1" not in session.ui_info.content
+        tab.set_gui(session.ui_token, "tok-alice")
+        tab.press(session.ui_sign_in)
+        wait_for(lambda: session.user is not None and not session.ui_relabel.disabled, what="sign-in")
+        session.ui_auto.value = False
+        tab.set_gui(session.ui_class, "Fire alarm switch sign")
+        wait_for(lambda: session.ui_class.value == "Fire alarm switch sign", what="class chosen")
+        tab.press(session.ui_relabel)
+        got = wait_for(lambda: (d := next(x for x in backend.project_data(1).detections["detections"]
+                                         if x["id"] == det["id"]))["class"] != "socket_x1" and d, what="relabel")
+        assert got["class"] == "fire_alarm_switch_sign"  # the id is what is recorded
+        wall = det["wall"]
+        tab.set_gui(session.ui_add_class, "Switch")
+        wait_for(lambda: session.ui_add_class.value == "Switch", what="class to add")
+        f = scene.frames[wall]  # a shift-click straight at the wall, from 1 m in front of it
+        origin = f.to_world(0.5, 1.0, 1.0) - scene.centre
+        added = session.add_at_ray(origin, -np.asarray(f.normal, float))
+        assert added is not None and added["class"] == "switch" and added["wall"] == wall
+    finally:
+        if tab is not None:
+            tab.close()
+        manager.stop_all()

@@ -223,6 +223,23 @@ def class_names(models_dir: Path | None) -> dict[str, str]:
         return {}
 
 
+def class_choices(ids: Iterable[str], names: dict[str, str]) -> dict[str, str]:
+    """A class dropdown's options: the library's display name -> class id, in the order of ``ids``.
+
+    A name that two classes share, or that is another class's id, gets its id in brackets,
+    so every option names one class.
+    """
+    ids = list(ids)
+    shown = [names.get(cid, cid) for cid in ids]
+    taken = set(ids)
+    out: dict[str, str] = {}
+    for cid, label in zip(ids, shown):
+        if shown.count(label) > 1 or (label != cid and label in taken):
+            label = f"{label} ({cid})"
+        out[label] = cid
+    return out
+
+
 def review_score(det: dict) -> float:
     """How sure recognition is (confidence, else alpha); objects without one sort last."""
     c = det.get("confidence")
@@ -980,6 +997,7 @@ class ReviewSession:
         self.scan_groups: dict[str, Any] = {}  # layer -> this tab's frame holding its tiles
         self.scan_nodes: dict[str, list[Any]] = {}  # layer -> this tab's point cloud tiles
         self._model_cache: dict[str, np.ndarray | None] = {}
+        self.class_ids: dict[str, str] = {}  # class dropdown option (display name) -> class id
         self.ceiling_nodes: dict[str, Any] = {}  # "kind/id" -> this tab's ceiling image
         gui = client.gui
         blank = np.zeros((scene.s.crop_px, scene.s.crop_px, 3), np.uint8)
@@ -999,7 +1017,7 @@ class ReviewSession:
             self.ui_model = gui.add_image(blank, label="model", format="png", visible=False)
             self.ui_accept = gui.add_button("Accept", color="green", disabled=True)
             self.ui_reject = gui.add_button("Reject", color="red", disabled=True)
-            classes = self._classes() or ["-"]
+            classes = list(self._class_choices()) or ["-"]
             self.ui_class = gui.add_dropdown("Class", classes, initial_value=classes[0],
                                              disabled=True)
             self.ui_relabel = gui.add_button("Relabel (accept as class)", disabled=True)
@@ -1009,7 +1027,6 @@ class ReviewSession:
                                           hint="least sure first (confidence, else alpha)")
         self.f_add = gui.add_folder("Add a missed object", order=22)
         with self.f_add:
-            classes = self._classes() or ["-"]
             self.ui_add_class = gui.add_dropdown("Class to add", classes, initial_value=classes[0])
             self.ui_add_help = gui.add_markdown("**Shift-click on a wall** (or a ceiling from below, or a "
                                                 "column) to add an object of this class there "
@@ -1030,7 +1047,7 @@ class ReviewSession:
         self.ui_sign_in.on_click(lambda ev: self.sign_in(self.ui_token.value))
         self.ui_accept.on_click(lambda ev: self.decide("accepted"))
         self.ui_reject.on_click(lambda ev: self.decide("rejected"))
-        self.ui_relabel.on_click(lambda ev: self.decide("accepted", self.ui_class.value))
+        self.ui_relabel.on_click(lambda ev: self.decide("accepted", self.class_id(self.ui_class.value)))
         self.ui_prev.on_click(lambda ev: self.step(-1))
         self.ui_next.on_click(lambda ev: self.step(+1))
         client.scene.on_click(modifier="shift")(self._on_shift_click)
@@ -1045,6 +1062,21 @@ class ReviewSession:
         have = {d["class"] for d in self.scene.detections.values()}
         return sorted(set(data.classes) | have)
 
+    def _class_choices(self) -> dict[str, str]:
+        """The class dropdowns' options (display name -> class id), sorted by name."""
+        names = self.scene.class_names
+        ids = sorted(self._classes(), key=lambda cid: (names.get(cid, cid).casefold(), cid))
+        self.class_ids = class_choices(ids, names)
+        return self.class_ids
+
+    def class_id(self, option: str) -> str:
+        """The class id of a dropdown's option (an id passes through)."""
+        return self.class_ids.get(option, option)
+
+    def class_option(self, cid: str) -> str | None:
+        """The dropdown option that shows class ``cid``."""
+        return next((label for label, c in self.class_ids.items() if c == cid), None)
+
     def notify(self, title: str, body: str, colour: str | None = None) -> None:
         try:
             self.client.add_notification(title, body, auto_close_seconds=4.0, color=colour)
@@ -1057,7 +1089,7 @@ class ReviewSession:
         if self._highlight is not None:
             self._highlight.remove()
             self._highlight = None
-        classes = self._classes()
+        classes = list(self._class_choices())
         if classes:
             self.ui_class.options = classes
             self.ui_add_class.options = classes
@@ -1196,8 +1228,9 @@ class ReviewSession:
                     position=pos)
             else:
                 self._highlight.position = pos
-            if det.get("class") in (self.ui_class.options or ()):
-                self.ui_class.value = det["class"]
+            option = self.class_option(det.get("class"))
+            if option in (self.ui_class.options or ()):
+                self.ui_class.value = option
             self.show()
         if fly:
             self.fly_to(det)
@@ -1301,7 +1334,7 @@ class ReviewSession:
                         "object there.", "yellow")
             return None
         wid, u, v = hit
-        return self.add_object(wid, u, v, self.ui_add_class.value)
+        return self.add_object(wid, u, v, self.class_id(self.ui_add_class.value))
 
     def add_object(self, wall: str, u: float, v: float, class_id: str) -> dict | None:
         if self.user is None:
@@ -1320,7 +1353,7 @@ class ReviewSession:
             self.notify("Not added", str(exc), "red")
             return None
         self.scene.add_detection(det)
-        self.notify(f"Added {det['class']}", f"on {wall} at u {det['u']:.3f}, v {det['v']:.3f} m",
+        self.notify(f"Added {self.scene.class_names.get(det['class'], det['class'])}", f"on {wall} at u {det['u']:.3f}, v {det['v']:.3f} m",
                     "green")
         self.select(det["id"], fly=False)
         return det
@@ -1396,14 +1429,15 @@ class ReviewSession:
         self.ui_model.visible = model is not None
         if model is not None:
             self.ui_model.image = model
-            self.ui_model.label = f"model: {det['class']}"
+            self.ui_model.label = f"model: {self.scene.class_names.get(det['class'], det['class'])}"
 
     def info_text(self, det: dict) -> str:
         r = det["review"]
         who = f" by {r['by']} on {readable_time(r['at'])}" if r.get("by") else ""
         storey = self.scene.storey_of.get(det.get("wall"))
         where = surface_text(det.get("wall"), self.scene.surfaces.get(det.get("wall")))
-        lines = [f"**{det.get('ref') or det['id']} · {det['class']}** on {where}"
+        name = self.scene.class_names.get(det["class"], det["class"])
+        lines = [f"**{det.get('ref') or det['id']} · {name}** on {where}"
                  + (f", storey {storey}" if storey else ""),
                  f"u {_fmt(det.get('u'), 3)} m, v {_fmt(det.get('v'), 3)} m, "
                  f"{_fmt(det.get('width_m'), 3)} × {_fmt(det.get('height_m'), 3)} m",
