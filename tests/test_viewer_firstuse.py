@@ -3,8 +3,11 @@ floor, readable times, no glyph a browser may lack."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
+from viser import _messages as vm
 
 from app.viewer.backend import InMemoryBackend
 from app.viewer.manager import ViewerManager
@@ -122,6 +125,46 @@ def test_class_dropdowns_show_the_librarys_names_and_decide_by_id(tmp_path) -> N
         origin = f.to_world(0.5, 1.0, 1.0) - scene.centre
         added = session.add_at_ray(origin, -np.asarray(f.normal, float))
         assert added is not None and added["class"] == "switch" and added["wall"] == wall
+    finally:
+        if tab is not None:
+            tab.close()
+        manager.stop_all()
+
+
+def test_the_scan_comes_after_the_first_frame_in_batches(tmp_path) -> None:
+    """A tab that has not drawn yet gets no scan; once it answers its render request it gets
+    the scan in batches of about ``scan_batch_points``, a pause apart."""
+    from .test_viewer_scene import FakeTab, wait_for
+
+    sp = write_synthetic_project(tmp_path / "out", rooms=2, walls_per_room=4, objects_per_wall=1, points=40_000,
+                                 room_size=(9.0, 9.0))
+    backend = InMemoryBackend()
+    backend.add_detection_dir(1, sp.out_dir, scans=[sp.scan])
+    settings = SceneSettings(poll_s=0.05, scan_delay_s=0.0, overview_points=20_000, tile_m=3.0,
+                             scan_batch_points=4000, scan_batch_pause_s=0.3, first_frame_wait_s=30.0)
+    manager = ViewerManager(backend, settings=settings)
+    tab = None
+    try:
+        scene = manager.wait_ready(1, 60)
+        tab = FakeTab(manager.viewer(1).port)
+        answer, tab.frame = tab.frame, None  # a tab still busy drawing: no answer yet
+        session = wait_for(lambda: next(iter(scene.sessions.values()), None), what="session")
+        req = wait_for(lambda: next((m for _, m in list(tab.received) if m.get("type") == "GetRenderRequestMessage"),
+                                    None), what="render request")
+        time.sleep(1.0)
+        assert session.scan_points_sent() == 0  # nothing of the scan before the first frame
+        tab.send(vm.GetRenderResponseMessage(payload=answer, render_uuid=req["render_uuid"]))
+        tiles = scene.scan_tiles["scan_overview"]
+        total = sum(len(t.points) for t in tiles)
+        wait_for(lambda: session.scan_points_sent() == total, 30.0, "the whole overview")
+        def clouds() -> list[float]:
+            return [t for t, m in list(tab.received) if m.get("type") == "PointCloudMessage"]
+
+        wait_for(lambda: len(clouds()) == len(tiles), 10.0, "every tile received")
+        times = clouds()
+        assert len(tiles) > 3
+        gaps = np.diff(times)
+        assert (gaps > 0.2).sum() >= total // 4000 - 2  # batches a pause apart, not one burst
     finally:
         if tab is not None:
             tab.close()

@@ -108,7 +108,10 @@ class SceneSettings:
     label_step_m: float = 0.35  # ... this much above each other
     label_lift_m: float = 0.06
     poll_s: float = 0.25  # change feed polling period
-    scan_delay_s: float = 1.5  # a new tab gets the scan this long after the rest of the scene
+    scan_delay_s: float = 1.0  # a new tab gets the scan this long after it drew the rest of the scene
+    first_frame_wait_s: float = 30.0  # ... or, when it shows no frame (a render it answers), this long
+    scan_batch_points: int = 60_000  # the scan goes out in batches of about this many points ...
+    scan_batch_pause_s: float = 0.4  # ... this far apart, so the tab draws between them
     scan_detail: str = "overview"  # what a new tab shows first: overview, full or off
     fly_s: float = 0.6  # camera flight to a selected object
     fly_steps: int = 24
@@ -618,7 +621,7 @@ class ProjectScene:
                      "rois_depth", "rois_colour", "spots", "spot_labels"):
             self.groups[name] = scene.add_frame(f"/{name}", show_axes=False,
                                                 visible=self._layer_visible(name))
-        self.scan_tiles = self._scan_layers(lod) if lod is not None else {}
+        self.scan_tiles = self._scan_layers(lod, ("overview",)) if lod is not None else {}
         ext = self._extent()
         self.spot_radius = max(self.s.spot_radius_m, self.s.spot_extent_share * ext)
         tops = {wid: f.to_world(f.width_m / 2.0, f.height_m, 0.05) - self.centre for wid, f in self.frames.items()}
@@ -634,14 +637,14 @@ class ProjectScene:
         rois = (data.rois or {}).get("walls", {})
         for wid, r in rois.items():
             self._add_rois(wid, r)
-        if self.ui_images.value != "off":
-            self._add_images(self.ui_images.value)
         for d in dets:
             self._add_spot(d)
         self._set_initial_camera()
-        # A status element created last: a browser that shows it has every node before it.
+        # The status once the plan, walls and spots are there: a browser that shows it has them.
         self._status.remove()
         self._status = self.server.gui.add_markdown(self.status_text(), order=0)
+        if self.ui_images.value != "off":  # the heaviest shared layer after them (the scan: per tab)
+            self._add_images(self.ui_images.value)
         for session in self.sessions.values():
             session.reset()
 
@@ -670,8 +673,16 @@ class ProjectScene:
         """World coordinates to scene coordinates (recentred)."""
         return np.asarray(world, dtype=np.float64) - self.centre
 
-    def _scan_layers(self, lod: ScanLod) -> dict[str, list[ScanTile]]:
-        """The scan's layers (body / ceiling at the overview and the full level), in tiles."""
+    def scan_layer(self, name: str) -> list[ScanTile] | None:
+        """The tiles of one scan layer (``scan_full``...), made the first time a tab asks for
+        the full level (the build makes only the overview's, which every tab gets)."""
+        with self._lock:
+            if name not in self.scan_tiles and self.lod is not None and name.endswith("_full"):
+                self.scan_tiles.update(self._scan_layers(self.lod, ("full",)))
+            return self.scan_tiles.get(name)
+
+    def _scan_layers(self, lod: ScanLod, levels: Iterable[str] = ("overview", "full")) -> dict[str, list[ScanTile]]:
+        """The scan's layers (body / ceiling at the given levels), in tiles."""
         top = None
         if self.frames:
             top = float(np.median([f.origin[2] + f.height_m - self.centre[2]
@@ -681,6 +692,8 @@ class ProjectScene:
         ov_size = max(ov.voxel_m * self.s.point_size_voxels, full_size)
         layers = {}
         for level, lv, size in (("full", lod, full_size), ("overview", ov, ov_size)):
+            if level not in levels:
+                continue
             ceiling = lv.xyz[:, 2] > top if top is not None else np.zeros(len(lv.xyz), bool)
             for part, mask in (("scan", ~ceiling), ("ceiling", ceiling)):
                 layers[f"{part}_{level}"] = make_tiles(lv.xyz[mask], lv.rgb[mask], size,
@@ -1156,14 +1169,21 @@ class ReviewSession:
 
     # -- the scan, per tab ----------------------------------------------------------------
     def stream_scan_later(self) -> None:
-        """Send the scan after the rest of the scene, so the tab shows walls and spots first.
+        """Send the scan once the tab has drawn the rest of the scene: the first frame at once.
 
-        The scan is by far the heaviest layer to send and to draw; a tab gets it
-        ``scan_delay_s`` after connecting, tile by tile, at the detail it asks for.
+        The scan is by far the heaviest layer to send and to draw (in a browser without a
+        graphics card a frame with the overview's points takes seconds): a tab first draws the
+        plan, walls, spots and panel; once it has shown a frame (:meth:`wait_drawn`) and
+        ``scan_delay_s`` later, it gets the scan at the detail it asks for, progressively
+        (:meth:`update_scan`).
         """
         def run() -> None:
-            time.sleep(self.scene.s.scan_delay_s)
             if self.scene.ready.wait(600):
+                t = time.monotonic()
+                drawn = self.wait_drawn(self.scene.s.first_frame_wait_s)
+                log.info("viewer: tab %s %s after %.1f s; the scan follows", self.client.client_id,
+                         "drew its first frame" if drawn else "showed no frame", time.monotonic() - t)
+                time.sleep(self.scene.s.scan_delay_s)
                 self.update_scan()
 
         threading.Thread(target=run, name=f"viewer-scan-{self.client.client_id}",
@@ -1175,26 +1195,51 @@ class ReviewSession:
             return set()
         return {f"scan_{level}"} | ({f"ceiling_{level}"} if self.ui_ceiling.value else set())
 
+    def wait_drawn(self, timeout: float) -> bool:
+        """Wait until this tab has drawn a frame of what it was sent (it answers a tiny render
+        request after applying every message before it); False after ``timeout`` or when the
+        tab cannot render (it has gone)."""
+        try:
+            self.client.get_render(8, 8, timeout=timeout)
+            return True
+        except Exception:  # TimeoutError, a closed tab, a client that cannot render
+            return False
+
     def update_scan(self) -> None:
-        """Show the scan layers this tab asks for, sending each one the first time."""
-        tiles = self.scene.scan_tiles
+        """Show the scan layers this tab asks for, sending each one the first time: tile by
+        tile, in batches of about ``scan_batch_points`` points ``scan_batch_pause_s`` apart,
+        so the tab draws the scan as it comes instead of stalling on one large message."""
+        s = self.scene.s
+        want = self.wanted_scan_layers()
+        # before the tab's scan lock: a rebuild holds the scene's lock while it resets the tabs
+        tiles = {name: layer for name in want if (layer := self.scene.scan_layer(name)) is not None}
         with self._scan_lock:
             if self.scene.sessions.get(self.client.client_id) is not self:
                 return  # the tab has gone
-            want = self.wanted_scan_layers()
-            for name in want - set(self.scan_nodes):
-                if name not in tiles:
-                    continue
-                group = self.client.scene.add_frame(f"/{name}", show_axes=False)
-                self.scan_groups[name] = group
-                self.scan_nodes[name] = [
-                    self.client.scene.add_point_cloud(
-                        f"/{name}/t{i}", points=t.points, colors=t.colors,
-                        point_size=t.point_size, point_shape="square", precision="float16",
-                        point_shading="flat", position=t.position)
-                    for i, t in enumerate(tiles[name])]
+            todo = []
+            for name in sorted(want - set(self.scan_nodes)):
+                if name in tiles:
+                    self.scan_groups[name] = self.client.scene.add_frame(f"/{name}", show_axes=False)
+                    self.scan_nodes[name] = []
+                    todo.append((name, self.scan_groups[name]))
             for name, group in self.scan_groups.items():
                 group.visible = name in want
+        batch = 0
+        for name, group in todo:
+            for i, t in enumerate(tiles[name]):
+                if batch >= s.scan_batch_points:
+                    time.sleep(s.scan_batch_pause_s)  # the scan lock is free meanwhile
+                    batch = 0
+                with self._scan_lock:
+                    if self.scene.sessions.get(self.client.client_id) is not self:
+                        return  # the tab has gone
+                    if self.scan_groups.get(name) is not group:
+                        break  # a rebuild: this layer's tiles are no longer wanted
+                    self.scan_nodes[name].append(self.client.scene.add_point_cloud(
+                        f"/{name}/t{i}", points=t.points, colors=t.colors,
+                        point_size=t.point_size, point_shape="square", precision="float16",
+                        point_shading="flat", position=t.position))
+                batch += len(t.points)
 
     def scan_points_sent(self) -> int:
         with self._scan_lock:
