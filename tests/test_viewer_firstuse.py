@@ -40,6 +40,23 @@ def test_spread_labels_stacks_close_labels_only() -> None:
             assert not near or abs(out[a][2] - out[b][2]) >= 0.34, (a, b)
 
 
+def test_label_positions_spread_faces_and_corners_along_their_walls() -> None:
+    from app.viewer.scene import label_positions
+    from sbsc_core.types import WallFrame
+
+    def wall(origin, u, width):  # noqa: ANN001
+        u = np.asarray(u, float)
+        return WallFrame(origin=np.asarray(origin, float), axis_u=u, axis_v=np.array([0.0, 0.0, 1.0]),
+                         normal=np.cross(u, [0.0, 0.0, 1.0]), width_m=width, height_m=3.0)
+
+    frames = {"A": wall([0, 0, 0], [1, 0, 0], 8.4), "B": wall([8.4, 0.15, 0], [-1, 0, 0], 8.4),  # two faces
+              "C": wall([20, 0, 0], [1, 0, 0], 4.0)}
+    u = label_positions(frames, 1.6)
+    assert u["C"] == pytest.approx(2.0)  # alone: the middle
+    a, b = (frames[k].to_world(u[k], 3.0)[:2] for k in ("A", "B"))
+    assert np.hypot(*(a - b)) == pytest.approx(8.4 / 3, abs=0.05)  # a third of the wall apart
+
+
 def test_scene_of_a_floor_stacks_wall_names_and_sizes_spots(tmp_path) -> None:
     sp = write_synthetic_project(tmp_path / "out", rooms=6, columns=3, walls_per_room=4, objects_per_wall=1,
                                  points=20_000, room_size=(7.6, 9.7), height_m=3.0)
@@ -56,7 +73,9 @@ def test_scene_of_a_floor_stacks_wall_names_and_sizes_spots(tmp_path) -> None:
         for i, a in enumerate(tops):  # no two wall names at one place
             for b in tops[i + 1:]:
                 assert np.hypot(*(a[:2] - b[:2])) >= 1.6 or abs(a[2] - b[2]) >= 0.34
-        assert any(p[2] > min(q[2] for q in tops) + 0.3 for p in tops)  # neighbouring rooms' walls stacked
+        # the rooms' shared partitions (two faces, middles at one place): names spread along the
+        # walls, apart in plan, as a view from above shows them (not only raised)
+        assert min(np.hypot(*(a[:2] - b[:2])) for i, a in enumerate(tops) for b in tops[i + 1:]) >= 1.6
         scene.locked, scene.signoff = True, {"by": "max", "at": "2026-11-28T12:34:56+00:00"}
         text = scene.status_text()
         assert "on 2026-11-28 12:34 UTC" in text and "🔒" not in text

@@ -104,8 +104,8 @@ class SceneSettings:
     wall_thickness_px: float = 2.5
     spot_radius_m: float = 0.05  # at least; a big floor gets bigger spots (spot_extent_share)
     spot_extent_share: float = 0.004  # spot radius = this x the floor's larger side, when larger
-    label_gap_m: float = 1.6  # wall labels closer than this in plan are stacked ...
-    label_step_m: float = 0.35  # ... this much above each other
+    label_gap_m: float = 1.6  # wall names closer than this in plan are spread along their walls ...
+    label_step_m: float = 0.35  # ... and those still that close stacked this much above each other
     label_lift_m: float = 0.06
     poll_s: float = 0.25  # change feed polling period
     scan_delay_s: float = 1.0  # a new tab gets the scan this long after it drew the rest of the scene
@@ -189,6 +189,40 @@ def readable_time(iso: Any) -> str:
     if t.tzinfo is not None:
         t = t.astimezone(_dt.UTC)
     return t.strftime("%Y-%m-%d %H:%M") + (" UTC" if t.tzinfo is not None else "")
+
+
+def label_positions(frames: dict[str, WallFrame], gap_m: float) -> dict[str, float]:
+    """Where along each wall (u, metres) its name goes: the middle, except for walls whose
+    middles are closer than ``gap_m`` in plan (the two faces of a partition, walls meeting
+    at a corner): each of such a group of n goes to (k + 1) / (n + 1) of its own width, in
+    the order of the ids and measured the same way round on walls facing each other, so that
+    seen from above the names stand apart (raising them would not separate them in a view
+    from above)."""
+    ids = list(frames)
+    mids = {w: frames[w].to_world(frames[w].width_m / 2.0, frames[w].height_m)[:2] for w in ids}
+    group = {w: w for w in ids}
+
+    def root(w: str) -> str:
+        while group[w] != w:
+            w = group[w]
+        return w
+
+    for i, a in enumerate(ids):
+        for b in ids[i + 1:]:
+            if np.hypot(*(mids[a] - mids[b])) < gap_m:
+                group[root(b)] = root(a)
+    members: dict[str, list[str]] = {}
+    for w in ids:
+        members.setdefault(root(w), []).append(w)
+    out = {}
+    for ws in members.values():
+        ref = frames[min(ws)].axis_u
+        for k, w in enumerate(sorted(ws)):
+            share = (k + 1) / (len(ws) + 1)
+            if float(np.dot(frames[w].axis_u, ref)) < -0.5:  # the other face of a partition runs the other way
+                share = 1.0 - share
+            out[w] = frames[w].width_m * share
+    return out
 
 
 def spread_labels(points: dict[str, np.ndarray], gap_m: float, step_m: float) -> dict[str, np.ndarray]:
@@ -624,7 +658,8 @@ class ProjectScene:
         self.scan_tiles = self._scan_layers(lod, ("overview",)) if lod is not None else {}
         ext = self._extent()
         self.spot_radius = max(self.s.spot_radius_m, self.s.spot_extent_share * ext)
-        tops = {wid: f.to_world(f.width_m / 2.0, f.height_m, 0.05) - self.centre for wid, f in self.frames.items()}
+        along = label_positions(self.frames, self.s.label_gap_m)
+        tops = {wid: f.to_world(along[wid], f.height_m, 0.05) - self.centre for wid, f in self.frames.items()}
         self.label_at = spread_labels(tops, self.s.label_gap_m, self.s.label_step_m)
         for wid, frame in self.frames.items():
             self._add_wall(wid, frame)
