@@ -230,6 +230,7 @@ def test_click_accept_records_decision_and_syncs(setup):
         assert "read-only" in scene.status_text()
         wait_for(lambda: session.ui_accept.disabled and session.ui_reject.disabled)
         wait_for(lambda: "read-only" in session.ui_who.content, 1.0, "read-only notice")
+        assert "🔒" not in session.ui_who.content + session.ui_info.content  # a glyph fonts may lack
         before = backend.project_data(1).detections
         tab.press(session.ui_accept)
         time.sleep(0.3)

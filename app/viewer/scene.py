@@ -1491,11 +1491,11 @@ class ReviewSession:
         for b in (self.ui_accept, self.ui_reject, self.ui_relabel, self.ui_class):
             b.disabled = not can
         if sc.locked:
-            self.ui_who.content = "🔒 Signed off: this scene is **read-only**." + (
+            self.ui_who.content = "**Signed off**: this scene is **read-only**." + (
                 f" (signed in as {self.user.name})" if self.user else "")
         if det is None:
             self.ui_info.content = "Click a spot to select an object." if not sc.locked else \
-                "🔒 Signed off: read-only. Click a spot to see an object."
+                "**Signed off**: read-only. Click a spot to see an object."
             for img in (self.ui_colour, self.ui_depth, self.ui_model):
                 img.visible = False
             return
@@ -1525,7 +1525,7 @@ class ReviewSession:
                  f"ρ_C {_fmt(det.get('rho_colour'))} · found in {det.get('source')}",
                  f"Review: **{r['status']}**{who} (version {r.get('version')})"]
         if self.scene.locked:
-            lines.append("🔒 Signed off: read-only.")
+            lines.append("**Signed off**: read-only.")
         return "\n\n".join(lines)
 
     def _crop(self, det: dict, kind: str) -> np.ndarray | None:
