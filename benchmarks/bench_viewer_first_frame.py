@@ -177,7 +177,7 @@ class TreePeak:
         return self.peak_kib / 1024.0
 
 
-def open_scene(srv: ServerProcess, token: str, pid: int, title: str) -> dict:
+def open_scene(srv: ServerProcess, token: str, pid: int, title: str, user: str = "rita") -> dict:
     """Sign in, open the project's 3D view in headless Chromium; seconds to its status and to
     its first drawn frame, then the server's memory with the scene open."""
     from playwright.sync_api import sync_playwright
@@ -217,12 +217,13 @@ def open_scene(srv: ServerProcess, token: str, pid: int, title: str) -> dict:
             time.sleep(0.2)
         res["first_frame_s"] = round(time.perf_counter() - t0, 2)
         res["bytes_by_first_frame"] = sum(n for t, n in frames if t <= res["first_frame_s"])
-        time.sleep(0.5)
-        seen.set()
-        res["tab_drew_s"] = round(drew[0], 2) if drew else None  # the tab's own first frame (before the scan)
-        scene.get_by_text("Signed in as rita").wait_for(timeout=10_000)
+        scene.get_by_text(f"Signed in as {user}").wait_for(timeout=10_000)
         time.sleep(8.0)  # the scan tiles arrive after the first frame
         res["bytes_after_8s"] = sum(n for _, n in frames)
+        seen.set()
+        # when the tab answered the render request after which its scan is sent (viser's
+        # get_render: a frame captured once every earlier message is applied)
+        res["tab_answered_s"] = round(drew[0], 2) if drew else None
         res["rss_scene_open_mib"] = round(rss_mib(srv))
         scene.screenshot(path=str(Path(tempfile.gettempdir()) / f"sbsc-first-frame-{pid}.png"))
         scene.close()
@@ -233,9 +234,10 @@ def open_scene(srv: ServerProcess, token: str, pid: int, title: str) -> dict:
 def idle_release(srv: ServerProcess, idle_s: float, res: dict) -> None:
     """Wait until the idle scene is stopped; the server's memory after it."""
     t1 = time.perf_counter()
+    start = srv.log_path.stat().st_size
     while time.perf_counter() - t1 < idle_s * 3:
         time.sleep(1.0)
-        if "idle for" in srv.log():
+        if b"idle for" in srv.log_path.read_bytes()[start:]:
             break
     time.sleep(2.0)
     res["idle_stopped_after_s"] = round(time.perf_counter() - t1, 1)
@@ -314,6 +316,31 @@ def after_job(detect_out: Path, scan: Path, tmp: Path, idle_s: float) -> dict:
     return res
 
 
+def open_only(data: Path, tmp: Path, idle_s: float) -> dict:
+    """The first frame of the project "first frame" that an earlier ``sbsc import`` made in
+    ``data`` (its scene prepared): nothing read or prepared again (``--open-only DATA``)."""
+    del tmp
+    settings = AppSettings(data_dir=data)
+    pid = find_sample_project(settings, "first frame")
+    if pid is None:
+        raise SystemExit(f"{data}: no project 'first frame' (sbsc import ... --name 'first frame' makes it)")
+    name = f"rita{int(time.time())}"
+    token = add_user(settings, name, "reviewer")
+    env = {**os.environ, "SBSC_DATA_DIR": str(data), "PYTHONPATH": str(ROOT)}
+    subprocess.run([sys.executable, "-m", "app", "user", "add-member", name, str(pid), "--role",
+                    "reviewer"], env=env, check=True)
+    srv = ServerProcess(data, {"SBSC_VIEWER_IDLE_S": str(idle_s)}).start()
+    res: dict = {}
+    try:
+        time.sleep(2.0)
+        res["rss_before_mib"] = round(rss_mib(srv))
+        res.update(open_scene(srv, token, pid, "first frame", name))
+        idle_release(srv, idle_s, res)
+    finally:
+        srv.stop()
+    return res
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("detect_out", type=Path, nargs="?")
@@ -324,7 +351,15 @@ def main() -> int:
                     help="where the synthetic floor is kept between runs")
     ap.add_argument("--idle-s", type=float, default=20.0)
     ap.add_argument("--only", choices=("import", "job"), help="measure one way only (default: both)")
+    ap.add_argument("--open-only", type=Path, metavar="DATA",
+                    help="only open the scene of project 'first frame' in this data dir (made by an earlier import)")
     args = ap.parse_args()
+    if args.open_only:
+        res = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load_avg_start": os.getloadavg()[0],
+               "open_only": open_only(args.open_only.resolve(), Path(tempfile.gettempdir()), args.idle_s),
+               "load_avg_end": os.getloadavg()[0]}
+        print(json.dumps(res, indent=1))
+        return 0
     res: dict = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load_avg_start": os.getloadavg()[0]}
     if args.synthetic:
         args.keep.mkdir(parents=True, exist_ok=True)
