@@ -270,7 +270,7 @@ def class_choices(ids: Iterable[str], names: dict[str, str]) -> dict[str, str]:
     shown = [names.get(cid, cid) for cid in ids]
     taken = set(ids)
     out: dict[str, str] = {}
-    for cid, label in zip(ids, shown):
+    for cid, label in zip(ids, shown, strict=True):
         if shown.count(label) > 1 or (label != cid and label in taken):
             label = f"{label} ({cid})"
         out[label] = cid
