@@ -217,7 +217,7 @@ def open_scene(srv: ServerProcess, token: str, pid: int, title: str, user: str =
             time.sleep(0.2)
         res["first_frame_s"] = round(time.perf_counter() - t0, 2)
         res["bytes_by_first_frame"] = sum(n for t, n in frames if t <= res["first_frame_s"])
-        scene.get_by_text(f"Signed in as {user}").wait_for(timeout=10_000)
+        scene.get_by_text(f"Signed in as {user}").wait_for(timeout=60_000)
         time.sleep(8.0)  # the scan tiles arrive after the first frame
         res["bytes_after_8s"] = sum(n for _, n in frames)
         seen.set()

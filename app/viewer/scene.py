@@ -108,7 +108,7 @@ class SceneSettings:
     label_step_m: float = 0.35  # ... and those still that close stacked this much above each other
     label_lift_m: float = 0.06
     poll_s: float = 0.25  # change feed polling period
-    scan_delay_s: float = 1.0  # a new tab gets the scan this long after it drew the rest of the scene
+    scan_delay_s: float = 2.0  # a new tab gets the scan this long after it drew the rest of the scene
     first_frame_wait_s: float = 10.0  # ... or, when it answers no render request by then, this long after the build
     scan_batch_points: int = 60_000  # the scan goes out in batches of about this many points ...
     scan_batch_pause_s: float = 0.4  # ... this far apart, so the tab draws between them
