@@ -235,16 +235,13 @@ def refuse_busy_port(host: str, port: int) -> None:
 
     if port == 0:
         return
-    try:
-        infos = socket.getaddrinfo(host.strip("[]") or None, port, type=socket.SOCK_STREAM,
-                                   flags=socket.AI_PASSIVE)
-    except socket.gaierror as exc:
-        raise InputError("--host", f"cannot listen on '{host}' ({exc.strerror})") from None
-    family, kind, proto, _, addr = infos[0]
-    with socket.socket(family, kind, proto) as probe:
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET  # as uvicorn binds it
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
         probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
-            probe.bind(addr)
+            probe.bind((host.strip("[]"), port))
+        except socket.gaierror as exc:
+            raise InputError("--host", f"cannot listen on '{host}' ({exc.strerror})") from None
         except OSError as exc:
             why = "is busy (another program listens on it)" if exc.errno == errno.EADDRINUSE \
                 else f"cannot be listened on ({exc.strerror})"
