@@ -21,7 +21,7 @@ from fastapi.responses import JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 from sqlalchemy.exc import DBAPIError
 
-from sbsc_core.errors import SbscError
+from sbsc_core.errors import InputError, SbscError
 
 from .api.deps import TokenCache
 from .bounds import BoundsMiddleware
@@ -232,12 +232,41 @@ def start_page(settings: AppSettings) -> str:
     return f"/review.html?id={pid}" if pid is not None else "/index.html"
 
 
+def refuse_busy_port(host: str, port: int) -> None:
+    """Raise InputError (one line) when ``host:port`` cannot be listened on, before any work.
+
+    Binds a probe socket the way uvicorn will (``SO_REUSEADDR``, so a port in TIME_WAIT
+    counts as free) and closes it at once; port 0 (any free port) is never busy.
+    """
+    import errno
+    import socket
+
+    if port == 0:
+        return
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET  # as uvicorn binds it
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host.strip("[]"), port))
+        except socket.gaierror as exc:
+            raise InputError("--host", f"cannot listen on '{host}' ({exc.strerror})") from None
+        except OSError as exc:
+            why = "is busy (another program listens on it)" if exc.errno == errno.EADDRINUSE \
+                else f"cannot be listened on ({exc.strerror})"
+            raise InputError("--port", f"port {port} on {host} {why}; choose another with "
+                                       "--port P (0 picks a free one)") from None
+
+
 def serve(host: str = "127.0.0.1", port: int = 8000, open_browser: bool = False) -> None:
-    """``sbsc serve``: run the app with uvicorn until interrupted."""
+    """``sbsc serve``: run the app with uvicorn until interrupted.
+
+    A busy port is refused first, in one line (exit 2), before the data folder is touched.
+    """
     from urllib.parse import quote
 
     import uvicorn
 
+    refuse_busy_port(host, port)
     settings = AppSettings()
     settings.ensure_dirs()
     reap_orphans(settings)

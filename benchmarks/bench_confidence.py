@@ -10,7 +10,9 @@ Scenes: ``one_room.yaml`` for every realism VARIANT (as in ``bench_realism.py``:
 ``clutter``, ``realistic``, ``acceptance``, ...), every pairing of scene and library design
 sets (``standard/standard``, ``alt/alt`` and, by default, the crosses ``standard/alt`` and
 ``alt/standard``: objects whose design differs from their model, as every real building's
-do, which give real mistakes and right hits with a misfit to learn from), upright and with a share of the rotatable objects turned, at several seeds. The FIT
+do, which give real mistakes and right hits with a misfit to learn from), upright and with a share of the rotatable objects turned, at several seeds. ``--fit-families`` / ``--eval-families`` add random design families (issue 27: scene
+and library of one family drawn per seed, ``sbsc simulate --designs random``), so that the
+calibration is fitted on many designs and reported on families left out of the fit. The FIT
 seeds and the EVALUATION seeds are disjoint; ``--eval-pairs`` may name other design sets
 for the evaluation only (the third family is never fitted on). Each scene is detected once
 (its candidates are kept in ``--work``) and its candidates go through consensus both with
@@ -65,7 +67,7 @@ from sbsc_core.io.scans import read_scans  # noqa: E402
 from sbsc_core.paths import sample_projects_dir  # noqa: E402
 from sbsc_core.pipeline import detect  # noqa: E402
 from sbsc_core.settings import DetectionSettings  # noqa: E402
-from sbsc_core.simulate.designs import design_builder  # noqa: E402
+from sbsc_core.simulate.designs import RANDOM, design_builder  # noqa: E402
 from sbsc_core.simulate.scenarios import simulate_scene  # noqa: E402
 from sbsc_core.templates import make_templates  # noqa: E402
 from sbsc_core.types import Orthoimage  # noqa: E402
@@ -169,8 +171,14 @@ def main() -> int:
     ap.add_argument("--pairs", nargs="+", default=list(PAIRS), help="SCENE/LIBRARY design sets fitted on")
     ap.add_argument("--eval-pairs", nargs="+", default=None, help="design sets evaluated on (default: --pairs)")
     ap.add_argument("--turned", nargs="+", type=float, default=list(TURNED), help="shares of objects turned")
-    ap.add_argument("--fit-seeds", nargs="+", type=int, default=list(FIT_SEEDS))
-    ap.add_argument("--eval-seeds", nargs="+", type=int, default=list(EVAL_SEEDS))
+    ap.add_argument("--fit-seeds", nargs="*", type=int, default=list(FIT_SEEDS),
+                    help="seeds of the --pairs scenes fitted on (none: only the families and scenes given)")
+    ap.add_argument("--eval-seeds", nargs="*", type=int, default=list(EVAL_SEEDS))
+    ap.add_argument("--fit-families", nargs="+", type=int, default=[], metavar="SEED",
+                    help="random design families fitted on (scene and library of one family, "
+                         "``sbsc simulate --designs random``), beside --pairs x --fit-seeds")
+    ap.add_argument("--eval-families", nargs="+", type=int, default=[], metavar="SEED",
+                    help="random design families evaluated on (never ones fitted on)")
     ap.add_argument("--fit-scenes", nargs="+", type=Path, default=[],
                     help="simulated scenes (any layout, e.g. bench_realism.py --full runs) also fitted on")
     ap.add_argument("--eval-scenes", nargs="+", type=Path, default=[], help="simulated scenes also evaluated on")
@@ -179,6 +187,8 @@ def main() -> int:
     args = ap.parse_args()
     if set(args.fit_seeds) & set(args.eval_seeds):
         ap.error("--fit-seeds and --eval-seeds must be disjoint")
+    if set(args.fit_families) & set(args.eval_families):
+        ap.error("--fit-families and --eval-families must be disjoint")
     if any(p.split("/")[0] == "third" or p.endswith("/third") for p in args.pairs):
         ap.error("the third design family is for testing only: never fit on it")
     args.work.mkdir(parents=True, exist_ok=True)
@@ -187,24 +197,25 @@ def main() -> int:
     data: dict[str, list[tuple[np.ndarray, int]]] = {"fit": [], "eval": []}
     codes: set[str] = set()
     t0 = time.perf_counter()
-    plan = (("fit", args.fit_seeds, args.pairs), ("eval", args.eval_seeds, args.eval_pairs or args.pairs))
-    for part, seeds, pairs in plan:
-        for seed in seeds:
-            for pair in pairs:
-                scene_d, lib_d = pair.split("/")
-                for variant in args.variants:
-                    for turned in args.turned:
-                        scan = args.work / f"{variant}-{scene_d}-{lib_d}-t{turned:g}-s{seed}"
-                        if not (scan / "ground_truth.json").is_file():
-                            simulate_scene(scene_file(args.work, turned, seed), scan, seed=seed,
-                                           angular_step_deg=args.step, design=False,
-                                           object_builder=design_builder(scene_d),
-                                           library_builder=design_builder(lib_d), **VARIANTS[variant])
-                        rows = rows_of(scan, settings, args.radius, codes)
-                        data[part].extend(rows)
-                        n_right = sum(r for _, r in rows)
-                        print(f"{part:4s} {scan.name:44s} hits {len(rows):3d} right {n_right:3d} "
-                              f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    plan = [(part, seed, *pair.split("/")) for part, seeds, pairs in
+            (("fit", args.fit_seeds, args.pairs), ("eval", args.eval_seeds, args.eval_pairs or args.pairs))
+            for seed in seeds for pair in pairs]
+    plan += [(part, family, RANDOM, RANDOM) for part, families in
+             (("fit", args.fit_families), ("eval", args.eval_families)) for family in families]
+    for part, seed, scene_d, lib_d in plan:
+        for variant in args.variants:
+            for turned in args.turned:
+                scan = args.work / f"{variant}-{scene_d}-{lib_d}-t{turned:g}-s{seed}"
+                if not (scan / "ground_truth.json").is_file():
+                    simulate_scene(scene_file(args.work, turned, seed), scan, seed=seed,
+                                   angular_step_deg=args.step, design=False,
+                                   object_builder=design_builder(scene_d, seed),
+                                   library_builder=design_builder(lib_d, seed), **VARIANTS[variant])
+                rows = rows_of(scan, settings, args.radius, codes)
+                data[part].extend(rows)
+                n_right = sum(r for _, r in rows)
+                print(f"{part:4s} {scan.name:44s} hits {len(rows):3d} right {n_right:3d} "
+                      f"({time.perf_counter() - t0:.0f} s)", flush=True)
     for part, scans in (("fit", args.fit_scenes), ("eval", args.eval_scenes)):
         for scan in scans:
             rows = rows_of(scan, settings, args.radius, codes)
@@ -218,9 +229,11 @@ def main() -> int:
     cal = fit_logistic(xf, yf, signs=[MONOTONE.get(f, 0) for f in FEATURES])
     table, ece = reliability(cal.predict(xe), ye)
     _, ece_fit = reliability(cal.predict(xf), yf)
-    print(f"\nfitted on {len(yf)} hits ({int(yf.sum())} right) of seeds {args.fit_seeds} {args.pairs}; "
-          f"evaluated on {len(ye)} hits ({int(ye.sum())} right) of seeds {args.eval_seeds} "
-          f"{args.eval_pairs or args.pairs}; variants {args.variants}")
+    fixed = f"seeds {args.fit_seeds} of {args.pairs}, " if args.fit_seeds else ""
+    fixed_e = f"seeds {args.eval_seeds} of {args.eval_pairs or args.pairs}, " if args.eval_seeds else ""
+    print(f"\nfitted on {len(yf)} hits ({int(yf.sum())} right) of {fixed}random families {args.fit_families}; "
+          f"evaluated on {len(ye)} hits ({int(ye.sum())} right) of {fixed_e}random families {args.eval_families}; "
+          f"variants {args.variants}")
     print(f"candidates made by {', '.join(sorted(codes))}")
     print("coefficients: " + ", ".join(f"{n} {c:+.3f}" for n, c in zip(FEATURES, cal.coef, strict=True))
           + f", intercept {cal.intercept:+.3f}")
@@ -231,8 +244,9 @@ def main() -> int:
     print(f"\nECE (evaluation scenes, 10 bins): {ece:.4f}   (fit scenes: {ece_fit:.4f})")
     if args.write or args.out:
         cal.info = {"fit_seeds": list(args.fit_seeds), "eval_seeds": list(args.eval_seeds), "scenes": "one_room.yaml",
-                    "variants": list(args.variants), "pairs": list(args.pairs),
-                    "eval_pairs": list(args.eval_pairs or args.pairs), "turned": list(args.turned),
+                    "fit_families": list(args.fit_families), "eval_families": list(args.eval_families),
+                    "variants": list(args.variants), "pairs": list(args.pairs) if args.fit_seeds else [],
+                    "eval_pairs": list(args.eval_pairs or args.pairs) if args.eval_seeds else [], "turned": list(args.turned),
                     "radius_m": args.radius,
                     "fit_scenes": [p.name for p in args.fit_scenes], "eval_scenes": [p.name for p in args.eval_scenes],
                     "fit_hits": int(len(yf)), "eval_hits": int(len(ye)), "eval_ece": round(ece, 4),

@@ -1,13 +1,19 @@
-"""The 3D scene after an import: preparing it (time, peak memory), first frame in headless Chromium.
+"""The 3D scene after an import and after a job: preparing it (time, peak memory), first frame in headless Chromium.
 
-Runs ``sbsc import DETECT_OUT --scan SCAN`` into a fresh data dir as its own process (which
-prepares the scene's scan level of detail, reading the scan in chunks, as a job does when it
-ends) and samples the resident memory of that process tree every 0.1 s: ``prepare_peak_mib``.
-Then starts ``sbsc serve`` with a short idle time, signs in on the app's page in headless
-Chromium (software rendering), opens the 3D view from the project page and measures the
-time until the scene's status and its first drawn frame are there. Then closes the tab and
-measures the server's resident memory before opening, with the scene open, and after the
-idle scene was stopped. Run it under the heavy lock (Scenario I reads ~100 M points).
+After an import: runs ``sbsc import DETECT_OUT --scan SCAN`` into a fresh data dir as its
+own process (which prepares the scene's scan level of detail, reading the scan in chunks)
+and samples the resident memory of that process tree every 0.1 s: ``prepare_peak_mib``.
+After a job: starts ``sbsc serve``, makes a project through the REST API, uploads SCAN and
+runs a job whose recognition step hands back DETECT_OUT (:func:`replay_detect_output`; the
+rest is the app's own: the scene's level of detail prepared when the job ends, the results
+imported), sampling the server's process tree (workers included) meanwhile.
+
+Each time a reviewer who is a member of the project (issue 30) signs in on the app's page in
+headless Chromium (software rendering), opens the 3D view from the project page, and the
+bench measures the time until the scene's status and its first drawn frame are there, and
+the websocket bytes by then. Then it closes the tab and measures the server's resident
+memory before opening, with the scene open, and after the idle scene was stopped. Run it
+under the heavy lock (Scenario I reads ~100 M points).
 
     flock /tmp/sbsc-heavy.lock .venv/bin/python benchmarks/bench_viewer_first_frame.py DETECT_OUT SCAN
     flock /tmp/sbsc-heavy.lock .venv/bin/python benchmarks/bench_viewer_first_frame.py --synthetic 100000000
@@ -131,6 +137,210 @@ def drawn(png: bytes) -> bool:
     return float(img.std()) > 8.0  # more than a blank canvas
 
 
+def replay_detect_output(scans, models, *, expected=None, out: Path, settings_file=None,  # noqa: ANN001
+                         log=None, progress=None) -> dict:  # noqa: ANN001
+    """A job runner (``SBSC_JOB_RUNNER``) that hands back the detect output named by
+    ``$SBSC_BENCH_DETECT_OUT`` instead of running recognition again: the job then ends as
+    any job does (the scene's level of detail prepared from the uploaded scan, results imported)."""
+    import shutil
+
+    src = Path(os.environ["SBSC_BENCH_DETECT_OUT"])
+    shutil.copytree(src, out, dirs_exist_ok=True)
+    if log:
+        log(f"replayed the detect output {src.name}")
+    doc = json.loads((Path(out) / "detections.json").read_text())
+    return {"detections": len(doc.get("detections", []))}
+
+
+class TreePeak:
+    """The peak resident memory (MiB) of a process tree, sampled every 0.1 s while in a ``with``."""
+
+    def __init__(self, pid: int) -> None:
+        self.pid, self.peak_kib = pid, 0
+        self._done = threading.Event()
+        self._th = threading.Thread(target=self._sample, daemon=True)
+
+    def _sample(self) -> None:
+        while not self._done.wait(0.1):
+            self.peak_kib = max(self.peak_kib, tree_rss_kib(self.pid))
+
+    def __enter__(self) -> TreePeak:
+        self._th.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._done.set()
+        self._th.join()
+
+    @property
+    def mib(self) -> float:
+        return self.peak_kib / 1024.0
+
+
+def open_scene(srv: ServerProcess, token: str, pid: int, title: str, user: str = "rita") -> dict:
+    """Sign in, open the project's 3D view in headless Chromium; seconds to its status and to
+    its first drawn frame, then the server's memory with the scene open."""
+    from playwright.sync_api import sync_playwright
+
+    res: dict = {"load_avg_open": os.getloadavg()[0]}
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path="/usr/bin/chromium", args=ARGS)
+        page = b.new_page(viewport={"width": 1400, "height": 850})
+        page.goto(srv.url + "/")
+        page.fill("#token", token)
+        page.click("#login-form button[type=submit]")
+        page.wait_for_selector("#new-name")
+        page.goto(f"{srv.url}/project.html?id={pid}")
+        page.wait_for_selector(f"#title:has-text('{title}')")
+        t0 = time.perf_counter()
+        with page.expect_popup() as pop:
+            page.click("#open-3d")
+        scene = pop.value
+        scene.bring_to_front()  # the tab a click opens is in front (a background tab's frames are throttled)
+        drew: list[float] = []  # when the server heard that the tab drew its first frame (its log)
+        seen = threading.Event()
+
+        def watch_log() -> None:
+            start = len(srv.log_path.read_bytes())
+            while not seen.wait(0.1):
+                if b"drew its first frame" in srv.log_path.read_bytes()[start:]:
+                    drew.append(time.perf_counter() - t0)
+                    return
+
+        threading.Thread(target=watch_log, daemon=True).start()
+        frames: list[tuple[float, int]] = []
+        scene.on("websocket", lambda ws: ws.on(
+            "framereceived", lambda data: frames.append((time.perf_counter() - t0, len(data)))))
+        scene.get_by_text("objects on").wait_for(timeout=120_000)
+        res["status_s"] = round(time.perf_counter() - t0, 2)
+        while not drawn(scene.screenshot()) and time.perf_counter() - t0 < 120:
+            time.sleep(0.2)
+        res["first_frame_s"] = round(time.perf_counter() - t0, 2)
+        res["bytes_by_first_frame"] = sum(n for t, n in frames if t <= res["first_frame_s"])
+        scene.get_by_text(f"Signed in as {user}").wait_for(timeout=60_000)
+        time.sleep(8.0)  # the scan tiles arrive after the first frame
+        res["bytes_after_8s"] = sum(n for _, n in frames)
+        seen.set()
+        # when the tab answered the render request after which its scan is sent (viser's
+        # get_render: a frame captured once every earlier message is applied)
+        res["tab_answered_s"] = round(drew[0], 2) if drew else None
+        res["rss_scene_open_mib"] = round(rss_mib(srv))
+        scene.screenshot(path=str(Path(tempfile.gettempdir()) / f"sbsc-first-frame-{pid}.png"))
+        scene.close()
+        b.close()
+    return res
+
+
+def idle_release(srv: ServerProcess, idle_s: float, res: dict) -> None:
+    """Wait until the idle scene is stopped; the server's memory after it."""
+    t1 = time.perf_counter()
+    start = srv.log_path.stat().st_size
+    while time.perf_counter() - t1 < idle_s * 3:
+        time.sleep(1.0)
+        if b"idle for" in srv.log_path.read_bytes()[start:]:
+            break
+    time.sleep(2.0)
+    res["idle_stopped_after_s"] = round(time.perf_counter() - t1, 1)
+    res["rss_after_idle_mib"] = round(rss_mib(srv))
+    res["freed_mib"] = res["rss_scene_open_mib"] - res["rss_after_idle_mib"]
+
+
+def after_import(detect_out: Path, scan: Path, tmp: Path, idle_s: float) -> dict:
+    """``sbsc import`` (its process tree's peak while preparing), then the first frame."""
+    data = tmp / "import"
+    settings = AppSettings(data_dir=data)
+    env = {**os.environ, "SBSC_DATA_DIR": str(data), "PYTHONPATH": str(ROOT)}
+    code, secs, peak, out = run_measured(
+        [sys.executable, "-m", "app", "import", str(detect_out), "--scan", str(scan),
+         "--name", "first frame"], env)
+    print(out, flush=True)
+    if code != 0:
+        raise SystemExit(f"sbsc import failed ({code})")
+    res: dict = {"import_s": round(secs, 1), "prepare_peak_mib": round(peak)}
+    pid = find_sample_project(settings, "first frame")
+    token = add_user(settings, "rita", "reviewer")
+    # an imported project has only the admins as members: rita is made one as an admin does
+    subprocess.run([sys.executable, "-m", "app", "user", "add-member", "rita", str(pid), "--role",
+                    "reviewer"], env=env, check=True)
+    srv = ServerProcess(data, {"SBSC_VIEWER_IDLE_S": str(idle_s)}).start()
+    try:
+        time.sleep(2.0)
+        res["rss_before_mib"] = round(rss_mib(srv))
+        res.update(open_scene(srv, token, pid, "first frame"))
+        idle_release(srv, idle_s, res)
+    finally:
+        srv.stop()
+    return res
+
+
+def after_job(detect_out: Path, scan: Path, tmp: Path, idle_s: float) -> dict:
+    """A project made in the app: the scan uploaded, a job run (recognition replayed from
+    ``detect_out``, the rest as any job: scene prepared, results imported) while the server's
+    process tree is sampled; then the first frame."""
+    import httpx
+
+    data = tmp / "job"
+    settings = AppSettings(data_dir=data)
+    manager = add_user(settings, "mia", "manager")
+    token = add_user(settings, "rita", "reviewer")
+    srv = ServerProcess(data, {"SBSC_VIEWER_IDLE_S": str(idle_s),
+                               "SBSC_JOB_RUNNER": "benchmarks.bench_viewer_first_frame:replay_detect_output",
+                               "SBSC_BENCH_DETECT_OUT": str(detect_out)}).start()
+    res: dict = {}
+    try:
+        h = {"Authorization": f"Bearer {manager}"}
+        with httpx.Client(base_url=srv.url, timeout=900.0) as c:
+            pid = c.post("/api/projects", json={"name": "after a job"}, headers=h).raise_for_status().json()["id"]
+            c.post(f"/api/projects/{pid}/members", json={"user": "rita", "role": "reviewer"},
+                   headers=h).raise_for_status()
+            t = time.perf_counter()
+            with open(scan, "rb") as fh:
+                c.post(f"/api/projects/{pid}/scans", files={"file": (scan.name, fh)},
+                       headers=h).raise_for_status()
+            res["upload_s"] = round(time.perf_counter() - t, 1)
+            time.sleep(2.0)
+            t = time.perf_counter()
+            with TreePeak(srv.proc.pid) as peak:
+                jid = c.post(f"/api/projects/{pid}/jobs", json={}, headers=h).raise_for_status().json()["id"]
+                while (job := c.get(f"/api/jobs/{jid}", headers=h).json())["status"] not in \
+                        ("succeeded", "failed", "cancelled"):
+                    time.sleep(0.5)
+            if job["status"] != "succeeded":
+                raise SystemExit(f"job failed: {job}")
+            res["job_s"], res["prepare_peak_mib"] = round(time.perf_counter() - t, 1), round(peak.mib)
+        res["rss_before_mib"] = round(rss_mib(srv))
+        res.update(open_scene(srv, token, pid, "after a job"))
+        idle_release(srv, idle_s, res)
+    finally:
+        srv.stop()
+    return res
+
+
+def open_only(data: Path, tmp: Path, idle_s: float) -> dict:
+    """The first frame of the project "first frame" that an earlier ``sbsc import`` made in
+    ``data`` (its scene prepared): nothing read or prepared again (``--open-only DATA``)."""
+    del tmp
+    settings = AppSettings(data_dir=data)
+    pid = find_sample_project(settings, "first frame")
+    if pid is None:
+        raise SystemExit(f"{data}: no project 'first frame' (sbsc import ... --name 'first frame' makes it)")
+    name = f"rita{int(time.time())}"
+    token = add_user(settings, name, "reviewer")
+    env = {**os.environ, "SBSC_DATA_DIR": str(data), "PYTHONPATH": str(ROOT)}
+    subprocess.run([sys.executable, "-m", "app", "user", "add-member", name, str(pid), "--role",
+                    "reviewer"], env=env, check=True)
+    srv = ServerProcess(data, {"SBSC_VIEWER_IDLE_S": str(idle_s)}).start()
+    res: dict = {}
+    try:
+        time.sleep(2.0)
+        res["rss_before_mib"] = round(rss_mib(srv))
+        res.update(open_scene(srv, token, pid, "first frame", name))
+        idle_release(srv, idle_s, res)
+    finally:
+        srv.stop()
+    return res
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("detect_out", type=Path, nargs="?")
@@ -140,10 +350,17 @@ def main() -> int:
     ap.add_argument("--keep", type=Path, default=Path(tempfile.gettempdir()) / "sbsc-bench-viewer",
                     help="where the synthetic floor is kept between runs")
     ap.add_argument("--idle-s", type=float, default=20.0)
+    ap.add_argument("--only", choices=("import", "job"), help="measure one way only (default: both)")
+    ap.add_argument("--open-only", type=Path, metavar="DATA",
+                    help="only open the scene of project 'first frame' in this data dir (made by an earlier import)")
     args = ap.parse_args()
-    from playwright.sync_api import sync_playwright
-
-    res: dict = {"date": time.strftime("%Y-%m-%d"), "load_avg_start": os.getloadavg()[0]}
+    if args.open_only:
+        res = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load_avg_start": os.getloadavg()[0],
+               "open_only": open_only(args.open_only.resolve(), Path(tempfile.gettempdir()), args.idle_s),
+               "load_avg_end": os.getloadavg()[0]}
+        print(json.dumps(res, indent=1))
+        return 0
+    res: dict = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load_avg_start": os.getloadavg()[0]}
     if args.synthetic:
         args.keep.mkdir(parents=True, exist_ok=True)
         t = time.perf_counter()
@@ -151,59 +368,13 @@ def main() -> int:
         res["synthetic_written_s"] = round(time.perf_counter() - t, 1)
     elif args.detect_out is None or args.scan is None:
         ap.error("give DETECT_OUT SCAN, or --synthetic N")
+    res["scan_bytes"] = args.scan.stat().st_size
     with tempfile.TemporaryDirectory(prefix="sbsc-viewer-") as tmp:
-        data = Path(tmp) / "data"
-        settings = AppSettings(data_dir=data)
-        env = {**os.environ, "SBSC_DATA_DIR": str(data), "PYTHONPATH": str(ROOT)}
-        code, secs, peak, out = run_measured(
-            [sys.executable, "-m", "app", "import", str(args.detect_out), "--scan", str(args.scan),
-             "--name", "first frame"], env)
-        print(out, flush=True)
-        if code != 0:
-            raise SystemExit(f"sbsc import failed ({code})")
-        res["import_s"], res["prepare_peak_mib"] = round(secs, 1), round(peak)
-        res["scan_bytes"] = args.scan.stat().st_size
-        pid = find_sample_project(settings, "first frame")
-        token = add_user(settings, "rita", "reviewer")
-        srv = ServerProcess(data, {"SBSC_VIEWER_IDLE_S": str(args.idle_s)}).start()
-        try:
-            time.sleep(2.0)
-            res["rss_before_mib"] = round(rss_mib(srv))
-            with sync_playwright() as pw:
-                b = pw.chromium.launch(executable_path="/usr/bin/chromium", args=ARGS)
-                page = b.new_page(viewport={"width": 1400, "height": 850})
-                page.goto(srv.url + "/")
-                page.fill("#token", token)
-                page.click("#login-form button[type=submit]")
-                page.wait_for_selector("#new-name")
-                page.goto(f"{srv.url}/project.html?id={pid}")
-                page.wait_for_selector("#title:has-text('first frame')")
-                t0 = time.perf_counter()
-                with page.expect_popup() as pop:
-                    page.click("#open-3d")
-                scene = pop.value
-                scene.get_by_text("objects on").wait_for(timeout=120_000)
-                res["status_s"] = round(time.perf_counter() - t0, 2)
-                while not drawn(scene.screenshot()) and time.perf_counter() - t0 < 120:
-                    time.sleep(0.2)
-                res["first_frame_s"] = round(time.perf_counter() - t0, 2)
-                scene.get_by_text("Signed in as rita").wait_for(timeout=10_000)
-                time.sleep(8.0)  # the scan tiles arrive after the first frame
-                res["rss_scene_open_mib"] = round(rss_mib(srv))
-                scene.screenshot(path=str(Path(tempfile.gettempdir()) / "sbsc-first-frame.png"))
-                scene.close()
-                b.close()
-            t1 = time.perf_counter()
-            while time.perf_counter() - t1 < args.idle_s * 3:
-                time.sleep(1.0)
-                if "idle for" in srv.log():
-                    break
-            time.sleep(2.0)
-            res["idle_stopped_after_s"] = round(time.perf_counter() - t1, 1)
-            res["rss_after_idle_mib"] = round(rss_mib(srv))
-            res["freed_mib"] = res["rss_scene_open_mib"] - res["rss_after_idle_mib"]
-        finally:
-            srv.stop()
+        for way, run in (("import", after_import), ("job", after_job)):
+            if args.only in (None, way):
+                res[f"after_{way}"] = run(args.detect_out.resolve(), args.scan.resolve(), Path(tmp), args.idle_s)
+                print(json.dumps({way: res[f"after_{way}"]}), flush=True)
+    res["load_avg_end"] = os.getloadavg()[0]
     print(json.dumps(res, indent=1))
     return 0
 

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from .io.scan_source import ScanChunk
-from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
+from .orthoimage import near_wall, ortho_pixels, orthoimage_from_pixels, wall_coordinates
 from .partition import ScanPart, append_records, folder_records
 from .partition import part_chunks as file_chunks
 from .settings import CeilingSettings, OrthoimageSettings
@@ -277,6 +277,7 @@ def ceiling_part(part: ScanPart | MemoryPart, origin: np.ndarray, tiles: list[Ce
     groups: dict[tuple, list[int]] = {}  # tiles at one height under one level of one storey
     for k, t in enumerate(tiles):
         groups.setdefault((float(t.frame.origin[2]), t.storey, t.level), []).append(k)
+    margin = 0.01 + 2 * float(ortho.pixel_m)  # an image's last pixel may reach past its frame; float32 rounding
     for chunk in part_chunks(part, origin):
         z = chunk.xyz[:, 2].astype(np.float64) + float(origin[2])
         for (cz, _, level), ks in groups.items():
@@ -288,22 +289,37 @@ def ceiling_part(part: ScanPart | MemoryPart, origin: np.ndarray, tiles: list[Ce
             if not len(idx):
                 continue
             xyz = chunk.xyz[idx]
-            below = z[idx] < cz - CEILING_SKIN_M  # hangs below the ceiling plane: may be a wall's top
+            below = np.flatnonzero(z[idx] < cz - CEILING_SKIN_M)  # hangs below the ceiling: may be a wall's top
+            xyz_below = xyz[below]
             on_wall = np.zeros(len(idx), bool)
             for f in walls:
-                uvd = wall_coordinates(xyz[below], f, origin)
-                on_wall[below] |= (np.abs(uvd[:, 2]) < wall_clear_m) & (uvd[:, 0] > -wall_clear_m) \
-                    & (uvd[:, 0] < f.width_m + wall_clear_m)
+                on_wall[below[near_wall(xyz_below, f, wall_clear_m, origin)]] = True
             idx, xyz = idx[~on_wall], xyz[~on_wall]
+            spans: dict[tuple[int, float, float], np.ndarray] = {}  # tiles of one grid row or column share a span
             for k in ks:
                 t = tiles[k]
-                uvd = wall_coordinates(xyz, t.frame, origin)
+                x0, y1 = float(t.frame.origin[0]), float(t.frame.origin[1])  # axis_u +x, axis_v -y
+                x1, y0 = x0 + t.frame.width_m, y1 - t.frame.height_m
+                inside = np.flatnonzero(_in_span(xyz, 0, x0, x1, origin, margin, spans)
+                                        & _in_span(xyz, 1, y0, y1, origin, margin, spans))
+                uvd = wall_coordinates(xyz[inside], t.frame, origin)
                 keep, pixel = ortho_pixels(uvd, t.frame, ortho)
                 if not len(pixel):
                     continue
                 written[k] += append_records(_tile_dir(root, k), part.key, pixel, uvd[keep, 2],
-                                             chunk.rgb[idx[keep]])
+                                             chunk.rgb[idx[inside[keep]]])
     return written
+
+
+def _in_span(xyz: np.ndarray, axis: int, lo: float, hi: float, origin: np.ndarray, margin: float,
+             cache: dict[tuple[int, float, float], np.ndarray]) -> np.ndarray:
+    """Which points lie within [``lo``, ``hi``] grown by ``margin`` along plan ``axis`` (0: x,
+    1: y); kept in ``cache`` for the next tile of the same span."""
+    key = (axis, lo, hi)
+    if key not in cache:
+        c, o = xyz[:, axis], float(origin[axis])
+        cache[key] = (c >= lo - o - margin) & (c <= hi - o + margin)
+    return cache[key]
 
 
 def tile_orthoimage(scratch: str | Path, k: int, tile: CeilingTile, ortho: OrthoimageSettings) -> Orthoimage:

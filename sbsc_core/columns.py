@@ -5,9 +5,14 @@ the floor and 0.3 m below the ceiling that are not on a wall (``wall_clear_m`` f
 plane over the wall) are binned into plan cells of ``cell_m``; a cell is *tall* when its
 points cover at least ``min_cover`` of that height. Connected groups of tall cells between
 ``min_side_m`` and ``max_side_m`` across are columns: round when a circle fits their points
-within ``round_rms_m``, else rectangles (the smallest rectangle around the points). A wall
+within ``round_rms_m``, else rectangles turned like their faces (:func:`_face_angle`) around
+the points, their sides then put on their faces' points. A wall
 (its points are removed) and furniture (not tall) are never columns, and a column never
-cuts a wall (walls are segmented before and without it).
+cuts a wall (walls are segmented before and without it). One exception: segmentation takes
+a column's widest face, seen square-on, for a short wall. A lone short wall (its points span
+at most ``max_side_m`` and meet no other wall, :func:`lone_short_walls`) keeps its points in
+the search, and when a column is found there the wall is dropped for the column's faces
+(:func:`walls_on_columns`).
 
 **Faces.** A rectangular column has four faces, each framed like a wall seen from outside the
 column (origin at its lower-left corner, ``axis_v`` up, ``normal`` out), ids
@@ -31,17 +36,18 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .ceilings import MemoryPart, part_chunks
-from .orthoimage import ortho_pixels, orthoimage_from_pixels, wall_coordinates
+from .orthoimage import near_wall, ortho_pixels, orthoimage_from_pixels, wall_coordinates
 from .partition import ScanPart, append_records, folder_records
 from .settings import ColumnSettings, OrthoimageSettings
 from .stages import Stage
-from .types import CylinderFrame, Orthoimage, PointCloud, Segmentation, WallFrame
+from .types import CylinderFrame, Orthoimage, PointCloud, Segmentation, Wall, WallFrame
 
 _UP = np.array([0.0, 0.0, 1.0])
 _COMPASS = (("E", 0.0), ("N", 90.0), ("W", 180.0), ("S", 270.0))
@@ -122,8 +128,13 @@ class ColumnFace:
         return doc
 
 
-def find_columns(cloud: PointCloud, seg: Segmentation, s: ColumnSettings) -> list[FoundColumn]:
-    """The free-standing columns of every storey (see the module docstring)."""
+def find_columns(cloud: PointCloud, seg: Segmentation, s: ColumnSettings, *,
+                 lone_walls: Collection[str] = ()) -> list[FoundColumn]:
+    """The free-standing columns of every storey (see the module docstring).
+
+    ``lone_walls`` (:func:`lone_short_walls`) are walls that may be a column's face: their
+    points are not removed from the search.
+    """
     import cv2
 
     storeys = [(st.id, st.floor_z, st.ceiling_z) for st in seg.storeys] or [(None, seg.floor_z, seg.ceiling_z)]
@@ -141,9 +152,8 @@ def find_columns(cloud: PointCloud, seg: Segmentation, s: ColumnSettings) -> lis
         xyz = cloud.xyz[idx]
         keep = np.ones(len(idx), bool)
         for w in walls:
-            uvd = wall_coordinates(xyz, w.frame, origin)
-            keep &= ~((np.abs(uvd[:, 2]) < s.wall_clear_m) & (uvd[:, 0] > -s.wall_clear_m)
-                      & (uvd[:, 0] < w.frame.width_m + s.wall_clear_m))
+            if w.id not in lone_walls:  # a lone short "wall" may be a column's face: its points stay
+                keep &= ~near_wall(xyz, w.frame, s.wall_clear_m, origin)
         xy = xyz[keep, :2].astype(np.float64) + origin[:2]
         zz = z[idx[keep]]
         if len(xy) < 50:
@@ -178,6 +188,78 @@ def find_columns(cloud: PointCloud, seg: Segmentation, s: ColumnSettings) -> lis
     return out
 
 
+_EXTENT_Q = 0.5  # a wall's extent: between these percentiles of its points (a few stray points beyond its ends)
+_EXTENT_POINTS = 20_000  # a regular subsample of a wall's points this big measures it
+
+
+def _wall_extent(cloud: PointCloud, wall: Wall) -> tuple[np.ndarray, np.ndarray] | None:
+    """Plan ends (world x, y) of where a wall's points lie along it, or None without points."""
+    idx = np.asarray(wall.point_index)
+    if not len(idx):
+        return None
+    idx = idx[:: max(1, len(idx) // _EXTENT_POINTS)]
+    u = wall_coordinates(cloud.xyz[idx], wall.frame, cloud.origin)[:, 0].astype(np.float64)
+    lo, hi = np.percentile(u, [_EXTENT_Q, 100.0 - _EXTENT_Q])
+    o, a = np.asarray(wall.frame.origin[:2], np.float64), np.asarray(wall.frame.axis_u[:2], np.float64)
+    return o + lo * a, o + hi * a
+
+
+def _to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Plan distance from point ``p`` to the segment ``a``-``b``."""
+    ab = b - a
+    t = float(np.clip(np.dot(p - a, ab) / max(float(np.dot(ab, ab)), 1e-12), 0.0, 1.0))
+    return float(np.linalg.norm(p - (a + t * ab)))
+
+
+def lone_short_walls(cloud: PointCloud, walls: list[Wall], s: ColumnSettings) -> list[str]:
+    """Ids of the walls that may be a column's face: their points (``cloud`` is the one their
+    point indices refer to) span at most ``s.max_side_m`` along them, and neither end comes
+    within ``s.wall_clear_m`` of another wall of their storey (a wall stub meets the wall it
+    stands out of; a column's face meets none).
+
+    Segmentation takes a column's widest face, seen square-on, for a short wall; its points
+    then must not be removed from the column search (:func:`find_columns`), and a column
+    found there replaces that wall (:func:`walls_on_columns`)."""
+    spans = {w.id: (np.asarray(w.frame.origin[:2], np.float64),
+                    np.asarray(w.frame.origin[:2], np.float64) + w.frame.width_m * np.asarray(w.frame.axis_u[:2]))
+             for w in walls}
+    out = []
+    for w in walls:
+        ends = _wall_extent(cloud, w)
+        if ends is None or float(np.linalg.norm(ends[1] - ends[0])) > s.max_side_m:
+            continue
+        others = [o for o in walls if o.id != w.id and o.storey == w.storey]  # walls of its own storey
+        if all(_to_segment(e, *spans[o.id]) > s.wall_clear_m for e in ends for o in others):
+            out.append(w.id)
+    return out
+
+
+def walls_on_columns(cloud: PointCloud, seg: Segmentation, columns: list[FoundColumn], s: ColumnSettings,
+                     lone_walls: Collection[str]) -> list[str]:
+    """Ids of the lone short walls (:func:`lone_short_walls`) that are a found column's face:
+    the middle of their points lies within ``s.wall_clear_m`` of the column's outline. The
+    column's faces are searched instead (each face once, with the classes a column may hold).
+    ``cloud`` is the one the walls' point indices refer to."""
+    out = []
+    for w in seg.walls:
+        if w.id not in lone_walls:
+            continue
+        ends = _wall_extent(cloud, w)
+        mid = (ends[0] + ends[1]) / 2
+        for c in columns:
+            if c.storey != w.storey and w.storey is not None:
+                continue
+            a = math.radians(c.angle_deg)
+            local = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]]) @ (mid - c.centre)
+            half = np.asarray(c.size_m, np.float64) / 2
+            inside = (float(np.linalg.norm(local)) <= half[0] + s.wall_clear_m if c.shape == "round"
+                      else bool(np.all(np.abs(local) <= half + s.wall_clear_m)))
+            if inside:
+                out.append(w.id)
+                break
+    return out
+
+
 def _fit(pts: np.ndarray, s: ColumnSettings) -> tuple | None:
     """("round", centre, (d, d), 0) or ("rect", centre, (a, b), angle) for a column's plan points.
 
@@ -194,7 +276,6 @@ def _fit(pts: np.ndarray, s: ColumnSettings) -> tuple | None:
 
 def _fit_local(pts: np.ndarray, s: ColumnSettings) -> tuple | None:
     """:func:`_fit` on points near the origin."""
-    import cv2
 
     a = np.column_stack([pts[:, 0], pts[:, 1], np.ones(len(pts))])
     b = -(pts[:, 0] ** 2 + pts[:, 1] ** 2)
@@ -206,17 +287,59 @@ def _fit_local(pts: np.ndarray, s: ColumnSettings) -> tuple | None:
         rms = float(np.sqrt(np.mean((np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) - r) ** 2)))
         if rms < s.round_rms_m and s.min_side_m / 2 <= r <= s.max_side_m / 2:
             return "round", (float(cx), float(cy)), (2 * r, 2 * r), 0.0
-    (rx, ry), (w, h), ang = cv2.minAreaRect(pts.astype(np.float32))
-    centre, size, ang = _refine_rect(pts, np.array([rx, ry]), np.array([w, h], float), float(ang))
+    ang = _face_angle(pts)
+    a = math.radians(ang)
+    axes = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+    q = pts @ axes.T
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    centre, size, ang = _refine_rect(pts, axes.T @ ((lo + hi) / 2), hi - lo, ang)
     if min(size) < s.min_side_m or max(size) > s.max_side_m:
         return None
     return "rect", (float(centre[0]), float(centre[1])), (float(size[0]), float(size[1])), float(ang)
 
 
+_PROFILE_BIN_M = 0.01  # the projection profiles' bins: about the scanner's noise on a face
+_PROFILE_MAX_POINTS = 20_000  # a regular subsample of this many points is enough for the profiles
+
+
+def _face_angle(pts: np.ndarray) -> float:
+    """The turn (degrees, 0-90) of a rectangular column's sides, from its plan points.
+
+    A face seen edge-on from above is a line of points: along the right directions the
+    points' projection profiles (histograms of their coordinates) have sharp peaks where the
+    faces are. The turn maximises the profiles' sum of squares, searched every half degree,
+    then every twentieth around the best. Unlike the smallest enclosing rectangle, this holds
+    for a column seen from one side only (an L of two faces, whose smallest rectangle is
+    diagonal) and does not turn for an object standing out of a face.
+    """
+    p = pts[:: max(1, len(pts) // _PROFILE_MAX_POINTS)]
+    p = p - p.mean(axis=0)
+
+    def sharpness(deg: float) -> float:
+        a = math.radians(deg)
+        score = 0.0
+        for axis in ((math.cos(a), math.sin(a)), (-math.sin(a), math.cos(a))):
+            c = p @ np.asarray(axis)
+            h = np.bincount(np.floor((c - c.min()) / _PROFILE_BIN_M).astype(np.int64))
+            score += float(np.dot(h, h))
+        return score
+
+    coarse = np.arange(0.0, 90.0, 0.5)
+    best = float(coarse[int(np.argmax([sharpness(d) for d in coarse]))])
+    fine = best + np.arange(-0.5, 0.5001, 0.05)
+    return float(fine[int(np.argmax([sharpness(d) for d in fine]))]) % 90.0
+
+
 def _refine_rect(pts: np.ndarray, centre: np.ndarray, size: np.ndarray, angle_deg: float, band_m: float = 0.04
                  ) -> tuple[np.ndarray, np.ndarray, float]:
-    """The rectangle's sides put on the median of their points (objects on a face and stray
-    points move the smallest enclosing rectangle out and turn it), its turn from their slopes."""
+    """The rectangle's sides put on their faces (objects on a face and stray points move the
+    rectangle around the points out, and turn it), its turn from the faces' slopes.
+
+    A side's face is the densest line of points (projection profile, :data:`_PROFILE_BIN_M`)
+    in the rectangle's half on that side, away from the corners; the side is put on the median
+    of the points within ``band_m / 2`` of it. A side with no face seen (fewer than 10 points
+    there) stays where the points end.
+    """
     for _ in range(2):
         a = math.radians(angle_deg)
         axes = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
@@ -226,7 +349,13 @@ def _refine_rect(pts: np.ndarray, centre: np.ndarray, size: np.ndarray, angle_de
             t = 1 - k
             along = np.abs(p[:, t]) < 0.8 * size[t] / 2
             for j, sign in enumerate((-1.0, 1.0)):
-                on = along & (sign * p[:, k] > size[k] / 2 - band_m)
+                half = along & (sign * p[:, k] > 0)
+                on = half
+                if half.sum() >= 10:
+                    c = p[half, k]
+                    h = np.bincount(np.floor((c - c.min()) / _PROFILE_BIN_M).astype(np.int64))
+                    face = c.min() + (int(np.argmax(h)) + 0.5) * _PROFILE_BIN_M
+                    on = half & (np.abs(p[:, k] - face) < band_m / 2)
                 if on.sum() < 10:
                     lo_hi[k, j] = sign * size[k] / 2
                     continue

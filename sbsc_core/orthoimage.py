@@ -130,6 +130,41 @@ def wall_coordinates(xyz: np.ndarray, frame: WallFrame, cloud_origin: np.ndarray
     return out
 
 
+_PLAN_MARGIN_M = 0.01  # plan boxes are grown by this: float32 rounding never drops a point the exact test keeps
+
+
+def near_wall(xyz: np.ndarray, frame: WallFrame, clear_m: float, cloud_origin: np.ndarray | None = None
+              ) -> np.ndarray:
+    """Which points (float32, relative to ``cloud_origin``) lie within ``clear_m`` of a wall's
+    plane, over its span grown by ``clear_m`` at each end.
+
+    The exact test (:func:`wall_coordinates`) runs only on the points over the plan box of
+    that slab (grown by :data:`_PLAN_MARGIN_M`): a cloud holds many walls, and most points are
+    far from any one of them.
+    """
+    keep = np.zeros(len(xyz), bool)
+    idx = np.arange(len(xyz))
+    if abs(float(frame.axis_u[2])) < 1e-9 and abs(float(frame.normal[2])) < 1e-9:  # upright: a plan box
+        u, n = np.asarray(frame.axis_u[:2], np.float64), np.asarray(frame.normal[:2], np.float64)
+        o = np.asarray(frame.origin[:2], np.float64)
+        corners = np.array([o + a * u + b * n for a in (-clear_m, frame.width_m + clear_m) for b in (-clear_m, clear_m)])
+        idx = np.flatnonzero(in_plan_box(xyz, corners.min(axis=0), corners.max(axis=0), cloud_origin,
+                                         margin_m=_PLAN_MARGIN_M))
+    uvd = wall_coordinates(xyz[idx], frame, cloud_origin)
+    keep[idx] = (np.abs(uvd[:, 2]) < clear_m) & (uvd[:, 0] > -clear_m) & (uvd[:, 0] < frame.width_m + clear_m)
+    return keep
+
+
+def in_plan_box(xyz: np.ndarray, lo: np.ndarray, hi: np.ndarray, cloud_origin: np.ndarray | None = None, *,
+                margin_m: float = 0.0) -> np.ndarray:
+    """Which points (relative to ``cloud_origin``) lie over the plan box ``lo`` to ``hi``
+    (x, y; world coordinates) grown by ``margin_m``."""
+    o = np.zeros(2) if cloud_origin is None else np.asarray(cloud_origin, np.float64)[:2]
+    x, y = xyz[:, 0], xyz[:, 1]
+    return ((x >= lo[0] - o[0] - margin_m) & (x <= hi[0] - o[0] + margin_m)
+            & (y >= lo[1] - o[1] - margin_m) & (y <= hi[1] - o[1] + margin_m))
+
+
 def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shape: tuple[int, int],
                      depth_range: tuple[float, float], quantum: float, *, layer_gap: float | None = None,
                      furniture_depth: float | None = None, min_layer_share: float = 0.5

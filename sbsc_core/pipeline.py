@@ -452,6 +452,7 @@ def detect(
     t0 = time.perf_counter()
     progress(Stage.SEGMENTATION, 0.0)
     seg = segment_floor_ceiling_walls(cloud, s.segmentation)
+    columns = _columns_of(cloud, seg, s, sample=_regular_sample(cloud, s)) if s.columns.enabled else []
     timings[Stage.SEGMENTATION] = time.perf_counter() - t0
 
     t = time.perf_counter()
@@ -461,7 +462,7 @@ def detect(
     walls = _collect_walls(_walls_results(cloud, seg, templates, prototypes, s, pool), len(seg.walls),
                            progress, timings)
     if s.ceilings.enabled or s.columns.enabled:  # objects on ceilings and columns (issue 11)
-        beyond = _beyond_walls_in_memory(cloud, seg, library, expected, s, pool, progress, timings)
+        beyond = _beyond_walls_in_memory(cloud, seg, library, expected, s, pool, progress, timings, columns)
         walls.update(beyond.walls)
         templates, classes = {**beyond.templates, **templates}, sorted(set(classes) | set(beyond.classes))
     result = _consensus(seg, walls, templates, classes, expected, s, progress, timings)
@@ -471,27 +472,44 @@ def detect(
     return result
 
 
+def _regular_sample(cloud: PointCloud, s: DetectionSettings) -> PointCloud:
+    """A regular sample of an in-memory cloud as big as the one :func:`detect_scans` measures
+    the ceiling levels and the columns on (views, no copy)."""
+    step = max(1, -(-len(cloud) // (2 * s.segmentation.fit_max_points)))
+    return cloud if step == 1 else PointCloud(cloud.xyz[::step], cloud.rgb[::step], cloud.origin, cloud.sources)
+
+
+def _columns_of(cloud: PointCloud, seg: Segmentation, s: DetectionSettings,
+                log: Callable[[str], None] | None = None, *, sample: PointCloud | None = None) -> list:
+    """The free-standing columns found in ``sample`` (default ``cloud``, the cloud the walls'
+    point indices refer to); the walls that are a column's face are dropped from ``seg``
+    (:func:`~sbsc_core.columns.walls_on_columns`)."""
+    from .columns import find_columns, lone_short_walls, walls_on_columns
+
+    lone = lone_short_walls(cloud, seg.walls, s.columns)
+    columns = find_columns(cloud if sample is None else sample, seg, s.columns, lone_walls=lone)
+    faces = set(walls_on_columns(cloud, seg, columns, s.columns, lone)) if columns and lone else set()
+    if faces:
+        seg.walls = [w for w in seg.walls if w.id not in faces]
+        if log is not None:
+            log(f"{', '.join(sorted(faces))}: a column's face, not a wall")
+    return columns
+
+
 def _beyond_walls_in_memory(cloud: PointCloud, seg: Segmentation, library: ModelLibrary,
                             expected: ExpectedCounts | None, s: DetectionSettings,
                             pool: ProcessPoolExecutor | None, progress: Progress,
-                            timings: dict[str, float]) -> _BeyondWalls:
-    """:func:`_beyond_walls` on an in-memory cloud: the levels and columns are measured on a
-    regular sample of it (as :func:`detect_scans` does), its points are binned into the
-    surfaces' partitions in a temporary folder in this process, and the surfaces' stages
-    run in ``pool`` (or one made here), their images kept in the results."""
+                            timings: dict[str, float], columns: list) -> _BeyondWalls:
+    """:func:`_beyond_walls` on an in-memory cloud: the levels are measured on a regular
+    sample of it (as :func:`detect_scans` does; ``columns`` were found before the walls'
+    stages), its points are binned into the surfaces' partitions in a temporary folder in
+    this process, and the surfaces' stages run in ``pool`` (or one made here), their images
+    kept in the results."""
     import tempfile
 
     from .ceilings import ceiling_levels, memory_parts
 
-    step = max(1, -(-len(cloud) // (2 * s.segmentation.fit_max_points)))
-    sample = cloud if step == 1 else PointCloud(cloud.xyz[::step], cloud.rgb[::step], cloud.origin, cloud.sources)
-    levels = ceiling_levels(sample, seg, s.ceilings) if s.ceilings.enabled else None
-    columns = []
-    if s.columns.enabled:
-        from .columns import find_columns
-
-        columns = find_columns(sample, seg, s.columns)
-    del sample
+    levels = ceiling_levels(_regular_sample(cloud, s), seg, s.ceilings) if s.ceilings.enabled else None
     own = pool is None
     executor: Executor = (wall_pool(s) if own else pool) or InlineExecutor()
     try:
@@ -797,9 +815,7 @@ def detect_scans(
         seg.stray_points = int(round(seg.stray_points * points / max(sampled, 1)))
     found_columns = []
     if s.columns.enabled:  # free-standing columns (issue 11), found in the sample
-        from .columns import find_columns
-
-        found_columns = find_columns(cloud, seg, s.columns)
+        found_columns = _columns_of(cloud, seg, s, log)
     levels = None
     if s.ceilings.enabled:  # lower ceilings within a storey (stepped ceilings), measured in the sample
         from .ceilings import ceiling_levels

@@ -75,6 +75,69 @@ def test_no_columns_in_an_empty_room():
     assert find_columns(cloud, seg, ColumnSettings(enabled=True)) == []
 
 
+def _column_seen_from_one_side(rng, *, stub: bool = False) -> tuple[PointCloud, Segmentation]:
+    """A 10 x 8 m room, 3 m high, with a 0.49 x 0.41 m column at (4.75, 2.56) seen only from
+    the south-east (its S face y = 2.355 and its E face x = 4.995; a 45 mm object stands out
+    of the E face), the S face segmented as a short wall ``W2`` (its points are its own).
+    With ``stub``, a 0.5 m stub of the wall x = 0 (x 0 to 0.5 at y = 6) is a short wall too."""
+    zs = np.arange(0.02, 2.98, 0.01)
+    parts, own = [], {}
+
+    def face(xy: np.ndarray, name: str | None = None) -> None:
+        gx, gz = np.meshgrid(np.arange(len(xy)), zs)
+        pts = np.column_stack([xy[gx.ravel(), 0], xy[gx.ravel(), 1], gz.ravel()])
+        if name:
+            start = sum(len(p) for p in parts)
+            own[name] = np.arange(start, start + len(pts))
+        parts.append(pts)
+
+    for y in np.arange(0.0, 8.0, 0.01):  # the walls x = 0 and x = 10
+        parts.append(np.column_stack([np.zeros(len(zs)), np.full(len(zs), y), zs]))
+        parts.append(np.column_stack([np.full(len(zs), 10.0), np.full(len(zs), y), zs]))
+    xs, ys = np.arange(4.505, 4.995, 0.01), np.arange(2.355, 2.765, 0.01)
+    face(np.column_stack([xs, np.full(len(xs), 2.355)]), "W2")
+    face(np.column_stack([np.full(len(ys), 4.995), ys]))
+    ox, oy, oz = np.meshgrid([5.04], np.arange(2.50, 2.58, 0.01), np.arange(1.40, 1.48, 0.01))  # the object
+    parts.append(np.column_stack([ox.ravel(), oy.ravel(), oz.ravel()]))
+    walls = [_wall("W1", (0, 0), (0, 8)), _wall("W3", (10, 8), (10, 0))]
+    if stub:
+        xs = np.arange(0.0, 0.5, 0.01)
+        face(np.column_stack([xs, np.full(len(xs), 6.0)]), "W4")
+    xyz = np.vstack(parts) + rng.normal(0, 0.002, (sum(len(p) for p in parts), 3))
+    cloud = PointCloud(xyz.astype(np.float32), np.full((len(xyz), 3), 200, np.uint8))
+    w2 = _wall("W2", (4.505 - 0.6, 2.355), (4.995 + 0.6, 2.355))  # a free end's frame is padded
+    w2.point_index = own["W2"]
+    walls.append(w2)
+    if stub:
+        w4 = _wall("W4", (0.0, 6.0), (0.5, 6.0))
+        w4.point_index = own["W4"]
+        walls.append(w4)
+    return cloud, Segmentation(0.0, 3.0, walls, [Storey("S1", 0.0, 3.0)])
+
+
+def test_a_column_seen_from_one_side_whose_face_was_taken_for_a_wall():
+    """Two faces of a column seen (an L: its smallest enclosing rectangle is diagonal), the
+    wider one segmented as a short wall: the column is found whole, turned like its faces,
+    the wall is dropped for its faces; a wall stub that meets a wall stays a wall."""
+    from sbsc_core.pipeline import _columns_of
+    from sbsc_core.settings import DetectionSettings
+
+    cloud, seg = _column_seen_from_one_side(np.random.default_rng(3), stub=True)
+    s = DetectionSettings()
+    cols = _columns_of(cloud, seg, s)
+    assert len(cols) == 1 and cols[0].shape == "rect"
+    c = cols[0]
+    assert c.centre == pytest.approx((4.75, 2.56), abs=0.02)
+    a = math.radians(c.angle_deg)
+    along_x = abs(math.cos(a)) > 0.9  # the first side along x or along y
+    assert (c.size_m if along_x else c.size_m[::-1]) == pytest.approx((0.49, 0.41), abs=0.025)
+    assert (c.angle_deg + 45.0) % 90.0 - 45.0 == pytest.approx(0.0, abs=0.5)
+    assert [w.id for w in seg.walls] == ["W1", "W3", "W4"]
+    # without the lone wall's points the column is not found (what happened before)
+    cloud2, seg2 = _column_seen_from_one_side(np.random.default_rng(3))
+    assert find_columns(cloud2, seg2, ColumnSettings()) == []
+
+
 @pytest.mark.slow
 def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
     import yaml

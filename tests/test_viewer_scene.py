@@ -163,6 +163,7 @@ def test_click_accept_records_decision_and_syncs(setup):
         assert "read-only" in scene.status_text()
         wait_for(lambda: session.ui_accept.disabled and session.ui_reject.disabled)
         wait_for(lambda: "read-only" in session.ui_who.content, 1.0, "read-only notice")
+        assert "🔒" not in session.ui_who.content + session.ui_info.content  # a glyph fonts may lack
         before = backend.project_data(1).detections
         tab.press(session.ui_accept)
         time.sleep(0.3)
@@ -187,8 +188,15 @@ def test_scan_is_sent_per_tab_after_the_scene(setup):
         first_cloud = next(t for t, m in tab.received if m.get("type") == "PointCloudMessage")
         status = [t for t, m in tab.received if m.get("type") == "GuiMarkdownMessage"]
         assert status and min(status) <= first_cloud  # the panel came before the scan
+        asked = [t for t, m in tab.received if m.get("type") == "GetRenderRequestMessage"]
+        assert asked and asked[0] < first_cloud  # ... and the tab drew its first frame before it too
         tab.set_gui(session.ui_ceiling, True)
         wait_for(lambda: "ceiling_overview" in session.scan_nodes, what="ceiling")
+        assert "scan_full" not in scene.scan_tiles  # the full level's tiles: made when first asked for
+        tab.set_gui(session.ui_scan, "full")
+        wait_for(lambda: session.scan_nodes.get("scan_full") and session.scan_nodes.get("ceiling_full")
+                 and len(session.scan_nodes["scan_full"]) == len(scene.scan_tiles["scan_full"]), what="full")
+        assert sum(len(t.points) for k in ("scan_full", "ceiling_full") for t in scene.scan_tiles[k]) == len(scene.lod)
         tab.set_gui(session.ui_scan, "off")
         wait_for(lambda: not any(g.visible for g in session.scan_groups.values()), what="scan off")
         assert "scan_overview" not in session.wanted_scan_layers()

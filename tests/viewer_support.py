@@ -5,7 +5,9 @@ from __future__ import annotations
 import threading
 import time
 
+import cv2
 import msgspec
+import numpy as np
 import viser
 import zstandard
 from viser import _messages as vm
@@ -34,6 +36,7 @@ class FakeTab:
                           max_size=None)
         self.received: list[tuple[float, dict]] = []
         self._dctx = zstandard.ZstdDecompressor()
+        self.frame = cv2.imencode(".jpg", np.full((8, 8, 3), 255, np.uint8))[1].tobytes()
         self._stop = False
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
@@ -54,6 +57,8 @@ class FakeTab:
             inner = msgspec.msgpack.decode(self._dctx.decompress(raw[16:16 + n]))
             for m in inner["messages"]:
                 self.received.append((time.monotonic(), m))
+                if m.get("type") == "GetRenderRequestMessage" and self.frame is not None:  # a browser answers
+                    self.send(vm.GetRenderResponseMessage(payload=self.frame, render_uuid=m["render_uuid"]))
 
     def send(self, message: vm.Message) -> None:
         self.ws.send(msgspec.msgpack.encode(message.as_serializable_dict()))

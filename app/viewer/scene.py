@@ -105,11 +105,14 @@ class SceneSettings:
     wall_thickness_px: float = 2.5
     spot_radius_m: float = 0.05  # at least; a big floor gets bigger spots (spot_extent_share)
     spot_extent_share: float = 0.004  # spot radius = this x the floor's larger side, when larger
-    label_gap_m: float = 1.6  # wall labels closer than this in plan are stacked ...
-    label_step_m: float = 0.35  # ... this much above each other
+    label_gap_m: float = 1.6  # wall names closer than this in plan are spread along their walls ...
+    label_step_m: float = 0.35  # ... and those still that close stacked this much above each other
     label_lift_m: float = 0.06
     poll_s: float = 0.25  # change feed polling period
-    scan_delay_s: float = 1.5  # a new tab gets the scan this long after the rest of the scene
+    scan_delay_s: float = 2.0  # a new tab gets the scan this long after it drew the rest of the scene
+    first_frame_wait_s: float = 10.0  # ... or, when it answers no render request by then, this long after the build
+    scan_batch_points: int = 60_000  # the scan goes out in batches of about this many points ...
+    scan_batch_pause_s: float = 0.4  # ... this far apart, so the tab draws between them
     scan_detail: str = "overview"  # what a new tab shows first: overview, full or off
     fly_s: float = 0.6  # camera flight to a selected object
     fly_steps: int = 24
@@ -189,6 +192,40 @@ def readable_time(iso: Any) -> str:
     return t.strftime("%Y-%m-%d %H:%M") + (" UTC" if t.tzinfo is not None else "")
 
 
+def label_positions(frames: dict[str, WallFrame], gap_m: float) -> dict[str, float]:
+    """Where along each wall (u, metres) its name goes: the middle, except for walls whose
+    middles are closer than ``gap_m`` in plan (the two faces of a partition, walls meeting
+    at a corner): each of such a group of n goes to (k + 1) / (n + 1) of its own width, in
+    the order of the ids and measured the same way round on walls facing each other, so that
+    seen from above the names stand apart (raising them would not separate them in a view
+    from above)."""
+    ids = list(frames)
+    mids = {w: frames[w].to_world(frames[w].width_m / 2.0, frames[w].height_m)[:2] for w in ids}
+    group = {w: w for w in ids}
+
+    def root(w: str) -> str:
+        while group[w] != w:
+            w = group[w]
+        return w
+
+    for i, a in enumerate(ids):
+        for b in ids[i + 1:]:
+            if np.hypot(*(mids[a] - mids[b])) < gap_m:
+                group[root(b)] = root(a)
+    members: dict[str, list[str]] = {}
+    for w in ids:
+        members.setdefault(root(w), []).append(w)
+    out = {}
+    for ws in members.values():
+        ref = frames[min(ws)].axis_u
+        for k, w in enumerate(sorted(ws)):
+            share = (k + 1) / (len(ws) + 1)
+            if float(np.dot(frames[w].axis_u, ref)) < -0.5:  # the other face of a partition runs the other way
+                share = 1.0 - share
+            out[w] = frames[w].width_m * share
+    return out
+
+
 def spread_labels(points: dict[str, np.ndarray], gap_m: float, step_m: float) -> dict[str, np.ndarray]:
     """Label anchors lifted so that no two closer than ``gap_m`` in plan share a height:
     each one, in order, rises by ``step_m`` until no label placed before it is within
@@ -222,6 +259,23 @@ def class_names(models_dir: Path | None) -> dict[str, str]:
         return {cid: str(m.get("name") or cid) for cid, m in read_library_metadata(models_dir).items()}
     except (SbscError, OSError, ValueError):
         return {}
+
+
+def class_choices(ids: Iterable[str], names: dict[str, str]) -> dict[str, str]:
+    """A class dropdown's options: the library's display name -> class id, in the order of ``ids``.
+
+    A name that two classes share, or that is another class's id, gets its id in brackets,
+    so every option names one class.
+    """
+    ids = list(ids)
+    shown = [names.get(cid, cid) for cid in ids]
+    taken = set(ids)
+    out: dict[str, str] = {}
+    for cid, label in zip(ids, shown, strict=True):
+        if shown.count(label) > 1 or (label != cid and label in taken):
+            label = f"{label} ({cid})"
+        out[label] = cid
+    return out
 
 
 def wall_hit(frames: dict[str, WallFrame], origin: np.ndarray, direction: np.ndarray
@@ -595,10 +649,11 @@ class ProjectScene:
                      "rois_depth", "rois_colour", "spots", "spot_labels"):
             self.groups[name] = scene.add_frame(f"/{name}", show_axes=False,
                                                 visible=self._layer_visible(name))
-        self.scan_tiles = self._scan_layers(lod) if lod is not None else {}
+        self.scan_tiles = self._scan_layers(lod, ("overview",)) if lod is not None else {}
         ext = self._extent()
         self.spot_radius = max(self.s.spot_radius_m, self.s.spot_extent_share * ext)
-        tops = {wid: f.to_world(f.width_m / 2.0, f.height_m, 0.05) - self.centre for wid, f in self.frames.items()}
+        along = label_positions(self.frames, self.s.label_gap_m)
+        tops = {wid: f.to_world(along[wid], f.height_m, 0.05) - self.centre for wid, f in self.frames.items()}
         self.label_at = spread_labels(tops, self.s.label_gap_m, self.s.label_step_m)
         for wid, frame in self.frames.items():
             self._add_wall(wid, frame)
@@ -611,14 +666,14 @@ class ProjectScene:
         rois = (data.rois or {}).get("walls", {})
         for wid, r in rois.items():
             self._add_rois(wid, r)
-        if self.ui_images.value != "off":
-            self._add_images(self.ui_images.value)
         for d in dets:
             self._add_spot(d)
         self._set_initial_camera()
-        # A status element created last: a browser that shows it has every node before it.
+        # The status once the plan, walls and spots are there: a browser that shows it has them.
         self._status.remove()
         self._status = self.server.gui.add_markdown(self.status_text(), order=0)
+        if self.ui_images.value != "off":  # the heaviest shared layer after them (the scan: per tab)
+            self._add_images(self.ui_images.value)
         for session in self.sessions.values():
             session.reset()
 
@@ -647,8 +702,16 @@ class ProjectScene:
         """World coordinates to scene coordinates (recentred)."""
         return np.asarray(world, dtype=np.float64) - self.centre
 
-    def _scan_layers(self, lod: ScanLod) -> dict[str, list[ScanTile]]:
-        """The scan's layers (body / ceiling at the overview and the full level), in tiles."""
+    def scan_layer(self, name: str) -> list[ScanTile] | None:
+        """The tiles of one scan layer (``scan_full``...), made the first time a tab asks for
+        the full level (the build makes only the overview's, which every tab gets)."""
+        with self._lock:
+            if name not in self.scan_tiles and self.lod is not None and name.endswith("_full"):
+                self.scan_tiles.update(self._scan_layers(self.lod, ("full",)))
+            return self.scan_tiles.get(name)
+
+    def _scan_layers(self, lod: ScanLod, levels: Iterable[str] = ("overview", "full")) -> dict[str, list[ScanTile]]:
+        """The scan's layers (body / ceiling at the given levels), in tiles."""
         top = None
         if self.frames:
             top = float(np.median([f.origin[2] + f.height_m - self.centre[2]
@@ -658,6 +721,8 @@ class ProjectScene:
         ov_size = max(ov.voxel_m * self.s.point_size_voxels, full_size)
         layers = {}
         for level, lv, size in (("full", lod, full_size), ("overview", ov, ov_size)):
+            if level not in levels:
+                continue
             ceiling = lv.xyz[:, 2] > top if top is not None else np.zeros(len(lv.xyz), bool)
             for part, mask in (("scan", ~ceiling), ("ceiling", ceiling)):
                 layers[f"{part}_{level}"] = make_tiles(lv.xyz[mask], lv.rgb[mask], size,
@@ -974,6 +1039,7 @@ class ReviewSession:
         self.scan_groups: dict[str, Any] = {}  # layer -> this tab's frame holding its tiles
         self.scan_nodes: dict[str, list[Any]] = {}  # layer -> this tab's point cloud tiles
         self._model_cache: dict[str, np.ndarray | None] = {}
+        self.class_ids: dict[str, str] = {}  # class dropdown option (display name) -> class id
         self.ceiling_nodes: dict[str, Any] = {}  # "kind/id" -> this tab's ceiling image
         gui = client.gui
         blank = np.zeros((scene.s.crop_px, scene.s.crop_px, 3), np.uint8)
@@ -993,7 +1059,7 @@ class ReviewSession:
             self.ui_model = gui.add_image(blank, label="model", format="png", visible=False)
             self.ui_accept = gui.add_button("Accept", color="green", disabled=True)
             self.ui_reject = gui.add_button("Reject", color="red", disabled=True)
-            classes = self._classes() or ["-"]
+            classes = list(self._class_choices()) or ["-"]
             self.ui_class = gui.add_dropdown("Class", classes, initial_value=classes[0],
                                              disabled=True)
             self.ui_relabel = gui.add_button("Relabel (accept as class)", disabled=True)
@@ -1003,7 +1069,6 @@ class ReviewSession:
                                           hint="least sure first (confidence, else alpha)")
         self.f_add = gui.add_folder("Add a missed object", order=22)
         with self.f_add:
-            classes = self._classes() or ["-"]
             self.ui_add_class = gui.add_dropdown("Class to add", classes, initial_value=classes[0])
             self.ui_add_help = gui.add_markdown("**Shift-click on a wall** (or a ceiling from below, or a "
                                                 "column) to add an object of this class there "
@@ -1024,7 +1089,7 @@ class ReviewSession:
         self.ui_sign_in.on_click(lambda ev: self.sign_in(self.ui_token.value))
         self.ui_accept.on_click(lambda ev: self.decide("accepted"))
         self.ui_reject.on_click(lambda ev: self.decide("rejected"))
-        self.ui_relabel.on_click(lambda ev: self.decide("accepted", self.ui_class.value))
+        self.ui_relabel.on_click(lambda ev: self.decide("accepted", self.class_id(self.ui_class.value)))
         self.ui_prev.on_click(lambda ev: self.step(-1))
         self.ui_next.on_click(lambda ev: self.step(+1))
         client.scene.on_click(modifier="shift")(self._on_shift_click)
@@ -1039,6 +1104,21 @@ class ReviewSession:
         have = {d["class"] for d in self.scene.detections.values()}
         return sorted(set(data.classes) | have)
 
+    def _class_choices(self) -> dict[str, str]:
+        """The class dropdowns' options (display name -> class id), sorted by name."""
+        names = self.scene.class_names
+        ids = sorted(self._classes(), key=lambda cid: (names.get(cid, cid).casefold(), cid))
+        self.class_ids = class_choices(ids, names)
+        return self.class_ids
+
+    def class_id(self, option: str) -> str:
+        """The class id of a dropdown's option (an id passes through)."""
+        return self.class_ids.get(option, option)
+
+    def class_option(self, cid: str) -> str | None:
+        """The dropdown option that shows class ``cid``."""
+        return next((label for label, c in self.class_ids.items() if c == cid), None)
+
     def notify(self, title: str, body: str, colour: str | None = None) -> None:
         try:
             self.client.add_notification(title, body, auto_close_seconds=4.0, color=colour)
@@ -1051,7 +1131,7 @@ class ReviewSession:
         if self._highlight is not None:
             self._highlight.remove()
             self._highlight = None
-        classes = self._classes()
+        classes = list(self._class_choices())
         if classes:
             self.ui_class.options = classes
             self.ui_add_class.options = classes
@@ -1118,14 +1198,21 @@ class ReviewSession:
 
     # -- the scan, per tab ----------------------------------------------------------------
     def stream_scan_later(self) -> None:
-        """Send the scan after the rest of the scene, so the tab shows walls and spots first.
+        """Send the scan once the tab has drawn the rest of the scene: the first frame at once.
 
-        The scan is by far the heaviest layer to send and to draw; a tab gets it
-        ``scan_delay_s`` after connecting, tile by tile, at the detail it asks for.
+        The scan is by far the heaviest layer to send and to draw (in a browser without a
+        graphics card a frame with the overview's points takes seconds): a tab first draws the
+        plan, walls, spots and panel; once it has shown a frame (:meth:`wait_drawn`) and
+        ``scan_delay_s`` later, it gets the scan at the detail it asks for, progressively
+        (:meth:`update_scan`).
         """
         def run() -> None:
-            time.sleep(self.scene.s.scan_delay_s)
             if self.scene.ready.wait(600):
+                t = time.monotonic()
+                drawn = self.wait_drawn(self.scene.s.first_frame_wait_s)
+                log.info("viewer: tab %s %s after %.1f s; the scan follows", self.client.client_id,
+                         "drew its first frame" if drawn else "showed no frame", time.monotonic() - t)
+                time.sleep(self.scene.s.scan_delay_s)
                 self.update_scan()
 
         threading.Thread(target=run, name=f"viewer-scan-{self.client.client_id}",
@@ -1137,26 +1224,51 @@ class ReviewSession:
             return set()
         return {f"scan_{level}"} | ({f"ceiling_{level}"} if self.ui_ceiling.value else set())
 
+    def wait_drawn(self, timeout: float) -> bool:
+        """Wait until this tab has drawn a frame of what it was sent (it answers a tiny render
+        request after applying every message before it); False after ``timeout`` or when the
+        tab cannot render (it has gone)."""
+        try:
+            self.client.get_render(8, 8, timeout=timeout)
+            return True
+        except Exception:  # TimeoutError, a closed tab, a client that cannot render
+            return False
+
     def update_scan(self) -> None:
-        """Show the scan layers this tab asks for, sending each one the first time."""
-        tiles = self.scene.scan_tiles
+        """Show the scan layers this tab asks for, sending each one the first time: tile by
+        tile, in batches of about ``scan_batch_points`` points ``scan_batch_pause_s`` apart,
+        so the tab draws the scan as it comes instead of stalling on one large message."""
+        s = self.scene.s
+        want = self.wanted_scan_layers()
+        # before the tab's scan lock: a rebuild holds the scene's lock while it resets the tabs
+        tiles = {name: layer for name in want if (layer := self.scene.scan_layer(name)) is not None}
         with self._scan_lock:
             if self.scene.sessions.get(self.client.client_id) is not self:
                 return  # the tab has gone
-            want = self.wanted_scan_layers()
-            for name in want - set(self.scan_nodes):
-                if name not in tiles:
-                    continue
-                group = self.client.scene.add_frame(f"/{name}", show_axes=False)
-                self.scan_groups[name] = group
-                self.scan_nodes[name] = [
-                    self.client.scene.add_point_cloud(
-                        f"/{name}/t{i}", points=t.points, colors=t.colors,
-                        point_size=t.point_size, point_shape="square", precision="float16",
-                        point_shading="flat", position=t.position)
-                    for i, t in enumerate(tiles[name])]
+            todo = []
+            for name in sorted(want - set(self.scan_nodes)):
+                if name in tiles:
+                    self.scan_groups[name] = self.client.scene.add_frame(f"/{name}", show_axes=False)
+                    self.scan_nodes[name] = []
+                    todo.append((name, self.scan_groups[name]))
             for name, group in self.scan_groups.items():
                 group.visible = name in want
+        batch = 0
+        for name, group in todo:
+            for i, t in enumerate(tiles[name]):
+                if batch >= s.scan_batch_points:
+                    time.sleep(s.scan_batch_pause_s)  # the scan lock is free meanwhile
+                    batch = 0
+                with self._scan_lock:
+                    if self.scene.sessions.get(self.client.client_id) is not self:
+                        return  # the tab has gone
+                    if self.scan_groups.get(name) is not group:
+                        break  # a rebuild: this layer's tiles are no longer wanted
+                    self.scan_nodes[name].append(self.client.scene.add_point_cloud(
+                        f"/{name}/t{i}", points=t.points, colors=t.colors,
+                        point_size=t.point_size, point_shape="square", precision="float16",
+                        point_shading="flat", position=t.position))
+                batch += len(t.points)
 
     def scan_points_sent(self) -> int:
         with self._scan_lock:
@@ -1190,8 +1302,9 @@ class ReviewSession:
                     position=pos)
             else:
                 self._highlight.position = pos
-            if det.get("class") in (self.ui_class.options or ()):
-                self.ui_class.value = det["class"]
+            option = self.class_option(det.get("class"))
+            if option in (self.ui_class.options or ()):
+                self.ui_class.value = option
             self.show()
         if fly:
             self.fly_to(det)
@@ -1295,7 +1408,7 @@ class ReviewSession:
                         "object there.", "yellow")
             return None
         wid, u, v = hit
-        return self.add_object(wid, u, v, self.ui_add_class.value)
+        return self.add_object(wid, u, v, self.class_id(self.ui_add_class.value))
 
     def add_object(self, wall: str, u: float, v: float, class_id: str) -> dict | None:
         if self.user is None:
@@ -1311,7 +1424,7 @@ class ReviewSession:
             self.notify("Not added", str(exc), "red")
             return None
         self.scene.add_detection(det)
-        self.notify(f"Added {det['class']}", f"on {wall} at u {det['u']:.3f}, v {det['v']:.3f} m",
+        self.notify(f"Added {self.scene.class_names.get(det['class'], det['class'])}", f"on {wall} at u {det['u']:.3f}, v {det['v']:.3f} m",
                     "green")
         self.select(det["id"], fly=False)
         return det
@@ -1369,11 +1482,11 @@ class ReviewSession:
         for b in (self.ui_accept, self.ui_reject, self.ui_relabel, self.ui_class):
             b.disabled = not can
         if sc.locked:
-            self.ui_who.content = "🔒 Signed off: this scene is **read-only**." + (
+            self.ui_who.content = "**Signed off**: this scene is **read-only**." + (
                 f" (signed in as {self.user.name})" if self.user else "")
         if det is None:
             self.ui_info.content = "Click a spot to select an object." if not sc.locked else \
-                "🔒 Signed off: read-only. Click a spot to see an object."
+                "**Signed off**: read-only. Click a spot to see an object."
             for img in (self.ui_colour, self.ui_depth, self.ui_model):
                 img.visible = False
             return
@@ -1387,14 +1500,15 @@ class ReviewSession:
         self.ui_model.visible = model is not None
         if model is not None:
             self.ui_model.image = model
-            self.ui_model.label = f"model: {det['class']}"
+            self.ui_model.label = f"model: {self.scene.class_names.get(det['class'], det['class'])}"
 
     def info_text(self, det: dict) -> str:
         r = det["review"]
         who = f" by {r['by']} on {readable_time(r['at'])}" if r.get("by") else ""
         storey = self.scene.storey_of.get(det.get("wall"))
         where = surface_text(det.get("wall"), self.scene.surfaces.get(det.get("wall")))
-        lines = [f"**{det.get('ref') or det['id']} · {det['class']}** on {where}"
+        name = self.scene.class_names.get(det["class"], det["class"])
+        lines = [f"**{det.get('ref') or det['id']} · {name}** on {where}"
                  + (f", storey {storey}" if storey else ""),
                  f"u {_fmt(det.get('u'), 3)} m, v {_fmt(det.get('v'), 3)} m, "
                  f"{_fmt(det.get('width_m'), 3)} × {_fmt(det.get('height_m'), 3)} m",
@@ -1402,7 +1516,7 @@ class ReviewSession:
                  f"ρ_C {_fmt(det.get('rho_colour'))} · found in {det.get('source')}",
                  f"Review: **{r['status']}**{who} (version {r.get('version')})"]
         if self.scene.locked:
-            lines.append("🔒 Signed off: read-only.")
+            lines.append("**Signed off**: read-only.")
         return "\n\n".join(lines)
 
     def _crop(self, det: dict, kind: str) -> np.ndarray | None:
