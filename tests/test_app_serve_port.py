@@ -7,9 +7,12 @@ import socket
 import subprocess
 import sys
 
-from .test_app_support import ROOT
+import pytest
+
+from .app_support import ROOT
 
 
+@pytest.mark.slow
 def test_a_busy_port_is_refused_in_one_line_before_any_work(tmp_path):
     data = tmp_path / "data"
     with socket.socket() as busy:

@@ -105,10 +105,11 @@ def test_class_choices_show_names_and_keep_ids() -> None:
                    "Same (a)": "a", "Same (b)": "b", "switch (c)": "c"}  # every option names one class
 
 
+@pytest.mark.slow
 def test_class_dropdowns_show_the_librarys_names_and_decide_by_id(tmp_path) -> None:
     from sbsc_core.paths import bundled_models_dir
 
-    from .test_viewer_scene import FakeTab, wait_for
+    from .viewer_support import FakeTab, wait_for
 
     sp = write_synthetic_project(tmp_path / "out", rooms=1, walls_per_room=2, objects_per_wall=3, points=4000)
     backend = InMemoryBackend()
@@ -151,10 +152,11 @@ def test_class_dropdowns_show_the_librarys_names_and_decide_by_id(tmp_path) -> N
         manager.stop_all()
 
 
+@pytest.mark.slow
 def test_the_scan_comes_after_the_first_frame_in_batches(tmp_path) -> None:
     """A tab that has not drawn yet gets no scan; once it answers its render request it gets
     the scan in batches of about ``scan_batch_points``, a pause apart."""
-    from .test_viewer_scene import FakeTab, wait_for
+    from .viewer_support import FakeTab, wait_for
 
     sp = write_synthetic_project(tmp_path / "out", rooms=2, walls_per_room=4, objects_per_wall=1, points=40_000,
                                  room_size=(9.0, 9.0))
