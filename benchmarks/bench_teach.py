@@ -59,8 +59,37 @@ def sbsc(*args: str) -> float:
     return time.perf_counter() - t0
 
 
+SCAN_FILES = ("scan.ply", "ground_truth.json", "expected.json", "as_designed.ifc")
+
+
+def reuse_scan(out: Path, *, seed: int, library_designs: str) -> bool:
+    """Make ``out`` from a floor of the same scene, designs and seed with another library
+    (``sim_<scene>_<designs>_<other>_<seed>`` beside it): its scan and truth hard-linked, the
+    library of ``library_designs`` rendered (the simulator writes the library last, from the
+    seed and the family only, so the result is the same as simulating again). False when
+    there is none."""
+    from sbsc_core.simulate.designs import design_builder
+    from sbsc_core.simulate.library import write_model_library
+
+    prefix, _, tail = out.name.rsplit("_", 2)  # sim_<scene>_<designs>, <library>, <seed>
+    for other in ("standard", "alt", "third"):
+        src = out.parent / f"{prefix}_{other}_{tail}"
+        if other == library_designs or not (src / "ground_truth.json").is_file():
+            continue
+        tmp = out.parent / f".{out.name}.tmp"
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir()
+        for name in SCAN_FILES:
+            if (src / name).is_file():
+                os.link((src / name).resolve(), tmp / name)
+        write_model_library(tmp / "models", seed=seed, object_builder=design_builder(library_designs, seed))
+        tmp.rename(out)
+        return True
+    return False
+
+
 def simulate(out: Path, *, scene: str, seed: int, designs: str, library_designs: str) -> Path:
-    if not (out / "ground_truth.json").is_file():
+    if not (out / "ground_truth.json").is_file() and not reuse_scan(out, seed=seed, library_designs=library_designs):
         scene_args = ["--scenario", scene] if scene in ("I", "II") else ["--scene", scene]
         sbsc("simulate", *scene_args, "--realistic", "--clutter", "--designs", designs,
              "--library-designs", library_designs, "--seed", str(seed), "--out", str(out))
