@@ -8,9 +8,13 @@
   no model yet, so its size is the relief blob under the click, and it is placed at the blob's
   centre (:func:`sbsc_core.learning.examples.relief_blob`).
 - **Learning** is the library's :func:`sbsc_core.learning.library.learn_library` over the
-  current job's detect output, with the reviewed document of the accepted objects a person
-  added or relabelled (found objects that were only accepted teach nothing new, and would mix
-  the old design into a new one's medians).
+  current job's detect output and the project's library, with the reviewed document of the
+  accepted objects a person added or relabelled (found objects that were only accepted teach
+  nothing new, and would mix the old design into a new one's medians).
+- **Removing** what was learnt for a class (its hits are rejected) writes the project's library
+  without it (:func:`sbsc_core.learning.forget.forget_learnt`) and puts the class in
+  ``<data>/projects/<pid>/unlearnt.json``: learning skips its examples until it is re-taught.
+  The pending suggestions it brought go (:func:`brought_by`).
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from sqlalchemy.orm import Session
 from .models import DetectionRow, Job, Project, WallRow
 
 CLASSES_FILE = "classes.json"
+UNLEARNT_FILE = "unlearnt.json"
 SPEC_KEYS = ("name", "ifc_class", "predefined_type", "mount")
 
 
@@ -62,6 +67,23 @@ def save_project_classes(data_dir: Path, pid: int, classes: dict[str, dict]) -> 
         raise
 
 
+def unlearnt(data_dir: Path, pid: int) -> set[str]:
+    """The classes whose learnt models were removed (learning skips their examples until re-taught)."""
+    path = Path(data_dir) / "projects" / str(pid) / UNLEARNT_FILE
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else []
+    except (OSError, ValueError):
+        return set()
+    return {c for c in doc if isinstance(c, str)} if isinstance(doc, list) else set()
+
+
+def save_unlearnt(data_dir: Path, pid: int, classes: set[str]) -> None:
+    """Write the removed classes atomically."""
+    from sbsc_core.io.atomic import write_json_atomic
+
+    write_json_atomic(Path(data_dir) / "projects" / str(pid) / UNLEARNT_FILE, sorted(classes))
+
+
 def taught_class_fields(spec: dict) -> dict:
     """A created class as the app lists library classes (no size until it is learnt)."""
     return {"name": spec.get("name"), "ifc_class": spec.get("ifc_class"),
@@ -83,11 +105,28 @@ def measure(wall: WallRow, data_dir: Path, u: float, v: float) -> tuple[float, f
     return relief_blob(depth, wall.height_m, wall.pixel_m, u, v)
 
 
-def examples(s: Session, job_id: int) -> list[DetectionRow]:
-    """The current results' examples: accepted objects a person added or relabelled."""
+def _by_person(d: DetectionRow) -> bool:
+    return d.source == "reviewer" or d.class_id != d.detected_class
+
+
+def examples(s: Session, job_id: int, skip: set[str] | frozenset = frozenset()) -> list[DetectionRow]:
+    """The current results' examples: accepted objects a person added or relabelled, also once
+    a later run found them and took the decision over (``carried_from``); not of the classes
+    in ``skip``."""
     rows = s.scalars(select(DetectionRow).where(DetectionRow.job_id == job_id,
                                                 DetectionRow.status == "accepted").order_by(DetectionRow.id))
-    return [d for d in rows if d.source == "reviewer" or d.class_id != d.detected_class]
+    out = []
+    for d in rows:
+        if d.class_id in skip:
+            continue
+        origin, hops = d, 0
+        while not _by_person(origin) and origin.carried_from is not None and hops < 100:
+            origin, hops = s.get(DetectionRow, origin.carried_from), hops + 1
+            if origin is None:
+                break
+        if origin is not None and _by_person(origin) and origin.class_id == d.class_id:
+            out.append(d)
+    return out
 
 
 def reviewed_document(rows: list[DetectionRow]) -> dict:
@@ -105,32 +144,51 @@ def reviewed_document(rows: list[DetectionRow]) -> dict:
     return {"schema": "sbsc.detections/1", "detections": dets}
 
 
-def learn(s: Session, project: Project, data_dir: Path, source_library: Path) -> tuple[Path, list]:
+def learnt_library_path(pid: int) -> Path:
+    """A new folder for a learnt library of project ``pid``, relative to the data folder."""
+    return Path("projects", str(pid), "models", f"learnt_{uuid.uuid4().hex[:12]}")
+
+
+def learn(s: Session, project: Project, data_dir: Path, source_library: Path,
+          reteach: frozenset[str] = frozenset()) -> tuple[Path, list]:
     """Learn a library from ``project``'s examples into a new folder under its ``models/``.
+
+    The examples of removed classes (:func:`unlearnt`) are skipped unless ``reteach`` names
+    them; what was learnt for the classes in ``reteach`` is dropped from ``source_library``
+    first, so they are taught afresh from their current examples.
 
     Returns (folder relative to ``data_dir``, the ``Taught`` list of ``learn_library``).
     Raises :class:`sbsc_core.errors.InputError` (naming an example that cannot be used) or
     ``LookupError`` when there is nothing to learn from.
     """
     from sbsc_core.io.models import load_model_library
+    from sbsc_core.learning.forget import forget_learnt, learnt_part
     from sbsc_core.learning.library import learn_library
 
     job = s.get(Job, project.current_job_id)
     if job is None or not job.out_dir or not (Path(data_dir) / job.out_dir / "detections.json").is_file():
         raise LookupError(f"project {project.id}'s current results have no detect output to learn from")
-    rows = examples(s, job.id)
+    rows = examples(s, job.id, unlearnt(data_dir, project.id) - set(reteach))
     if not rows:
         raise LookupError(f"project {project.id} has no accepted object that a person added or "
                           "relabelled to learn from")
-    known = set(load_model_library(source_library).class_ids)
-    present = {d.class_id for d in rows}
-    specs = {cid: {k: v for k, v in spec.items() if k in SPEC_KEYS and v}
-             for cid, spec in project_classes(data_dir, project.id).items()
-             if cid in present and cid not in known}
-    rel = Path("projects", str(project.id), "models", f"learnt_{uuid.uuid4().hex[:12]}")
+    missing = sorted(set(reteach) - {d.class_id for d in rows})
+    if missing:
+        raise LookupError(f"no accepted example of class '{missing[0]}' to re-teach it from "
+                          "(add and confirm one or more first)")
+    rel = learnt_library_path(project.id)
     work = Path(data_dir) / "projects" / str(project.id) / "teach" / uuid.uuid4().hex[:12]
     work.mkdir(parents=True)
     try:
+        drop = [c for c in sorted(reteach) if (source_library / c).is_dir() and learnt_part(source_library / c)]
+        if drop:  # re-taught: from the library without what was learnt for them
+            forget_learnt(source_library, work / "models", drop)
+            source_library = work / "models"
+        known = set(load_model_library(source_library).class_ids)
+        present = {d.class_id for d in rows}
+        specs = {cid: {k: v for k, v in spec.items() if k in SPEC_KEYS and v}
+                 for cid, spec in project_classes(data_dir, project.id).items()
+                 if cid in present and cid not in known}
         (work / "reviewed.json").write_text(json.dumps(reviewed_document(rows)), encoding="utf-8")
         classes = None
         if specs:
@@ -142,3 +200,51 @@ def learn(s: Session, project: Project, data_dir: Path, source_library: Path) ->
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return rel, taught
+
+
+def forget(project: Project, data_dir: Path, library: Path, class_id: str) -> tuple[Path, str]:
+    """Write the project's library ``library`` without what was learnt for ``class_id`` into a
+    new folder under its ``models/``. Returns (folder relative to ``data_dir``, ``"class"`` or
+    ``"designs"``); :class:`sbsc_core.errors.InputError` when the class has nothing learnt."""
+    from sbsc_core.learning.forget import forget_learnt
+
+    rel = learnt_library_path(project.id)
+    part = forget_learnt(library, Path(data_dir) / rel, [class_id])[class_id]
+    return rel, part
+
+
+def brought_by(s: Session, project: Project, data_dir: Path, class_id: str, part: str) -> list[DetectionRow]:
+    """The current results' pending suggestions that what was learnt for ``class_id`` brought,
+    and that nobody has touched (no review decision).
+
+    A learnt class brought all of its hits; learnt designs of a known class the hits of that
+    class that no earlier run without them found (within the carry-over tolerance).
+    """
+    from sbsc_core.learning.forget import learnt_design_files
+
+    from .models import ReviewDecision
+    from .review_service import CARRY_TOLERANCE_M, models_dir
+
+    if project.current_job_id is None:
+        return []
+    rows = list(s.scalars(select(DetectionRow).where(
+        DetectionRow.job_id == project.current_job_id, DetectionRow.status == "pending",
+        DetectionRow.source != "reviewer", DetectionRow.detected_class == class_id,
+        DetectionRow.class_id == class_id).order_by(DetectionRow.id)))
+    touched = set(s.scalars(select(ReviewDecision.detection_id).where(
+        ReviewDecision.detection_id.in_([d.id for d in rows])))) if rows else set()
+    rows = [d for d in rows if d.id not in touched]
+    if part != "designs" or not rows:
+        return rows
+    seen: list[np.ndarray] = []
+    for j in s.scalars(select(Job).where(Job.project_id == project.id, Job.id != project.current_job_id,
+                                         Job.status == "succeeded")):
+        cdir = models_dir(s, j.models_id, Path(data_dir)) / class_id
+        if cdir.is_dir() and not learnt_design_files(cdir):
+            seen += [np.asarray(d.position, float) for d in s.scalars(select(DetectionRow).where(
+                DetectionRow.job_id == j.id, DetectionRow.detected_class == class_id))]
+    if not seen:
+        return rows
+    at = np.asarray(seen)
+    return [d for d in rows if float(np.min(np.linalg.norm(at - np.asarray(d.position, float), axis=1)))
+            > max(CARRY_TOLERANCE_M, 0.5 * max(d.width_m, d.height_m))]

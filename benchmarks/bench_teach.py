@@ -17,14 +17,18 @@ relief under each click, medians of the crops), and the floor is detected again:
 recall on its other objects and the whole floor's FP.
 
 With ``--together`` the left-out classes are removed from the design-change run's library and
-taught there as new classes beside the designs: one detection measures both.
+taught there as new classes beside the designs: one detection measures both (with
+``--no-design``: the left-out classes are taught together, and nothing else).
+
+A floor of the same scene, designs and seed with another library reuses that floor's scan
+(hard links; the library is rendered from its family and the seed, as the simulator does).
 
 One detection runs at a time (``nice``). A floor with fewer than ``examples + 1`` instances of a
 class (``one_room`` has one of each) is scored on ``--next-floor`` only.
 
     .venv/bin/python benchmarks/bench_teach.py --run-dir /tmp/teach --scene I --designs third \\
         --library-designs standard [--seed 1] [--next-floor 2] [--leave-out radiator exit_light]
-        [--together] [--no-design] [--json out.json]
+        [--together] [--no-design] [--next-floor-learnt-only] [--json out.json]
 """
 
 from __future__ import annotations
@@ -59,8 +63,37 @@ def sbsc(*args: str) -> float:
     return time.perf_counter() - t0
 
 
+SCAN_FILES = ("scan.ply", "ground_truth.json", "expected.json", "as_designed.ifc")
+
+
+def reuse_scan(out: Path, *, seed: int, library_designs: str) -> bool:
+    """Make ``out`` from a floor of the same scene, designs and seed with another library
+    (``sim_<scene>_<designs>_<other>_<seed>`` beside it): its scan and truth hard-linked, the
+    library of ``library_designs`` rendered (the simulator writes the library last, from the
+    seed and the family only, so the result is the same as simulating again). False when
+    there is none."""
+    from sbsc_core.simulate.designs import design_builder
+    from sbsc_core.simulate.library import write_model_library
+
+    prefix, _, tail = out.name.rsplit("_", 2)  # sim_<scene>_<designs>, <library>, <seed>
+    for other in ("standard", "alt", "third"):
+        src = out.parent / f"{prefix}_{other}_{tail}"
+        if other == library_designs or not (src / "ground_truth.json").is_file():
+            continue
+        tmp = out.parent / f".{out.name}.tmp"
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir()
+        for name in SCAN_FILES:
+            if (src / name).is_file():
+                os.link((src / name).resolve(), tmp / name)
+        write_model_library(tmp / "models", seed=seed, object_builder=design_builder(library_designs, seed))
+        tmp.rename(out)
+        return True
+    return False
+
+
 def simulate(out: Path, *, scene: str, seed: int, designs: str, library_designs: str) -> Path:
-    if not (out / "ground_truth.json").is_file():
+    if not (out / "ground_truth.json").is_file() and not reuse_scan(out, seed=seed, library_designs=library_designs):
         scene_args = ["--scenario", scene] if scene in ("I", "II") else ["--scene", scene]
         sbsc("simulate", *scene_args, "--realistic", "--clutter", "--designs", designs,
              "--library-designs", library_designs, "--seed", str(seed), "--out", str(out))
@@ -194,33 +227,45 @@ def next_floor(run: Path, a: argparse.Namespace, tag: str, lib: Path) -> dict:
     nxt = simulate(run / f"sim_{tag}_{a.next_floor}", scene=a.scene, seed=a.next_floor, designs=a.designs,
                    library_designs=a.library_designs)
     ntruth = read_truth(nxt / "ground_truth.json")
-    return {"next_floor": {"seed": a.next_floor,
-                           "before": figures(detect(nxt, nxt / "models", run / f"det_{tag}_{a.next_floor}"), ntruth),
-                           "after": figures(detect(nxt, lib, run / f"det_{tag}_{a.next_floor}_{lib.name}"), ntruth)}}
+    out = {"seed": a.next_floor}
+    if not a.next_floor_learnt_only:
+        out["before"] = figures(detect(nxt, nxt / "models", run / f"det_{tag}_{a.next_floor}"), ntruth)
+    out["after"] = figures(detect(nxt, lib, run / f"det_{tag}_{a.next_floor}_{lib.name}"), ntruth)
+    return {"next_floor": out}
 
 
-def new_class(run: Path, a: argparse.Namespace, cls: str) -> dict:
+def new_class(run: Path, a: argparse.Namespace, classes: list[str]) -> dict:
+    """``classes`` left out of the library together (one class: in turn), each taught from
+    ``--examples`` of its objects; one detection scores them all."""
     tag = f"{a.scene}_{a.designs}_{a.library_designs}"
     floor = simulate(run / f"sim_{tag}_{a.seed}", scene=a.scene, seed=a.seed, designs=a.designs,
                      library_designs=a.library_designs)
     truth = read_truth(floor / "ground_truth.json")
     before = detect(floor, floor / "models", run / f"det_{tag}_{a.seed}")  # the orthoimages do not depend on it
-    minus = run / f"lib_{tag}_minus_{cls}"
+    name = "_".join(sorted(classes))
+    minus = run / f"lib_{tag}_minus_{name}"
     if not minus.is_dir():
-        shutil.copytree(floor / "models", minus, ignore=lambda d, names: [cls] if Path(d) == floor / "models" else [])
-    examples = pick_examples(truth, a.examples, [cls], seen=seen_shares(before, truth))
-    rev = write_reviewed(examples, run / f"reviewed_{tag}_{cls}.json")
-    lib = run / f"lib_{tag}_{cls}_learnt"
+        shutil.copytree(floor / "models", minus,
+                        ignore=lambda d, names: [n for n in names if n in classes] if Path(d) == floor / "models" else [])
+    examples = pick_examples(truth, a.examples, classes, seen=seen_shares(before, truth))
+    rev = write_reviewed(examples, run / f"reviewed_{tag}_{name}.json")
+    lib = run / f"lib_{tag}_{name}_learnt"
     learn(before, rev, minus, lib)
-    meta = json.loads((lib / cls / "model.json").read_text(encoding="utf-8"))
-    after = detect(floor, lib, run / f"det_{tag}_{a.seed}_{cls}_learnt")
-    res = {"class": cls, "examples": len(examples), "learnt_size_m": [meta["width_m"], meta["height_m"]],
-           "true_size_m": [examples[0].width_m, examples[0].height_m], "rest": figures(after, truth, examples, cls)}
+    after = detect(floor, lib, run / f"det_{tag}_{a.seed}_{name}_learnt")
+    res = {"classes": sorted(classes), "examples": len(examples), "floor_rest": figures(after, truth, examples)}
+    for cls in classes:
+        meta = json.loads((lib / cls / "model.json").read_text(encoding="utf-8"))
+        ex = [o for o in examples if o.class_id == cls]
+        res[cls] = {"examples": len(ex), "learnt_size_m": [meta["width_m"], meta["height_m"]],
+                    "true_size_m": [ex[0].width_m, ex[0].height_m], "rest": figures(after, truth, examples, cls)["class"]}
+    if len(classes) == 1:
+        cls = classes[0]
+        res = {"class": cls, **res, "rest": figures(after, truth, examples, cls)}
     if a.next_floor is not None:
         nxt = simulate(run / f"sim_{tag}_{a.next_floor}", scene=a.scene, seed=a.next_floor, designs=a.designs,
                        library_designs=a.library_designs)
-        res["next_floor"] = figures(detect(nxt, lib, run / f"det_{tag}_{a.next_floor}_{cls}_learnt"),
-                                    read_truth(nxt / "ground_truth.json"), None, cls)
+        res["next_floor"] = {c: figures(detect(nxt, lib, run / f"det_{tag}_{a.next_floor}_{name}_learnt"),
+                                        read_truth(nxt / "ground_truth.json"), None, c) for c in classes}
     return res
 
 
@@ -238,6 +283,8 @@ def main() -> int:
     p.add_argument("--together", action="store_true",
                    help="leave the --leave-out classes out of the design-change run's library and teach them "
                         "there as new classes (one detection instead of one per class)")
+    p.add_argument("--next-floor-learnt-only", action="store_true",
+                   help="score the next floor with the learnt library only (not with its own library too)")
     p.add_argument("--json", type=Path)
     a = p.parse_args()
     a.run_dir.mkdir(parents=True, exist_ok=True)
@@ -246,8 +293,9 @@ def main() -> int:
         out["design_change"] = design_change(a.run_dir, a)
         print(json.dumps(out["design_change"]), flush=True)
     out["new_class"] = []
-    for cls in [] if a.together else a.leave_out:
-        out["new_class"].append(new_class(a.run_dir, a, cls))
+    groups = [a.leave_out] if a.together and a.no_design and a.leave_out else [] if a.together else [[c] for c in a.leave_out]
+    for classes in groups:
+        out["new_class"].append(new_class(a.run_dir, a, classes))
         print(json.dumps(out["new_class"][-1]), flush=True)
     if a.json:
         a.json.write_text(json.dumps(out, indent=1), encoding="utf-8")

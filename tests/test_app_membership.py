@@ -53,7 +53,7 @@ def world(tmp_path_factory):
         doc = client.get(f"/api/projects/{pid}/detections", headers=h["ada"]).json()
         sid = client.get(f"/api/projects/{pid}/suggestions", headers=h["ada"]).json()[0]["id"]
         ids = {"pid": pid, "jid": job, "did": doc["detections"][0]["id"], "sid": sid,
-               "wall": doc["walls"][0]["id"], "kind": "colour", "user": "vic"}
+               "wall": doc["walls"][0]["id"], "kind": "colour", "user": "vic", "class_id": "switch"}
         yield client, h, ids, other
 
 

@@ -149,3 +149,89 @@ def test_a_relabelled_object_teaches_its_class_another_design(c, srv) -> None:
     files = r.json()["classes"][0]["files"]
     names = zipfile.ZipFile(io.BytesIO(c.get(f"/api/projects/{pid}/exemplars.zip", headers=rita).content)).namelist()
     assert files and all(f"models/switch/{f}" in names for f in files)
+
+
+def _teach_readers(c: httpx.Client, srv, name: str) -> tuple[int, dict]:  # noqa: ANN001
+    """A project that learnt the card reader from two examples and searched again."""
+    pid = project(c, srv, name)
+    rita = auth(srv.tokens["rita"])
+    c.post(f"/api/projects/{pid}/classes", json={"id": "card_reader", "name": "Card reader"}, headers=rita)
+    for u, v in READERS[:2]:
+        assert c.post(f"/api/projects/{pid}/detections", headers=rita,
+                      json={"class": "card_reader", "wall": "W01", "u": u, "v": v, "status": "accepted"}).status_code == 201
+    r = c.post(f"/api/projects/{pid}/learn", headers=rita)
+    assert r.status_code == 202, r.text
+    assert wait_job(c, r.json()["job"]["id"], srv.tokens["rita"])["status"] == "succeeded"
+    return pid, rita
+
+
+def _readers(c: httpx.Client, pid: int, h: dict) -> list[dict]:
+    return [x for x in c.get(f"/api/projects/{pid}/detections", headers=h).json()["detections"]
+            if x["class"] == "card_reader"]
+
+
+def test_a_learnt_class_whose_hits_are_rejected_is_removed_then_re_taught(c, srv) -> None:
+    pid, rita = _teach_readers(c, srv, "teach_remove")
+    pending = [x for x in _readers(c, pid, rita) if x["review"]["status"] == "pending"]
+    assert len(pending) == 2
+    bad = pending[0]  # the reviewer rejects one of its hits
+    assert c.patch(f"/api/detections/{bad['id']}", json={"status": "rejected", "version": bad["review"]["version"]},
+                   headers=rita).status_code == 200
+    listed = c.get(f"/api/projects/{pid}/learnt", headers=rita).json()
+    assert listed == {"classes": [{"class": "card_reader", "part": "class",
+                                   "hits": {"pending": 1, "accepted": 2, "rejected": 1}}], "removed": []}
+    url = f"/api/projects/{pid}/learnt"
+    # bad input: one line each, nothing changed
+    for cls, code, word in (("Card-Reader", 422, "class id"), ("badge_reader", 404, "not in"),
+                            ("switch", 409, "nothing")):
+        r = c.delete(f"{url}/{cls}", headers=rita)
+        assert r.status_code == code and word in r.json()["detail"] and "\n" not in r.json()["detail"], (cls, r.text)
+    assert c.delete(f"{url}/card_reader", headers=auth(srv.tokens["olga"])).status_code == 404  # not a member
+    assert c.get(url, headers=rita).json()["classes"][0]["class"] == "card_reader"
+    r = c.delete(f"{url}/card_reader", headers=rita)  # a reviewer may remove it
+    assert r.status_code == 200, r.text
+    assert r.json()["part"] == "class" and r.json()["suggestions_removed"] == 1
+    after = _readers(c, pid, rita)
+    assert sorted(x["review"]["status"] for x in after) == ["accepted", "accepted", "rejected"]  # decisions stay
+    assert c.get(url, headers=rita).json() == {"classes": [], "removed": ["card_reader"]}
+    names = zipfile.ZipFile(io.BytesIO(c.get(f"/api/projects/{pid}/exemplars.zip", headers=rita).content)).namelist()
+    assert names and not [n for n in names if "card_reader" in n]  # the project's library is without it
+    assert "card_reader" in c.get(f"/api/projects/{pid}/classes", headers=rita).json()  # its objects keep their class
+    # the next learning no longer uses it: its examples are all there is, so there is nothing to learn from
+    r = c.post(f"/api/projects/{pid}/learn", headers=rita)
+    assert r.status_code == 409 and "no accepted object" in r.json()["detail"]
+    assert c.delete(f"{url}/card_reader", headers=rita).status_code == 404  # removed already: not in the library
+    r = c.post(f"/api/projects/{pid}/learn", json={"reteach": ["switch"]}, headers=rita)
+    assert r.status_code == 422 and "switch" in r.json()["detail"]
+    # re-taught from its examples: found again, the rejection kept
+    r = c.post(f"/api/projects/{pid}/learn", json={"reteach": ["card_reader"]}, headers=rita)
+    assert r.status_code == 202, r.text
+    assert [(t["class"], t["action"]) for t in r.json()["classes"]] == [("card_reader", "new class")]
+    assert wait_job(c, r.json()["job"]["id"], srv.tokens["rita"])["status"] == "succeeded"
+    assert sorted(x["review"]["status"] for x in _readers(c, pid, rita)) == ["accepted", "accepted", "pending", "rejected"]
+    assert c.get(url, headers=rita).json()["removed"] == []
+
+
+def test_a_learnt_design_is_removed_and_a_signed_off_project_refuses(c, srv) -> None:
+    pid = project(c, srv, "teach_remove_design")
+    rita, max_ = auth(srv.tokens["rita"]), auth(srv.tokens["max"])
+    d = next(x for x in c.get(f"/api/projects/{pid}/detections", headers=rita).json()["detections"]
+             if x["class"] == "socket_x1")
+    assert c.patch(f"/api/detections/{d['id']}", json={"class": "switch", "version": 1}, headers=rita).status_code == 200
+    r = c.post(f"/api/projects/{pid}/learn", headers=rita)
+    assert r.status_code == 202 and r.json()["classes"][0]["action"] == "new design"
+    files = r.json()["classes"][0]["files"]
+    assert wait_job(c, r.json()["job"]["id"], srv.tokens["rita"])["status"] == "succeeded"
+    assert [x["part"] for x in c.get(f"/api/projects/{pid}/learnt", headers=rita).json()["classes"]] == ["designs"]
+    r = c.delete(f"/api/projects/{pid}/learnt/switch", headers=rita)
+    assert r.status_code == 200 and r.json()["part"] == "designs", r.text
+    names = zipfile.ZipFile(io.BytesIO(c.get(f"/api/projects/{pid}/exemplars.zip", headers=rita).content)).namelist()
+    assert "models/switch/model.json" in names and not [f for f in files if f"models/switch/{f}" in names]
+    # signed off: 423 as every other write
+    pend = [x["id"] for x in c.get(f"/api/projects/{pid}/detections?status=pending", headers=rita).json()["detections"]]
+    if pend:
+        assert c.post(f"/api/projects/{pid}/decisions", json={"status": "rejected", "ids": pend},
+                      headers=rita).status_code == 200
+    assert c.post(f"/api/projects/{pid}/signoff", json={"comment": "ok"}, headers=max_).status_code == 200
+    assert c.delete(f"/api/projects/{pid}/learnt/switch", headers=max_).status_code == 423
+    assert c.post(f"/api/projects/{pid}/learn", json={"reteach": ["switch"]}, headers=max_).status_code == 423

@@ -70,6 +70,27 @@ def test_create_a_class_mark_two_examples_learn_and_search_again(browser, srv) -
         with page.expect_download() as dl:
             page.click("#t-download")
         assert dl.value.suggested_filename == f"models-{pid}.zip"
+        # it must not make things worse: one of its hits rejected, the learnt class removed, then re-taught
+        item = page.locator("#t-learnt li[data-class=card_reader]")
+        item.wait_for()
+        assert "learnt class" in item.inner_text() and "2 pending" in item.inner_text()
+        pending = page.locator(".det[data-status=pending]", has=page.locator(".cls[title=card_reader]"))
+        with httpx.Client(base_url=srv.url, timeout=60) as c:
+            did = pending.first.get_attribute("data-id")
+            d = c.get(f"/api/detections/{did}", headers=rita).json()
+            assert c.patch(f"/api/detections/{did}", json={"status": "rejected", "version": d["review"]["version"]},
+                           headers=rita).status_code == 200
+        item.locator("button[data-act=remove]").click()
+        page.wait_for_selector("#t-status:has-text('removed')")
+        page.wait_for_selector("#t-learnt li[data-class=card_reader]:has-text('removed')")
+        assert readers.count() == 3  # the untouched pending hit is gone, the decided ones stay
+        assert pending.count() == 0
+        page.locator("#t-learnt li[data-class=card_reader] button[data-act=re-teach]").click()
+        page.wait_for_selector("#t-status:has-text('Searched again')", timeout=60_000)
+        page.wait_for_function("() => document.querySelectorAll('.det[data-status=pending]').length > 0")
+        assert sorted(readers.nth(i).get_attribute("data-status") for i in range(readers.count())) == [
+            "accepted", "accepted", "pending", "rejected"]  # found again; the rejection kept
+        assert "learnt class" in page.locator("#t-learnt li[data-class=card_reader]").inner_text()
         assert not [e for e in errors if "Content Security Policy" in e or "Refused" in e], errors
     finally:
         page.close()

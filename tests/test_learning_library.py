@@ -264,3 +264,31 @@ def test_an_example_moves_to_a_snap_only_where_the_relief_agrees(tmp_path: Path)
     assert not trust_snap(surface, u, v, u + 0.01, v, 0.6, 0.08, 0.08, 0.75)  # a weak match
     # a class of another size (no blob of its size there): the match alone decides
     assert trust_snap(surface, u, v, u + 0.04, v, 0.9, 0.30, 0.30, 0.75)
+
+
+def test_what_was_learnt_for_a_class_can_be_removed_and_nothing_else(taught) -> None:
+    from sbsc_core.learning.forget import forget_learnt, learnt_parts
+
+    tmp = taught["tmp"]
+    lib = synthetic_library()
+    write_library(ModelLibrary({"socket": lib["socket"]}, "x"), tmp / "lib")  # beside the others
+    other = make_template(make_model("socket", *socket_like(relief_m=0.024, body=(200, 200, 190))), PIXEL_M)
+    ortho = taught["ortho"]
+    at = (150.0, 400.0)
+    paste(ortho, make_wall(seed=3)[1], other, at, seed=7)
+    det = write_detect_output([ortho], tmp / "det2")
+    rev = reviewed(tmp / "r2.json", [{"class": "card_reader", "position": world(ortho, *READER_AT)},
+                                     {"class": "socket", "position": world(ortho, *at)}])
+    learn_library(det, rev, taught["lib"], tmp / "learnt")
+    assert learnt_parts(tmp / "learnt") == {"card_reader": "class", "socket": "designs"}
+    done = forget_learnt(tmp / "learnt", tmp / "no_design", ["socket"])
+    assert done == {"socket": "designs"}
+    assert sorted(p.name for p in (tmp / "no_design" / "socket").iterdir()) == ["colour.png", "depth.npy", "model.json"]
+    assert "learnt_views" not in json.loads((tmp / "no_design" / "socket" / "model.json").read_text())
+    assert learnt_parts(tmp / "no_design") == {"card_reader": "class"}
+    assert forget_learnt(tmp / "no_design", tmp / "neither", ["card_reader"]) == {"card_reader": "class"}
+    assert set(load_model_library(tmp / "neither").class_ids) == set(load_model_library(taught["lib"]).class_ids)
+    for cid, why in (("panel", "nothing in the library was learnt"), ("badge_reader", "no such class")):
+        with pytest.raises(InputError, match=why):
+            forget_learnt(tmp / "learnt", tmp / f"bad_{cid}", [cid])
+        assert not (tmp / f"bad_{cid}").exists()  # nothing half-written

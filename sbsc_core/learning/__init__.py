@@ -4,5 +4,6 @@
 - :mod:`.snap`: an object placed where a depth model matches the relief nearby;
 - :mod:`.examples`: reviewed objects found on the surfaces of a detect output;
 - :mod:`.library`: the learnt library (:func:`learn_library`);
+- :mod:`.forget`: a library without what was learnt for a class (the review app's remove and re-teach);
 - :mod:`.command`: the ``sbsc learn`` command.
 """
