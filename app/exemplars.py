@@ -1,6 +1,6 @@
 """Learn from decisions: the reviewed objects of a project as a model library (contract 2).
 
-The crops and their medians are the library's (:mod:`sbsc_core.learning.crops`).
+The crops and their medians are the library's (:mod:`sbsc_core.recognition.learning.crops`).
 
 Every accepted object (recognized, relabelled or added by a reviewer) is cut out of its
 wall's colour and depth orthoimages over exactly its footprint. Each class of the project's
@@ -27,7 +27,13 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from sbsc_core.learning.crops import footprint, learnt_depth, learnt_view, relief, upright
+from sbsc_core.recognition.learning.crops import (
+    footprint,
+    learnt_depth,
+    learnt_view,
+    relief,
+    upright,
+)
 
 from .models import DetectionRow, Project, WallRow
 

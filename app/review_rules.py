@@ -52,3 +52,6 @@ def check_version(did: object, given: int, now: int, by: str | None, current: di
     if int(given) != now:
         raise StaleVersion(f"stale version {given}: detection {did} is at version {now} "
                            f"(last changed by {by or 'nobody'}); reload and decide again", current)
+
+
+CARRY_TOLERANCE_M = 0.10  # a new detection within this of an old one (or half its size) is the same

@@ -16,7 +16,6 @@ Errors are :mod:`app.errors` classes (``ServiceError`` here) carrying the HTTP s
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,10 +25,10 @@ from sqlalchemy.orm import Session
 
 from .auth import Principal
 from .errors import Conflict, Forbidden, Invalid, NotFound, ReviewError
+from .libraries import check_mount, library_classes, models_dir
 from .models import (
     DetectionRow,
     Job,
-    ModelLibraryRow,
     Project,
     ProjectEvent,
     ReviewDecision,
@@ -40,12 +39,11 @@ from .models import (
     utcnow,
 )
 from .results import detection_dict, review_counts, wall_dict
-from .review_rules import check_open, check_status, check_version, review_score
+from .review_rules import CARRY_TOLERANCE_M, check_open, check_status, check_version, review_score
 from .snap import Snap, depth_template, snap_to_relief
 from .surfaces import point_on
 
 ACTIONS = {"accepted": "accept", "rejected": "reject", "pending": "reset"}
-CARRY_TOLERANCE_M = 0.10  # a new detection within this of an old one (or half its size) is the same
 BULK_MAX = 100_000
 RELABELLED = "relabelled by a reviewer: decided one by one, never in bulk"
 
@@ -54,46 +52,6 @@ ServiceError = ReviewError  # the name the REST routes use
 
 
 # --------------------------------------------------------------------------- look-ups
-
-
-@functools.lru_cache(maxsize=1)
-def bundled_classes() -> dict:
-    """The bundled model library's classes (contract 2): class id -> name, IFC class, predefined
-    type and footprint, by class id as for an uploaded library; read from its ``model.json`` files."""
-    from sbsc_core.io.models import read_library_metadata
-    from sbsc_core.paths import bundled_models_dir
-
-    keys = ("name", "ifc_class", "predefined_type", "width_m", "height_m")
-    meta = read_library_metadata(bundled_models_dir())
-    return {cid: {**{k: meta[cid].get(k) for k in keys}, "mount": list(meta[cid]["mount"])} for cid in sorted(meta)}
-
-
-def check_mount(classes: dict, class_id: str, wall: WallRow) -> None:
-    """422 when the library says ``class_id`` is never mounted on this kind of surface (model.json
-    ``mount``: a radiator on a ceiling, a smoke detector on a column). A library stored before
-    ``mount`` was kept allows every surface."""
-    kind = wall.kind or "wall"
-    mounts = classes[class_id].get("mount")
-    if mounts and kind not in mounts:
-        raise Invalid(f"class: '{class_id}' is mounted on {' or '.join(mounts)} (its model.json 'mount'), "
-                      f"not on {kind} {wall.key}")
-
-
-def library_classes(s: Session, models_id: int | None) -> dict:
-    """Class id -> model.json fields of an uploaded library, or of the bundled one."""
-    if models_id is not None:
-        row = s.get(ModelLibraryRow, models_id)
-        if row is not None:
-            return dict(row.classes)
-    return bundled_classes()
-
-
-def models_dir(s: Session, models_id: int | None, data_dir: Path) -> Path:
-    """The model library directory (contract 2) a job used."""
-    from sbsc_core.paths import bundled_models_dir
-
-    row = s.get(ModelLibraryRow, models_id) if models_id is not None else None
-    return data_dir / row.path if row is not None else bundled_models_dir()
 
 
 def score(d: DetectionRow) -> float | None:

@@ -27,7 +27,7 @@ from sbsc_core.errors import InputError, SbscError
 
 from .config import AppSettings
 from .db import Database, upgrade
-from .jobs import _prepare_viewer, job_dir
+from .job_worker import _prepare_viewer, job_dir
 from .models import DesignRow, Job, ModelLibraryRow, Project, Scan, utcnow
 from .results import import_results
 from .storage import sha256_file

@@ -53,7 +53,7 @@ def _sweep(settings: AppSettings, db: Database) -> list:
 
 def reap_orphans(settings: AppSettings) -> None:
     """Kill the job processes a crashed server left behind (``<data>/run/*.pgid``)."""
-    from .jobs import GroupFiles
+    from .job_processes import GroupFiles
 
     killed = GroupFiles(settings.data_dir).reap_all()
     if killed:

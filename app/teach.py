@@ -6,13 +6,13 @@
   atomically.
 - An **example** of such a class is an object added on a wall (``POST .../detections``): it has
   no model yet, so its size is the relief blob under the click, and it is placed at the blob's
-  centre (:func:`sbsc_core.learning.examples.relief_blob`).
-- **Learning** is the library's :func:`sbsc_core.learning.library.learn_library` over the
+  centre (:func:`sbsc_core.recognition.learning.examples.relief_blob`).
+- **Learning** is the library's :func:`sbsc_core.recognition.learning.library.learn_library` over the
   current job's detect output and the project's library, with the reviewed document of the
   accepted objects a person added or relabelled (found objects that were only accepted teach
   nothing new, and would mix the old design into a new one's medians).
 - **Removing** what was learnt for a class (its hits are rejected) writes the project's library
-  without it (:func:`sbsc_core.learning.forget.forget_learnt`) and puts the class in
+  without it (:func:`sbsc_core.recognition.learning.forget.forget_learnt`) and puts the class in
   ``<data>/projects/<pid>/unlearnt.json``: learning skips its examples until it is re-taught.
   The pending suggestions it brought go (:func:`brought_by`).
 """
@@ -93,7 +93,7 @@ def taught_class_fields(spec: dict) -> dict:
 
 def measure(wall: WallRow, data_dir: Path, u: float, v: float) -> tuple[float, float, float, float] | None:
     """(u, v, width_m, height_m) of the relief blob under a click on ``wall``; None without one."""
-    from sbsc_core.learning.examples import relief_blob
+    from sbsc_core.recognition.learning.examples import relief_blob
 
     meta = (wall.images or {}).get("depth")
     if not meta:
@@ -162,8 +162,8 @@ def learn(s: Session, project: Project, data_dir: Path, source_library: Path,
     ``LookupError`` when there is nothing to learn from.
     """
     from sbsc_core.io.models import load_model_library
-    from sbsc_core.learning.forget import forget_learnt, learnt_part
-    from sbsc_core.learning.library import learn_library
+    from sbsc_core.recognition.learning.forget import forget_learnt, learnt_part
+    from sbsc_core.recognition.learning.library import learn_library
 
     job = s.get(Job, project.current_job_id)
     if job is None or not job.out_dir or not (Path(data_dir) / job.out_dir / "detections.json").is_file():
@@ -206,7 +206,7 @@ def forget(project: Project, data_dir: Path, library: Path, class_id: str) -> tu
     """Write the project's library ``library`` without what was learnt for ``class_id`` into a
     new folder under its ``models/``. Returns (folder relative to ``data_dir``, ``"class"`` or
     ``"designs"``); :class:`sbsc_core.errors.InputError` when the class has nothing learnt."""
-    from sbsc_core.learning.forget import forget_learnt
+    from sbsc_core.recognition.learning.forget import forget_learnt
 
     rel = learnt_library_path(project.id)
     part = forget_learnt(library, Path(data_dir) / rel, [class_id])[class_id]
@@ -220,10 +220,11 @@ def brought_by(s: Session, project: Project, data_dir: Path, class_id: str, part
     A learnt class brought all of its hits; learnt designs of a known class the hits of that
     class that no earlier run without them found (within the carry-over tolerance).
     """
-    from sbsc_core.learning.forget import learnt_design_files
+    from sbsc_core.recognition.learning.forget import learnt_design_files
 
+    from .libraries import models_dir
     from .models import ReviewDecision
-    from .review_service import CARRY_TOLERANCE_M, models_dir
+    from .review_rules import CARRY_TOLERANCE_M
 
     if project.current_job_id is None:
         return []

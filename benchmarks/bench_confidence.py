@@ -20,7 +20,7 @@ and without the expected counts. A hit is right when a ground-truth object of it
 lies within ``--radius`` of it (each object counts once). The logistic model is fitted on
 the FIT scenes only; the reliability table and the expected calibration error (ECE) are
 printed for the EVALUATION scenes. ``--write`` stores the fitted model as
-``sbsc_core/calibration/confidence.json`` (``--out PATH`` writes it elsewhere, to try it first).
+``sbsc_core/recognition/calibration/confidence.json`` (``--out PATH`` writes it elsewhere, to try it first).
 
 The shipped calibration adds Scenario I scenes with the realistic scanner and clutter, where
 long walls are seen from far and obliquely (flat signs lost in depth, mixed-pixel trails),
@@ -52,7 +52,11 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from sbsc_core.confidence import (  # noqa: E402
+from sbsc_core.io.models import load_model_library  # noqa: E402
+from sbsc_core.io.scans import read_scans  # noqa: E402
+from sbsc_core.paths import sample_projects_dir  # noqa: E402
+from sbsc_core.pipeline.detect import detect  # noqa: E402
+from sbsc_core.recognition.confidence import (  # noqa: E402
     CALIBRATION_PATH,
     FEATURES,
     MONOTONE,
@@ -61,15 +65,11 @@ from sbsc_core.confidence import (  # noqa: E402
     model_reliefs,
     reliability,
 )
-from sbsc_core.consensus import consensus_all  # noqa: E402
-from sbsc_core.io.models import load_model_library  # noqa: E402
-from sbsc_core.io.scans import read_scans  # noqa: E402
-from sbsc_core.paths import sample_projects_dir  # noqa: E402
-from sbsc_core.pipeline import detect  # noqa: E402
+from sbsc_core.recognition.consensus import consensus_all  # noqa: E402
+from sbsc_core.recognition.templates import make_templates  # noqa: E402
 from sbsc_core.settings import DetectionSettings  # noqa: E402
 from sbsc_core.simulate.designs import RANDOM, design_builder  # noqa: E402
 from sbsc_core.simulate.scenarios import simulate_scene  # noqa: E402
-from sbsc_core.templates import make_templates  # noqa: E402
 from sbsc_core.types import Orthoimage  # noqa: E402
 
 FIT_SEEDS = (11, 12, 13)

@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def start_cluster(n: int, tmp: Path) -> tuple[str, list[subprocess.Popen]]:
     dask = str(Path(sys.executable).with_name("dask"))
-    from sbsc_core.pipeline import worker_environment
+    from sbsc_core.pipeline.worker_env import worker_environment
 
     env = {**os.environ, **worker_environment(), "PYTHONPATH": str(ROOT)}
     info = tmp / f"scheduler-{n}.json"
@@ -66,7 +66,7 @@ def main() -> int:
     ap.add_argument("--run-dir", default="runs/bench_I")
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     args = ap.parse_args()
-    from sbsc_core.pipeline import detect_to_dir
+    from sbsc_core.pipeline.detect import detect_to_dir
 
     run = Path(args.run_dir)
     scan = run / "scan"

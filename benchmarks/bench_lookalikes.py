@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from sbsc_core.evaluate import evaluate
     from sbsc_core.io.documents import read_truth
-    from sbsc_core.pipeline import detect_to_dir
+    from sbsc_core.pipeline.detect import detect_to_dir
     from sbsc_core.simulate.designs_lookalike import lookalike_builder
     from sbsc_core.simulate.scenarios import simulate_scene
 

@@ -14,7 +14,7 @@ seed is the family seed) and its model library is that family's. The scan is det
 Prints the paper's Table 1 of every family, the classes that were taken for others (a
 missed object with an unmatched detection of another class within the match radius), then
 one line per family and the mean and worst TP and FP over the families, and the expected
-calibration error (ECE, 10 bins; :func:`sbsc_core.confidence.reliability`) of the
+calibration error (ECE, 10 bins; :func:`sbsc_core.recognition.confidence.reliability`) of the
 detections' ``confidence`` against whether they are right, pooled over the families.
 
 Issue 27's acceptance: at least 20 families left out of every fit, mean TP >= 97 %,
@@ -136,8 +136,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args(argv)
 
-    from sbsc_core.confidence import reliability
     from sbsc_core.evaluate import format_table
+    from sbsc_core.recognition.confidence import reliability
 
     results = []
     for family in args.families:

@@ -80,7 +80,7 @@ def simulate(scene: Path, out: Path, variant: str, design: str, seed: int, step:
 
 
 def detect(sim: Path, out: Path, expected: bool, redo: bool) -> tuple[dict, float]:
-    from sbsc_core.pipeline import detect_to_dir
+    from sbsc_core.pipeline.detect import detect_to_dir
 
     t = time.perf_counter()
     if redo or not (out / "detections.json").is_file():

@@ -1,4 +1,4 @@
-"""What refining the stations' registration does to the position error (``sbsc_core.registration``).
+"""What refining the stations' registration does to the position error (``sbsc_core.scene.registration``).
 
     .venv/bin/python benchmarks/bench_registration.py [--designs standard alt] [--seeds 5521]
         [--storeys 1] [--expected {yes,no,both}] [--run-dir /tmp/bench_registration] [--quiet]
@@ -41,7 +41,7 @@ def simulate(out: Path, design: str, seed: int, storeys: int, quiet: bool) -> No
 
 
 def detect(sim: Path, out: Path, expected: bool, refine: bool) -> tuple[dict, dict]:
-    from sbsc_core.pipeline import detect_to_dir
+    from sbsc_core.pipeline.detect import detect_to_dir
     from sbsc_core.settings import DetectionSettings
 
     s = DetectionSettings.from_dict({"registration": {"enabled": refine}})
@@ -55,8 +55,8 @@ def detect(sim: Path, out: Path, expected: bool, refine: bool) -> tuple[dict, di
 
 def station_errors_mm(sim: Path, seed: int, records: list[dict] | None) -> np.ndarray:
     """Mean error (mm) of each station's points, with the refined poses of ``records`` (None: as given)."""
+    from sbsc_core.imaging.partition import scan_origin
     from sbsc_core.io.scans import open_scan, sample_scan
-    from sbsc_core.partition import scan_origin
     from sbsc_core.simulate.building_scenario import plan_building
     from sbsc_core.simulate.realism import station_pose_error
 

@@ -16,7 +16,7 @@ there). ``T`` applies to the detections' calibrated ``confidence`` when they hav
 to ``alpha``.
 
 The calibrated threshold. ``confidence`` is calibrated: an object of confidence c is an
-object of its class at that place with probability c (``sbsc_core/confidence.py``, fitted
+object of its class at that place with probability c (``sbsc_core/recognition/confidence.py``, fitted
 and checked on held-out simulated seeds by ``benchmarks/bench_confidence.py``; the shipped
 calibration's held-out expected calibration error is in its ``info``). A bulk accept that
 may get at most a share ``1 - P`` of its objects wrong therefore accepts the objects with

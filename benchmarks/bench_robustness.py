@@ -17,7 +17,7 @@ of the scan that another simulator or a real scanner could produce:
   cast, linear instead of sRGB, one station darker), thinned (no ceiling, sparse upper
   walls) or misregistered (one station off by a few mm).
 
-Every variant is detected in-process (:func:`sbsc_core.pipeline.detect_to_dir`, the code of
+Every variant is detected in-process (:func:`sbsc_core.pipeline.detect.detect_to_dir`, the code of
 ``sbsc detect``) with the base run's model library and ``expected.json`` and evaluated with
 :func:`sbsc_core.evaluate.evaluate` (10 cm match radius). Prints one table (a row per
 variant and design set, summed over the seeds: TP, FN, FP, mean / max position error of the
@@ -393,7 +393,7 @@ def run_variant(v: Variant, scene: Path, run_dir: Path, design: str, seed: int, 
     from sbsc_core.errors import SbscError
     from sbsc_core.evaluate import evaluate
     from sbsc_core.io.documents import read_truth
-    from sbsc_core.pipeline import detect_to_dir
+    from sbsc_core.pipeline.detect import detect_to_dir
 
     run = Run(v.name, design, seed)
     b = base_dir(run_dir, design, seed)

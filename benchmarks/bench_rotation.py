@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 
 from sbsc_core.evaluate import evaluate  # noqa: E402
 from sbsc_core.io.documents import read_detections, read_truth  # noqa: E402
-from sbsc_core.pipeline import detect_to_dir  # noqa: E402
+from sbsc_core.pipeline.detect import detect_to_dir  # noqa: E402
 from sbsc_core.simulate.scenarios import simulate_scene  # noqa: E402
 
 

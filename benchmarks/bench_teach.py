@@ -117,8 +117,8 @@ def seen_shares(det_dir: Path, truth: TruthDocument) -> dict[int, float]:
     """The share of each truth object's footprint that the scan saw (its surface's depth
     orthoimage in the detect output); 0 when it is on no surface."""
     from sbsc_core.errors import InputError
-    from sbsc_core.learning.crops import footprint, seen_share
-    from sbsc_core.learning.examples import locate, read_detect_output
+    from sbsc_core.recognition.learning.crops import footprint, seen_share
+    from sbsc_core.recognition.learning.examples import locate, read_detect_output
 
     surfaces = read_detect_output(det_dir)
     out = {}

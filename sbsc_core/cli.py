@@ -264,9 +264,38 @@ def _add_compare(cmds: Commands) -> None:
 
 
 def _add_learn(cmds: Commands) -> None:
-    from .learning.command import add_learn
+    """Register ``sbsc learn DETECT_OUT --reviewed FILE --models DIR --out NEWDIR [--classes FILE]``."""
 
-    add_learn(cmds)
+    p = cmds.add("learn", func=_cmd_learn,
+                 help="teach a model library new classes and designs from reviewed objects of a detect output")
+    p.add_argument("detect_out", metavar="DETECT_OUT", help="a folder written by sbsc detect --out")
+    p.add_argument("--reviewed", required=True, metavar="FILE",
+                   help="detections document of the accepted, relabelled and added objects (contract 4); "
+                        "an object may give only its class and position")
+    p.add_argument("--models", required=True, metavar="DIR", help="the model library the detection used")
+    output_option(p, "dir")
+    p.add_argument("--classes", metavar="FILE",
+                   help="CLASSES.json: new class id -> {name, ifc_class, predefined_type?, mount?}")
+    json_option(p)
+
+
+def _cmd_learn(args: argparse.Namespace) -> int:
+    from .recognition.learning.library import learn_library
+
+    con = console()
+    out = output_parent(args.out)
+    detect_out = Path(args.detect_out)
+    if not detect_out.is_dir():
+        raise InputError(detect_out, "no such folder (give the --out folder of sbsc detect)")
+    taught = learn_library(detect_out, Path(args.reviewed), Path(args.models), out,
+                           classes=Path(args.classes) if args.classes else None, log=con.info)
+    changed = [t for t in taught if t.action != "matches"]
+    con.info(f"wrote {out}: {sum(t.action == 'new class' for t in taught)} new class(es), "
+             f"{sum(t.action == 'new design' for t in taught)} new design(s), "
+             f"{len(taught) - len(changed)} class(es) already matching")
+    if args.json:
+        con.result({"out": out, "classes": [t.to_dict() for t in taught]})
+    return 0
 
 
 BUILTIN: tuple[Registrar, ...] = (_add_simulate, _add_detect, _add_evaluate, _add_export_ifc, _add_compare,
@@ -504,10 +533,10 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_detect(args: argparse.Namespace) -> int:
-    from .cpu_features import prefer_fast_sort
+    from .pipeline.cpu_features import prefer_fast_sort
 
     prefer_fast_sort()  # before numpy is imported (AMD Zen 4: numpy's AVX2 sort is the fast one)
-    from .pipeline import detect_to_dir
+    from .pipeline.detect import detect_to_dir
 
     con = console()
     out = output_parent(args.out)

@@ -287,15 +287,15 @@ class ConfidenceSettings:
     """Calibrated confidence per detection and the "none of these" rule (issue 13)."""
 
     enabled: bool = True
-    calibration: str = ""  # a calibration JSON (empty: the one shipped in sbsc_core/calibration/)
+    calibration: str = ""  # a calibration JSON (empty: the one shipped in sbsc_core/recognition/calibration/)
     min_confidence: float = 0.5  # hits less likely right than this give no detection ...
     report_unknown: bool = False  # ... or, with this, a detection of class "unknown" for review
 
 
 @dataclass
 class CeilingSettings:
-    """Objects on ceilings (issue 11; :mod:`sbsc_core.ceilings`): searched by default when a
-    searched class may be mounted there (:func:`~sbsc_core.pipeline.searched_surfaces`)."""
+    """Objects on ceilings (issue 11; :mod:`sbsc_core.scene.ceilings`): searched by default when a
+    searched class may be mounted there (:func:`~sbsc_core.pipeline.detect.searched_surfaces`)."""
 
     enabled: bool = True  # ceilings may be searched (``sbsc detect --no-ceilings``: not)
     tile_m: float = 6.0  # a storey's ceiling is cut into tiles at most this big each way
@@ -310,8 +310,8 @@ class CeilingSettings:
 
 @dataclass
 class ColumnSettings:
-    """Objects on free-standing columns (issue 11; :mod:`sbsc_core.columns`): searched by
-    default when a searched class may be mounted there (:func:`~sbsc_core.pipeline.searched_surfaces`)."""
+    """Objects on free-standing columns (issue 11; :mod:`sbsc_core.scene.columns`): searched by
+    default when a searched class may be mounted there (:func:`~sbsc_core.pipeline.detect.searched_surfaces`)."""
 
     enabled: bool = True  # columns may be found and searched (``sbsc detect --no-columns``: not)
     cell_m: float = 0.05  # plan cells of the column search
@@ -326,7 +326,7 @@ class ColumnSettings:
 
 @dataclass
 class RegistrationSettings:
-    """Fine registration of the stations when they come as several files (:mod:`sbsc_core.registration`)."""
+    """Fine registration of the stations when they come as several files (:mod:`sbsc_core.scene.registration`)."""
 
     enabled: bool = True  # several scan files: refine how they fit together before anything is measured
     sample_points: int = 320_000  # each station's share of the sample kept for it (fewer than 1/4 of it seen

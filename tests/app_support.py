@@ -1,6 +1,6 @@
 """Helpers of the review-app tests (no tests here): a real server process, inputs, fake runners.
 
-The fake runners have the signature of ``sbsc_core.pipeline.detect_to_dir`` and write a
+The fake runners have the signature of ``sbsc_core.pipeline.detect.detect_to_dir`` and write a
 complete, valid output directory (contract 4 document, orthoimages), so the app can be
 tested without depending on recognition quality; the end-to-end test uses the real one.
 They are selected with ``SBSC_JOB_RUNNER=tests.app_support:NAME``.

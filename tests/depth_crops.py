@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from sbsc_core.io.models import load_model_library
-from sbsc_core.templates import make_templates
+from sbsc_core.recognition.templates import make_templates
 from sbsc_core.types import Orthoimage, WallArea, WallFrame
 
 PIXEL_M = 0.005

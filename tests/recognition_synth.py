@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from sbsc_core.templates import ModelTemplate
+from sbsc_core.recognition.templates import ModelTemplate
 from sbsc_core.types import ModelLibrary, ObjectModel, Orthoimage, WallArea, WallFrame
 
 PIXEL_M = 0.005

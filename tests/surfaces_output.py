@@ -14,7 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from sbsc_core.columns import FoundColumn, column_faces
+from sbsc_core.scene.columns import FoundColumn, column_faces
 
 from .app_support import PIXEL_M, _fake_output
 

@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from sbsc_core.amplitude import colour_where_relief_allows, relief_amplitude, scene_amplitude
+from sbsc_core.recognition.amplitude import (
+    colour_where_relief_allows,
+    relief_amplitude,
+    scene_amplitude,
+)
 from sbsc_core.types import Box, Candidate
 
 

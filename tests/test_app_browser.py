@@ -39,7 +39,7 @@ SCREENSHOT = (ROOT / "docs" / "images" if os.environ.get("SBSC_SAVE_SCREENSHOTS"
 @pytest.fixture(scope="module")
 def sample_server(tmp_path_factory):
     """A server whose sample project holds the real pipeline's results on the one-room scene."""
-    from sbsc_core.pipeline import detect_to_dir
+    from sbsc_core.pipeline.detect import detect_to_dir
 
     base = tmp_path_factory.mktemp("app_browser")
     data = base / "data"

@@ -46,7 +46,7 @@ def test_review_workflow_end_to_end(simulated, tmp_path):
     rita, boss = add_user(settings, "rita", "reviewer"), add_user(settings, "max", "manager")
     zip_path = Path(shutil.make_archive(str(tmp_path / "models"), "zip", simulated, "models"))
     expected = json.loads((simulated / "expected.json").read_text())
-    server = ServerProcess(data).start()  # the real runner: sbsc_core.pipeline.detect_to_dir
+    server = ServerProcess(data).start()  # the real runner: sbsc_core.pipeline.detect.detect_to_dir
     try:
         with httpx.Client(base_url=server.url, timeout=120) as c:
             h = auth(rita)

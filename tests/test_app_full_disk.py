@@ -20,7 +20,7 @@ from sqlalchemy.exc import OperationalError
 from app.auth import create_user
 from app.config import AppSettings
 from app.failures import DISK_FULL, WORKER_LOST, disk_full, reason
-from app.jobs import describe_exit
+from app.job_processes import describe_exit
 from app.server import create_app
 from app.storage import _FilePart
 

@@ -25,7 +25,7 @@ from .app_support import ServerProcess, auth, write_small_ply
 def scratch_runner(scans: Sequence[Path], models: Path, *, expected=None, out: Path,  # noqa: ANN001
                    settings_file=None, log=None, progress=None) -> dict:  # noqa: ANN001
     """A job that makes its partitions where the pipeline does (``scratch_dir``), then hangs."""
-    from sbsc_core.partition import scratch_dir
+    from sbsc_core.imaging.partition import scratch_dir
 
     work = scratch_dir(Path(out))
     (work / "wall_W01.bin").write_bytes(b"\0" * 1000)

@@ -18,7 +18,7 @@ from app.models import Project
 from app.results import job_dict, project_document
 from app.sample import ensure_sample_project
 from app.users import add_user
-from app.viewer.scene import wall_label
+from app.viewer.labels import wall_label
 from sbsc_core.types import WallFrame
 
 from .app_support import (
@@ -122,7 +122,8 @@ EXPECTED_DOC = {"schema": "sbsc.expected/1", "counts": {"socket_x1": 3, "switch"
 
 
 def test_expected_storeys_are_parsed_and_checked() -> None:
-    from app.jobs import parse_expected, parse_expected_storeys, runner_expected
+    from app.job_worker import runner_expected
+    from app.jobs import parse_expected, parse_expected_storeys
     from sbsc_core.errors import InputError
     from sbsc_core.io.documents import ExpectedCounts
 
@@ -145,7 +146,7 @@ def test_job_api_keeps_the_expected_storeys(tmp_path) -> None:
     """Issue 12: a whole expected.json with ``storeys`` reaches the job (and its retry) whole."""
     from fastapi.testclient import TestClient
 
-    from app.jobs import runner_expected
+    from app.job_worker import runner_expected
     from app.models import Job
     from app.server import create_app
     from app.users import create_user

@@ -5,7 +5,7 @@ no library knows (a relief blob of 10 x 14 cm in a colour of their own). When th
 has a class learnt from examples (``learnt_from`` in its model.json) whose size is the card
 readers', the runner finds every card reader as that class, as recognition would: so a test
 sees what a learnt class brings without depending on recognition quality (the learning itself
-is the library's, ``sbsc_core.learning``, run here for real).
+is the library's, ``sbsc_core.recognition.learning``, run here for real).
 """
 
 from __future__ import annotations

@@ -21,7 +21,9 @@ from sqlalchemy import inspect, select
 from app.auth import authenticate, create_user, hash_token
 from app.config import AppSettings
 from app.db import Database, alembic_config, upgrade
-from app.jobs import STAGE_SPANS, JobManager, describe_exit, overall_progress, parse_expected
+from app.job_processes import describe_exit
+from app.job_progress import STAGE_SPANS, overall_progress
+from app.jobs import JobManager, parse_expected
 from app.membership import set_member
 from app.models import Base, DetectionRow, Job, Project, ReviewDecision
 from app.sample import ensure_sample_project, find_sample_project

@@ -8,9 +8,15 @@ from functools import partial
 import numpy as np
 import pytest
 
-from sbsc_core.ceilings import ceiling_levels, ceiling_part, ceiling_tiles, in_core, tile_orthoimage
+from sbsc_core.imaging.partition import plan_parts, scan_origin
 from sbsc_core.io.ply import write_ply
-from sbsc_core.partition import plan_parts, scan_origin
+from sbsc_core.scene.ceilings import (
+    ceiling_levels,
+    ceiling_part,
+    ceiling_tiles,
+    in_core,
+    tile_orthoimage,
+)
 from sbsc_core.settings import CeilingSettings, OrthoimageSettings
 from sbsc_core.types import Box, Candidate, PointCloud, Segmentation, Storey
 from tests.synthetic_rooms import plan_wall
@@ -169,7 +175,7 @@ def test_a_lower_ceiling_gets_its_own_level_and_tiles(tmp_path):
 
 
 def test_surfaces_without_points_are_left_out(tmp_path):
-    from sbsc_core.pipeline import InlineExecutor, surface_stage
+    from sbsc_core.pipeline.executors import InlineExecutor, surface_stage
     from sbsc_core.settings import DetectionSettings
 
     ran = []
@@ -181,7 +187,7 @@ def test_surfaces_without_points_are_left_out(tmp_path):
         ran.append(k)
         return sf, "result", {}
 
-    import sbsc_core.pipeline as pl
+    import sbsc_core.pipeline.executors as pl
 
     saved = pl.park_wall, pl._templates_job
     pl.park_wall, pl._templates_job = (lambda res, parked: res), (lambda library, s, classes: ({}, None))
@@ -199,7 +205,7 @@ def test_surfaces_are_searched_where_the_library_mounts_a_searched_class():
     from sbsc_core.io.documents import ExpectedCounts
     from sbsc_core.io.models import load_model_library
     from sbsc_core.paths import bundled_models_dir
-    from sbsc_core.pipeline import searched_surfaces
+    from sbsc_core.pipeline.walls import searched_surfaces
     from sbsc_core.settings import DetectionSettings
 
     lib = load_model_library(bundled_models_dir())

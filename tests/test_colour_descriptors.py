@@ -5,7 +5,7 @@ import math
 import cv2
 import numpy as np
 
-from sbsc_core.colour_descriptors import (
+from sbsc_core.recognition.colour_descriptors import (
     descriptor_distance,
     descriptors_of,
     glcm_energy,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sbsc_core.colour_prep import prepare_colour
+from sbsc_core.imaging.colour_prep import prepare_colour
 from sbsc_core.settings import ColourPrepSettings
 from tests.synthetic_rooms import Block, Hole, Patch, make_ortho
 

@@ -5,9 +5,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from sbsc_core.colour_recognition import colour_image, colour_rois, learn_prototypes, match_colour
+from sbsc_core.recognition.colour_recognition import (
+    colour_image,
+    colour_rois,
+    learn_prototypes,
+    match_colour,
+)
+from sbsc_core.recognition.templates import make_templates
 from sbsc_core.settings import ColourRecognitionSettings
-from sbsc_core.templates import make_templates
 from tests.recognition_synth import PIXEL_M, make_wall, paste, synthetic_library
 
 WALL = (150, 160, 190)  # a blue-grey wall: every synthetic object contrasts with it

@@ -9,7 +9,7 @@ from functools import partial
 import numpy as np
 import pytest
 
-from sbsc_core.columns import column_faces, find_columns
+from sbsc_core.scene.columns import column_faces, find_columns
 from sbsc_core.settings import ColumnSettings
 from sbsc_core.types import Box, PointCloud, Segmentation, Storey
 from tests.synthetic_rooms import plan_wall
@@ -119,7 +119,7 @@ def test_a_column_seen_from_one_side_whose_face_was_taken_for_a_wall():
     """Two faces of a column seen (an L: its smallest enclosing rectangle is diagonal), the
     wider one segmented as a short wall: the column is found whole, turned like its faces,
     the wall is dropped for its faces; a wall stub that meets a wall stays a wall."""
-    from sbsc_core.pipeline import _columns_of
+    from sbsc_core.pipeline.detect import _columns_of
     from sbsc_core.settings import DetectionSettings
 
     cloud, seg = _column_seen_from_one_side(np.random.default_rng(3), stub=True)
@@ -171,7 +171,7 @@ def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
     from sbsc_core.io.documents import read_expected_counts
     from sbsc_core.io.models import load_model_library
     from sbsc_core.io.scans import read_scan
-    from sbsc_core.pipeline import detect
+    from sbsc_core.pipeline.detect import detect
     from sbsc_core.settings import DetectionSettings
 
     settings = DetectionSettings()  # ceilings and columns searched by default
@@ -196,9 +196,9 @@ def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
 
 
 def test_round_column_image_wraps_its_seam(tmp_path):
-    from sbsc_core.columns import column_part, face_orthoimage
+    from sbsc_core.imaging.partition import plan_parts, scan_origin
     from sbsc_core.io.ply import write_ply
-    from sbsc_core.partition import plan_parts, scan_origin
+    from sbsc_core.scene.columns import column_part, face_orthoimage
     from sbsc_core.settings import OrthoimageSettings
     from sbsc_core.types import Candidate, Orthoimage
 

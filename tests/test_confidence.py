@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sbsc_core.confidence import (
+from sbsc_core.recognition.confidence import (
     FEATURES,
     Calibration,
     fit_logistic,
@@ -14,10 +14,10 @@ from sbsc_core.confidence import (
     reliability,
     screen_hits,
 )
-from sbsc_core.consensus import make_hit
-from sbsc_core.placement import UNKNOWN, place_hits
+from sbsc_core.recognition.consensus import make_hit
+from sbsc_core.recognition.placement import UNKNOWN, place_hits
+from sbsc_core.recognition.templates import make_templates
 from sbsc_core.settings import ConfidenceSettings
-from sbsc_core.templates import make_templates
 from sbsc_core.types import Box, Candidate
 from tests.recognition_synth import make_wall, synthetic_library
 
@@ -112,7 +112,7 @@ def test_weak_hits_are_dropped_or_reported_as_unknown(tmp_path) -> None:
 
 
 def test_regions_like_no_class_become_unknown_for_review() -> None:
-    from sbsc_core.confidence import unexplained_regions
+    from sbsc_core.recognition.confidence import unexplained_regions
 
     ortho, _ = make_wall()
     templates = make_templates(synthetic_library(), ortho.pixel_m)
@@ -152,7 +152,7 @@ def test_screened_consensus_does_not_spend_the_count_on_a_place_like_no_class(tm
     and the count goes to the real switch; its place gives no other class either."""
     import json
 
-    from sbsc_core.confidence import screened_consensus
+    from sbsc_core.recognition.confidence import screened_consensus
     from sbsc_core.settings import ConsensusSettings
 
     cal = Calibration(np.array([0, 0, 0, 0, 0, 0, 0, -20.0]), 5.0)  # a deep misfit is wrong
@@ -195,8 +195,8 @@ def test_monotone_fit_never_rewards_worse_evidence() -> None:
 def test_a_refused_hit_does_not_take_a_better_class_out_of_its_place() -> None:
     """A weak hit is refused and its place cleared, but a candidate of another class that
     matched there better than the hit stays (its count may simply have been full then)."""
-    from sbsc_core.confidence import _clear_of
-    from sbsc_core.consensus import ConsensusHit
+    from sbsc_core.recognition.confidence import _clear_of
+    from sbsc_core.recognition.consensus import ConsensusHit
     from sbsc_core.types import Box, Candidate
 
     box = Box(10, 10, 30, 30)
@@ -233,7 +233,7 @@ def test_screening_goes_on_until_the_count_reaches_the_real_objects(tmp_path) ->
     (four rounds were not always enough)."""
     import json
 
-    from sbsc_core.confidence import screened_consensus
+    from sbsc_core.recognition.confidence import screened_consensus
     from sbsc_core.settings import ConsensusSettings
 
     cal = Calibration(np.array([0, 0, 0, 0, 0, 0, 0, -20.0]), 5.0)  # a deep misfit is wrong

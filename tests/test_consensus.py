@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from sbsc_core.consensus import (
+from sbsc_core.recognition.consensus import (
     ConsensusHit,
     coherence_level,
     coherence_matrix,
@@ -11,7 +11,7 @@ from sbsc_core.consensus import (
     suppress_conflicts,
     weighted_centre,
 )
-from sbsc_core.matching import box_at
+from sbsc_core.recognition.matching import box_at
 from sbsc_core.settings import ConsensusSettings
 from sbsc_core.types import Box, Candidate
 
@@ -164,7 +164,7 @@ def test_an_outscored_depth_match_confirms_no_colour_candidate() -> None:
     """one_room (standard, seed 2): at a socket, depth says socket 0.98 and flush socket 0.82
     and colour says flush socket; the flush socket's pair must not outrank the socket's depth
     match, nor use up the count of the real flush socket elsewhere (depth 0.97)."""
-    from sbsc_core.consensus import consensus_all
+    from sbsc_core.recognition.consensus import consensus_all
 
     d = [cand("depth", (50, 50), 0.98, cls="socket"), cand("depth", (50, 50), 0.82, cls="flush"),
          cand("depth", (200, 200), 0.97, cls="flush")]
@@ -178,7 +178,7 @@ def test_an_outscored_depth_match_confirms_no_colour_candidate() -> None:
 
 
 def test_consensus_all_keeps_the_count_for_the_places_that_are_left() -> None:
-    from sbsc_core.consensus import consensus_all
+    from sbsc_core.recognition.consensus import consensus_all
 
     # class "switch": a strong pair at (50, 50) and a weaker depth-only one at (200, 200);
     # class "socket": a better pair at the same place (50, 50), so the switch's pair must give way
@@ -211,11 +211,11 @@ def _bundled_library():
 
 def _recognise_bundled(wall_colour, seed: int):
     """Paste every bundled class on a synthetic wall; recognise with all classes searched."""
-    from sbsc_core.colour_recognition import colour_rois, learn_prototypes, match_colour
-    from sbsc_core.consensus import consensus_all
-    from sbsc_core.depth_recognition import depth_rois, match_depth
+    from sbsc_core.recognition.colour_recognition import colour_rois, learn_prototypes, match_colour
+    from sbsc_core.recognition.consensus import consensus_all
+    from sbsc_core.recognition.depth_recognition import depth_rois, match_depth
+    from sbsc_core.recognition.templates import make_templates
     from sbsc_core.settings import DetectionSettings
-    from sbsc_core.templates import make_templates
     from tests.recognition_synth import make_wall, paste
 
     lib = _bundled_library()

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from sbsc_core import partition
 from sbsc_core.cli import main
+from sbsc_core.imaging import partition
 from sbsc_core.paths import sample_projects_dir
 from sbsc_core.simulate.scenarios import simulate_scene
 

@@ -5,10 +5,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from sbsc_core.depth_recognition import depth_rois, match_depth
-from sbsc_core.matching import cluster_boxes
+from sbsc_core.recognition.depth_recognition import depth_rois, match_depth
+from sbsc_core.recognition.matching import cluster_boxes
+from sbsc_core.recognition.templates import make_templates
 from sbsc_core.settings import DepthRecognitionSettings
-from sbsc_core.templates import make_templates
 from sbsc_core.types import Box
 from tests.recognition_synth import PIXEL_M, make_wall, paste, synthetic_library
 
@@ -136,7 +136,7 @@ def test_cluster_boxes_merges_overlapping_and_touching() -> None:
 
 
 def test_holes_take_the_lowest_relief_around_them() -> None:
-    from sbsc_core.depth_recognition import depth_image
+    from sbsc_core.recognition.depth_recognition import depth_image
 
     templates = make_templates(synthetic_library(), PIXEL_M)
     ortho, area = make_wall(seed=10, holes=0)
@@ -163,7 +163,7 @@ def _unseen_below(ortho, area, row: int) -> None:
 
 
 def test_masked_ncc_is_the_correlation_over_known_pixels() -> None:
-    from sbsc_core.matching import masked_ncc
+    from sbsc_core.recognition.matching import masked_ncc
 
     rng = np.random.default_rng(0)
     region = rng.normal(0, 0.003, (30, 40)).astype(np.float32)
@@ -213,8 +213,8 @@ def test_an_object_seen_on_less_than_min_known_share_is_no_match() -> None:
 
 
 def test_plausibility_checks_ignore_unseen_pixels() -> None:
-    from sbsc_core.depth_recognition import isolation, relief_overlap
-    from sbsc_core.matching import padded_template
+    from sbsc_core.recognition.depth_recognition import isolation, relief_overlap
+    from sbsc_core.recognition.matching import padded_template
 
     model = np.full((20, 20), 0.01, np.float32)
     jd = np.zeros((60, 60), np.float32)
@@ -235,7 +235,7 @@ def test_a_mixed_pixel_trail_is_not_something_larger() -> None:
     """A 5 cm deep box seen obliquely: mixed ranges ramp down to the wall beside one edge.
     That side strip stands out, but falls at every pixel to the wall: a trail, not a larger
     object. Relief that levels off (a neighbour's recessed face) or rises again is not."""
-    from sbsc_core.depth_recognition import is_trail, isolation
+    from sbsc_core.recognition.depth_recognition import is_trail, isolation
 
     jd = np.zeros((60, 80), np.float32)
     jd[20:40, 20:40] = 0.05
@@ -264,7 +264,7 @@ def _flush_templates() -> dict:
 
 
 def test_wall_level_follows_a_long_step_but_not_a_flat_sign() -> None:
-    from sbsc_core.depth_recognition import depth_image_known, wall_level
+    from sbsc_core.recognition.depth_recognition import depth_image_known, wall_level
 
     s = replace(DepthRecognitionSettings(), refit_plane=False)  # the level alone, not the plane fit
     ortho, area = make_wall(seed=14, holes=0)
@@ -334,7 +334,7 @@ def test_candidates_carry_their_relief_gain_and_fit(scene) -> None:
 
 
 def test_see_through_gaps_are_closed_and_solid_models_left_alone() -> None:
-    from sbsc_core.depth_recognition import close_see_through
+    from sbsc_core.recognition.depth_recognition import close_see_through
 
     rails = np.zeros((40, 60), np.float32)
     rails[:, :4] = rails[:, -4:] = 0.09  # two posts
@@ -352,7 +352,7 @@ def test_see_through_gaps_are_closed_and_solid_models_left_alone() -> None:
 
 
 def test_parts_that_fit_one_footprint_are_grouped() -> None:
-    from sbsc_core.matching import group_boxes
+    from sbsc_core.recognition.matching import group_boxes
 
     parts = [Box(0, 0, 5, 40), Box(10, 0, 15, 40), Box(20, 0, 25, 40), Box(100, 100, 110, 110)]
     assert group_boxes(parts, height=30, width=45, gap_px=6) == [Box(0, 0, 25, 40)]

@@ -65,7 +65,7 @@ def test_the_review_apps_documents_follow_the_schema(tmp_path) -> None:
 @pytest.mark.slow
 def test_sbsc_detect_output_follows_the_schema(tmp_path) -> None:
     """The real pipeline on the bundled one-room scene."""
-    from sbsc_core.pipeline import detect_to_dir
+    from sbsc_core.pipeline.detect import detect_to_dir
 
     from .app_support import simulate_one_room
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from sbsc_core.confidence import screened_consensus
-from sbsc_core.consensus import make_hit
-from sbsc_core.duplicates import cross_surface_duplicates
+from sbsc_core.recognition.confidence import screened_consensus
+from sbsc_core.recognition.consensus import make_hit
+from sbsc_core.recognition.duplicates import cross_surface_duplicates
 from sbsc_core.settings import ConfidenceSettings, ConsensusSettings
 from sbsc_core.types import Box, Candidate, WallFrame
 

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from sbsc_core.consensus import weighted_centre
-from sbsc_core.edge_position import EdgeSettings, sharp_edge_centre
-from sbsc_core.matching import match_in_rois
+from sbsc_core.recognition.consensus import weighted_centre
+from sbsc_core.recognition.edge_position import EdgeSettings, sharp_edge_centre
+from sbsc_core.recognition.matching import match_in_rois
 from sbsc_core.types import Box, Candidate
 
 RELIEF_M = 0.06  # a box 6 cm deep (an electrical panel, an exit light)

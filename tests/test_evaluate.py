@@ -202,7 +202,7 @@ def test_rows_follow_the_library_order_and_names(tmp_path):
 def test_production_code_does_not_import_the_simulator():
     """evaluate, bim and the review service read class metadata from the model library."""
     code = ("import sys, sbsc_core.evaluate, sbsc_core.bim, sbsc_core.bim.design, sbsc_core.bim.export, "
-            "app.review_service as r; r.bundled_classes(); sbsc_core.bim.class_typings(); "
+            "app.review_service, app.libraries as r; r.bundled_classes(); sbsc_core.bim.class_typings(); "
             "sys.exit(any(m.startswith('sbsc_core.simulate') for m in sys.modules))")
     root = Path(__file__).resolve().parents[1]
     proc = subprocess.run([sys.executable, "-c", code], cwd=root, env={"PYTHONPATH": str(root)},

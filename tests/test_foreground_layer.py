@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sbsc_core.depth_recognition import (
+from sbsc_core.recognition.depth_recognition import (
     depth_rois,
     foreground_regions,
     foreground_source,

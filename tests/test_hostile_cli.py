@@ -20,7 +20,7 @@ from . import hostile_corpus as hc
 from .bim_fixtures import truth_document
 
 # Scans whose points lie 1e30-1e38 m away: contract 1 says such stray points are ignored and
-# counted, which the segmentation does since sbsc_core.stray_points (the 'building' work);
+# counted, which the segmentation does since sbsc_core.scene.stray_points (the 'building' work);
 # without that module these cases are reported, not asserted.
 STRAY_POINT_CASES: set[str] = set() if (Path(sbsc_core.__file__).parent / "stray_points.py").is_file() else {
     "ply_1e38.ply", "ply_far_outlier.ply", "xyz_1e38.xyz", "xyz_far_outlier.xyz"}

@@ -1,4 +1,4 @@
-"""``sbsc learn`` (sbsc_core.learning): new classes and designs taught by reviewed objects.
+"""``sbsc learn`` (sbsc_core.recognition.learning): new classes and designs taught by reviewed objects.
 
 Synthetic detect outputs (a wall's orthoimages and detections.json) keep these fast; the
 learnt library is then read by the library reader and searched by depth recognition.
@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 from sbsc_core.cli import main
-from sbsc_core.depth_recognition import depth_rois, match_depth
 from sbsc_core.errors import InputError
 from sbsc_core.io.models import load_model_library
-from sbsc_core.learning.library import learn_library
+from sbsc_core.recognition.depth_recognition import depth_rois, match_depth
+from sbsc_core.recognition.learning.library import learn_library
+from sbsc_core.recognition.templates import make_template, make_templates
 from sbsc_core.settings import DepthRecognitionSettings
-from sbsc_core.templates import make_template, make_templates
 from sbsc_core.types import ModelLibrary, Orthoimage
 from tests.recognition_synth import (
     PIXEL_M,
@@ -215,7 +215,7 @@ def test_cli_learn_writes_a_library_and_refuses_bad_input_in_one_line(taught, ca
 def test_look_alikes_are_found_between_learnt_designs_too() -> None:
     from dataclasses import replace
 
-    from sbsc_core.lookalikes import design_templates, lookalike_sets
+    from sbsc_core.recognition.lookalikes import design_templates, lookalike_sets
     from sbsc_core.settings import LookalikeSettings
     from tests.recognition_synth import sign_like
 
@@ -236,7 +236,7 @@ def test_look_alikes_are_found_between_learnt_designs_too() -> None:
 
 
 def test_a_learnt_view_is_the_median_of_what_each_crop_saw() -> None:
-    from sbsc_core.learning.crops import learnt_view
+    from sbsc_core.recognition.learning.crops import learnt_view
 
     a = np.full((4, 4, 3), 100.0, np.float32)
     b = np.full((4, 4, 3), 110.0, np.float32)
@@ -251,7 +251,7 @@ def test_a_learnt_view_is_the_median_of_what_each_crop_saw() -> None:
 
 
 def test_an_example_moves_to_a_snap_only_where_the_relief_agrees(tmp_path: Path) -> None:
-    from sbsc_core.learning.examples import read_detect_output, trust_snap
+    from sbsc_core.recognition.learning.examples import read_detect_output, trust_snap
 
     other = make_template(make_model("x", *socket_like(relief_m=0.02)), PIXEL_M)
     ortho, area = make_wall(seed=8)
@@ -267,7 +267,7 @@ def test_an_example_moves_to_a_snap_only_where_the_relief_agrees(tmp_path: Path)
 
 
 def test_what_was_learnt_for_a_class_can_be_removed_and_nothing_else(taught) -> None:
-    from sbsc_core.learning.forget import forget_learnt, learnt_parts
+    from sbsc_core.recognition.learning.forget import forget_learnt, learnt_parts
 
     tmp = taught["tmp"]
     lib = synthetic_library()

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from sbsc_core.colour_recognition import (
+from sbsc_core.recognition.colour_recognition import (
     ColourImage,
     ColourPrototypes,
     colour_image,
@@ -16,11 +16,11 @@ from sbsc_core.colour_recognition import (
     learn_prototypes,
     match_colour,
 )
-from sbsc_core.consensus import consensus_all
-from sbsc_core.depth_recognition import depth_rois, match_depth
-from sbsc_core.lookalikes import content_box, lookalike_sets, resolve_on_wall
+from sbsc_core.recognition.consensus import consensus_all
+from sbsc_core.recognition.depth_recognition import depth_rois, match_depth
+from sbsc_core.recognition.lookalikes import content_box, lookalike_sets, resolve_on_wall
+from sbsc_core.recognition.templates import make_templates
 from sbsc_core.settings import DetectionSettings
-from sbsc_core.templates import make_templates
 from sbsc_core.types import Box, Candidate, ModelLibrary, ObjectModel, Orthoimage, WallArea
 from tests.recognition_synth import _rgba, make_model, make_wall, paste, socket_like
 
@@ -55,7 +55,7 @@ def _recognized(library: ModelLibrary, places: dict[str, tuple[float, float]], s
     protos = learn_prototypes(templates, s.colour)
     d = match_depth(ortho, area, depth_rois(ortho, area, s.depth, templates), templates, s.depth)
     img = colour_image(ortho, area, s.colour)
-    c = match_colour(ortho, area, colour_rois(ortho, area, s.colour, img), protos, s.colour, img)
+    c = match_colour(ortho, area, colour_rois(ortho, area, s.colour, img), protos, s.colour, image=img)
     return _Recognized(templates, ortho, area, protos, img, d, c)
 
 
@@ -188,7 +188,7 @@ def white_plates() -> ModelLibrary:
 
 
 def test_plates_the_colour_classifier_cannot_tell_apart_are_lookalikes_on_a_wall(white_plates) -> None:
-    from sbsc_core.lookalikes import colour_confusable
+    from sbsc_core.recognition.lookalikes import colour_confusable
 
     s = DetectionSettings()
     templates = make_templates(white_plates, 0.005)
@@ -204,7 +204,7 @@ def test_plates_the_colour_classifier_cannot_tell_apart_are_lookalikes_on_a_wall
 def test_white_plates_are_told_apart_by_their_fine_relief(white_plates, seed: int) -> None:
     """A socket and a switch, plain white plates on a light wall: their prints are the same,
     the fine relief (the socket's cup, the switch's rocker) decides."""
-    from sbsc_core.depth_recognition import depth_images
+    from sbsc_core.recognition.depth_recognition import depth_images
 
     s = DetectionSettings()
     rng = np.random.default_rng(seed)
@@ -223,7 +223,7 @@ def test_white_plates_are_told_apart_by_their_fine_relief(white_plates, seed: in
 def test_white_plates_without_print_are_told_apart_by_relief_alone(white_plates) -> None:
     """On a wall of their own colour the plates show no print at all (no colour views, no
     colour candidates): the relief alone decides between the depth candidates."""
-    from sbsc_core.depth_recognition import depth_images
+    from sbsc_core.recognition.depth_recognition import depth_images
 
     s = DetectionSettings()
     templates = make_templates(white_plates, 0.005)
@@ -307,7 +307,7 @@ def test_a_lookalike_that_stands_out_otherwise_than_the_scene_is_not_taken() -> 
     stands out 8-16 mm: the flush plate's model cannot be it (gain 6, beyond the depth
     recognizer's range), so the candidate keeps its class; a 12 mm plate of the same print
     may still take it."""
-    from sbsc_core.lookalikes import amplitude_compatible, resolve_lookalikes
+    from sbsc_core.recognition.lookalikes import amplitude_compatible, resolve_lookalikes
     from sbsc_core.settings import LookalikeSettings
 
     rng = np.random.default_rng(3)

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from sbsc_core.matching import (
+from sbsc_core.recognition.matching import (
     REFUSE_POINT,
     box_at,
     masked_ncc,

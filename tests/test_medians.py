@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from sbsc_core.medians import median
+from sbsc_core.recognition.medians import median
 
 
 def _same(a, b) -> bool:

@@ -1,4 +1,4 @@
-"""Stations of a merged scan file, told by a per-point station property (sbsc_core.merged_stations)."""
+"""Stations of a merged scan file, told by a per-point station property (sbsc_core.io.merged_stations)."""
 
 from __future__ import annotations
 
@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from sbsc_core.errors import InputError
+from sbsc_core.imaging.partition import part_chunks, plan_parts, sample_part, station_names
+from sbsc_core.io.merged_stations import station_runs
 from sbsc_core.io.ply import write_ply
 from sbsc_core.io.scan_source import station_field
 from sbsc_core.io.scans import open_scan, read_scan
-from sbsc_core.merged_stations import station_runs
-from sbsc_core.partition import part_chunks, plan_parts, sample_part, station_names
-from sbsc_core.registration import refine_registration
+from sbsc_core.scene.registration import refine_registration
 from sbsc_core.settings import RegistrationSettings
 
 from .scan_files import _write_ply_struct

@@ -12,7 +12,7 @@ import pytest
 from sbsc_core.errors import InputError
 from sbsc_core.io.models import load_model_library
 from sbsc_core.paths import bundled_models_dir
-from sbsc_core.pipeline import _search_classes
+from sbsc_core.pipeline.walls import search_classes
 from sbsc_core.simulate.catalogue import CATALOGUE
 from sbsc_core.simulate.library import model_json
 
@@ -37,9 +37,9 @@ def test_mount_defaults_to_every_surface_and_is_read(tmp_path):
     assert lib.classes_on("ceiling") == ["any_where", "ceiling_only", "smoke"]
     assert lib.classes_on("column") == ["any_where"]
     # walls search only wall-mounted classes, with or without expected counts
-    assert _search_classes(lib, None) == ["any_where", "smoke"]
-    assert _search_classes(lib, {"ceiling_only": 2, "smoke": 1}) == ["smoke"]
-    assert _search_classes(lib, {"ceiling_only": 2}, kind="ceiling") == ["ceiling_only"]
+    assert search_classes(lib, None) == ["any_where", "smoke"]
+    assert search_classes(lib, {"ceiling_only": 2, "smoke": 1}) == ["smoke"]
+    assert search_classes(lib, {"ceiling_only": 2}, kind="ceiling") == ["ceiling_only"]
 
 
 @pytest.mark.parametrize("mount, fragment", [

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from sbsc_core.matching import box_at
-from sbsc_core.mounting import within_wall_height
+from sbsc_core.recognition.matching import box_at
+from sbsc_core.recognition.mounting import within_wall_height
 from sbsc_core.settings import ConsensusSettings
 from sbsc_core.types import Candidate, Orthoimage, WallFrame
 

@@ -1,12 +1,12 @@
-"""Orthographic occlusion (``sbsc_core.occlusion``): the wall seen behind a stand-off object."""
+"""Orthographic occlusion (``sbsc_core.imaging.occlusion``): the wall seen behind a stand-off object."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from sbsc_core.occlusion import front_layers, hide_occluded
-from sbsc_core.orthoimage import build_orthoimage
+from sbsc_core.imaging.occlusion import front_layers, hide_occluded
+from sbsc_core.imaging.orthoimage import build_orthoimage
 from sbsc_core.settings import OrthoimageSettings
 from sbsc_core.simulate import mesh as M
 from sbsc_core.simulate.objects import build_object
@@ -98,7 +98,7 @@ def test_hide_occluded_needs_a_coherent_front() -> None:
                 depth += [0.0, 0.001, -0.001]
     pixel, depth = np.array(pixel), np.array(depth, np.float32)
     rgb = np.where((depth > 0.05)[:, None], [[200, 20, 20]], [[210, 200, 170]]).astype(np.uint8)
-    from sbsc_core.orthoimage import rasterize_median
+    from sbsc_core.imaging.orthoimage import rasterize_median
 
     d, c, m = rasterize_median(pixel, depth, rgb, (h, w), (-0.06, 0.3), 0.0001)
     assert d[3, 3] == pytest.approx(0.0, abs=1e-3)  # the plain median: the wall

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from sbsc_core.orthoimage import build_orthoimage, rasterize_median
+from sbsc_core.imaging.orthoimage import build_orthoimage, rasterize_median
 from sbsc_core.settings import OrthoimageSettings
 from sbsc_core.types import PointCloud, Wall, WallFrame
 

@@ -9,10 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sbsc_core import partition
-from sbsc_core.io.ply import write_ply
-from sbsc_core.orthoimage import build_orthoimage
-from sbsc_core.partition import (
+from sbsc_core.imaging import partition
+from sbsc_core.imaging.orthoimage import build_orthoimage
+from sbsc_core.imaging.partition import (
     SampleBuffer,
     WallIndex,
     assign_chunk,
@@ -24,7 +23,8 @@ from sbsc_core.partition import (
     scan_origin,
     wall_orthoimage,
 )
-from sbsc_core.segmentation import segment_floor_ceiling_walls
+from sbsc_core.io.ply import write_ply
+from sbsc_core.scene.segmentation import segment_floor_ceiling_walls
 from sbsc_core.settings import DetectionSettings
 from sbsc_core.types import Wall
 from tests.synthetic_rooms import Block, Hole, Room, make_scene
@@ -75,7 +75,7 @@ def test_a_points_nearest_plane_wins_over_a_brute_force_check(scene):
         owner[idx] = w
     # brute force over every wall for a sample of points
     pick = np.random.default_rng(0).choice(len(cloud), 20_000, replace=False)
-    from sbsc_core.orthoimage import wall_coordinates
+    from sbsc_core.imaging.orthoimage import wall_coordinates
 
     best = np.full(len(pick), np.inf)
     want = np.full(len(pick), -1)
@@ -137,7 +137,7 @@ def test_spilled_formats_are_decoded_once(scene, tmp_path):
 
 @pytest.mark.slow
 def test_pool_workers_start_with_the_worker_environment(monkeypatch):
-    from sbsc_core import pipeline
+    from sbsc_core.pipeline import detect as pipeline
 
     monkeypatch.setattr(pipeline, "worker_environment", lambda: {"SBSC_TEST_WORKER_MARK": "set"})
     pool = pipeline.wall_pool(DetectionSettings(workers=2))
@@ -151,7 +151,7 @@ def test_pool_workers_start_with_the_worker_environment(monkeypatch):
 
 
 def test_numpy_environment_only_on_amd_zen4(monkeypatch):
-    from sbsc_core import cpu_features
+    from sbsc_core.pipeline import cpu_features
 
     zen4 = "vendor_id\t: AuthenticAMD\ncpu family\t: 25\nmodel\t\t: 17\nflags\t\t: fpu avx2 avx512f avx512dq\n"
     zen3 = zen4.replace(" avx512f avx512dq", "")

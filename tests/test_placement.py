@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from sbsc_core.consensus import ConsensusHit
 from sbsc_core.errors import SbscError
-from sbsc_core.matching import box_at
-from sbsc_core.templates import make_templates
+from sbsc_core.recognition.consensus import ConsensusHit
+from sbsc_core.recognition.matching import box_at
+from sbsc_core.recognition.templates import make_templates
 from sbsc_core.types import Orthoimage, WallFrame
 from tests.recognition_synth import synthetic_library
 
@@ -41,7 +41,7 @@ def test_position_against_the_wall_frame(templates) -> None:
 
 
 def place_hits_one(templates, orthos, hit):
-    from sbsc_core.placement import place_hits
+    from sbsc_core.recognition.placement import place_hits
 
     (det,) = place_hits([hit], orthos, templates)
     return det
@@ -54,7 +54,7 @@ def test_rotated_model_exchanges_width_and_height(templates) -> None:
 
 
 def test_ids_by_wall_then_top_to_bottom_then_left_to_right(templates) -> None:
-    from sbsc_core.placement import place_hits
+    from sbsc_core.recognition.placement import place_hits
 
     orthos = {w: _ortho(w, (0, 0, 0), (1, 0, 0), (0, -1, 0)) for w in ("W01", "W02")}
     hits = [_hit("socket", "W02", (10, 10)), _hit("sign", "W01", (200, 50)), _hit("knob", "W01", (20, 300)),
@@ -66,7 +66,7 @@ def test_ids_by_wall_then_top_to_bottom_then_left_to_right(templates) -> None:
 
 
 def test_unknown_wall_or_class_is_an_error(templates) -> None:
-    from sbsc_core.placement import place_hits
+    from sbsc_core.recognition.placement import place_hits
 
     orthos = {"W01": _ortho("W01", (0, 0, 0), (1, 0, 0), (0, -1, 0))}
     with pytest.raises(SbscError):

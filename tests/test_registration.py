@@ -1,4 +1,4 @@
-"""Fine registration of stations given as several files (sbsc_core.registration)."""
+"""Fine registration of stations given as several files (sbsc_core.scene.registration)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from sbsc_core.partition import SampleBuffer, ScanPart, part_chunks, plan_parts, sample_part
-from sbsc_core.registration import apply_pose, refine_registration
+from sbsc_core.imaging.partition import (
+    SampleBuffer,
+    ScanPart,
+    apply_pose,
+    part_chunks,
+    plan_parts,
+    sample_part,
+)
+from sbsc_core.scene.registration import refine_registration
 from sbsc_core.settings import RegistrationSettings
 
 from .stations import _disagreement_mm, _motion, _stations
@@ -105,7 +112,7 @@ def test_a_posed_part_is_moved_wherever_it_is_read(tmp_path):
 
 
 def test_many_stations_keep_fewer_points_each():
-    from sbsc_core.registration import station_points, station_sample_points
+    from sbsc_core.scene.registration import station_points, station_sample_points
 
     s = RegistrationSettings()
     assert station_points(29, s) == s.max_points
@@ -140,7 +147,7 @@ def test_each_scan_of_an_e57_file_is_a_station(tmp_path):
     parts, total = plan_parts([tmp_path / "two.e57"])
     assert total == 40_000
     assert [(p.station, p.scan, p.first) for p in parts] == [(0, 0, 0), (1, 1, 20_000)]
-    from sbsc_core.partition import station_names
+    from sbsc_core.imaging.partition import station_names
 
     assert station_names(parts) == ["two.e57#0", "two.e57#1"]
     origin = np.zeros(3)

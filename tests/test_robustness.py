@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sbsc_core.segmentation import find_floor_ceiling
+from sbsc_core.scene.segmentation import find_floor_ceiling
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 

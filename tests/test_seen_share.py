@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sbsc_core.depth_recognition import SeenShare, depth_rois, match_depth, seen_share
+from sbsc_core.recognition.depth_recognition import SeenShare, depth_rois, match_depth, seen_share
 from sbsc_core.settings import DepthRecognitionSettings
 from sbsc_core.types import Box, Orthoimage, WallArea, WallFrame
 from tests.depth_crops import PIXEL_M, bundled_templates, depth_crop

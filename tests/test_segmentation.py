@@ -8,7 +8,11 @@ import numpy as np
 import pytest
 
 from sbsc_core.errors import NoWallsError
-from sbsc_core.segmentation import find_floor_ceiling, fit_line_2d, segment_floor_ceiling_walls
+from sbsc_core.scene.segmentation import (
+    find_floor_ceiling,
+    fit_line_2d,
+    segment_floor_ceiling_walls,
+)
 from sbsc_core.settings import SegmentationSettings
 from sbsc_core.types import PointCloud
 from tests.synthetic_rooms import Block, Hole, Room, make_scene, rotated
@@ -185,7 +189,7 @@ def test_l_shaped_room_with_an_outside_corner() -> None:
 def test_nearest_planes_blockwise_equals_all_at_once(monkeypatch):
     """The voxel-to-plane assignment is computed in blocks of voxels (bounded memory for a
     building with many walls); the block size does not change it."""
-    from sbsc_core import segmentation as seg
+    from sbsc_core.scene import segmentation as seg
 
     rng = np.random.default_rng(3)
     xy = rng.uniform(-20, 20, (5000, 2))

@@ -7,17 +7,17 @@ import math
 import numpy as np
 import pytest
 
+from sbsc_core.imaging.partition import plan_parts
 from sbsc_core.io.ply import write_ply
 from sbsc_core.io.scans import read_scans
-from sbsc_core.partition import plan_parts
-from sbsc_core.segmentation import (
+from sbsc_core.scene.segmentation import (
     find_scan_storeys,
     segment_floor_ceiling_walls,
     segment_storeys,
     storey_bounds,
 )
+from sbsc_core.scene.storey_samples import storey_cloud, storey_part, storey_steps
 from sbsc_core.settings import SegmentationSettings
-from sbsc_core.storey_samples import storey_cloud, storey_part, storey_steps
 from sbsc_core.types import PointCloud
 from tests.synthetic_rooms import _stack, _two_rooms
 
@@ -134,7 +134,7 @@ def test_detect_scans_reads_each_storey_again_as_alone(tmp_path, storey_files) -
     executor's tasks) gives each storey's walls as the storey's own files do."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from sbsc_core.pipeline import _storey_points
+    from sbsc_core.pipeline.detect import _storey_points
     from sbsc_core.settings import DetectionSettings
 
     files = storey_files[0] + storey_files[1]
@@ -159,7 +159,7 @@ def test_detect_scans_reads_each_storey_again_as_alone(tmp_path, storey_files) -
 def test_a_storey_whose_points_show_two_storeys_keeps_the_levels_given(storeys) -> None:
     """A storey's cloud that holds two storeys (Z ranges not cut at the slab) is segmented on
     the levels and the dense part given, not split again."""
-    from sbsc_core.segmentation import segment_storey
+    from sbsc_core.scene.segmentation import segment_storey
 
     s1, s2 = storeys
     building = _stack(s1, s2)

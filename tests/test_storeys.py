@@ -6,9 +6,13 @@ import numpy as np
 import pytest
 
 from sbsc_core.errors import InputError, NoWallsError, SbscError
-from sbsc_core.segmentation import assign_points_to_walls, find_storeys, segment_floor_ceiling_walls
+from sbsc_core.scene.segmentation import (
+    assign_points_to_walls,
+    find_storeys,
+    segment_floor_ceiling_walls,
+)
+from sbsc_core.scene.stray_points import dense_box
 from sbsc_core.settings import SegmentationSettings
-from sbsc_core.stray_points import dense_box
 from sbsc_core.types import PointCloud
 from tests.synthetic_rooms import ORIGIN, Block, Hole, Room, _stack, _two_rooms, make_scene
 
@@ -212,7 +216,7 @@ def small_scan(tmp_path_factory):
 def test_detections_with_01_percent_of_points_scattered_10_km_away_are_the_same(small_scan) -> None:
     from sbsc_core.io.models import load_model_library
     from sbsc_core.io.scans import read_scans
-    from sbsc_core.pipeline import detect
+    from sbsc_core.pipeline.detect import detect
     from sbsc_core.settings import DetectionSettings
 
     cloud = read_scans([small_scan / "scan.ply"])
@@ -257,10 +261,10 @@ def test_a_sparse_las_spanning_kilometres_is_refused_in_one_line(tmp_path, capsy
 def test_each_storey_keeps_its_own_expected_counts() -> None:
     """With per-storey counts (contract 3's ``storeys``) a storey whose candidates are weaker is
     not starved by another storey's: each storey takes its own count, as when scanned alone."""
-    from sbsc_core.consensus import consensus_all
     from sbsc_core.io.documents import ExpectedCounts
-    from sbsc_core.matching import box_at
-    from sbsc_core.pipeline import consensus_by_storey, storey_counts
+    from sbsc_core.pipeline.detect import consensus_by_storey, storey_counts
+    from sbsc_core.recognition.consensus import consensus_all
+    from sbsc_core.recognition.matching import box_at
     from sbsc_core.settings import DetectionSettings
     from sbsc_core.types import Candidate, Segmentation, Storey, Wall, WallFrame
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sbsc_core.suggestions import possible_misses
+from sbsc_core.recognition.suggestions import possible_misses
 from sbsc_core.types import Box, Candidate, Detection, Orthoimage, WallFrame
 
 PX = 0.005

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from sbsc_core.errors import InputError
-from sbsc_core.templates import make_templates, resample_depth, resample_rgba
+from sbsc_core.recognition.templates import make_templates, resample_depth, resample_rgba
 from sbsc_core.types import ModelLibrary, ObjectModel
 
 
@@ -54,7 +54,7 @@ def test_depth_resampling_ignores_unknown_samples() -> None:
 
 
 def test_further_depth_models_are_resampled_with_the_reference() -> None:
-    from sbsc_core.templates import make_template
+    from sbsc_core.recognition.templates import make_template
     from sbsc_core.types import ObjectModel
 
     view = np.full((40, 40, 4), 255, np.uint8)

@@ -17,8 +17,9 @@ from app.sample import ensure_sample_project
 from app.server import create_app
 from app.viewer.backend import Locked, NotFound, NotReady, StaleVersion
 from app.viewer.db_backend import DbReviewBackend
+from app.viewer.labels import STATUS_RGB
 from app.viewer.manager import ViewerManager
-from app.viewer.scene import STATUS_RGB, SceneSettings
+from app.viewer.scene import SceneSettings
 from app.viewer.synthetic import write_synthetic_project
 
 from .viewer_support import FakeTab, wait_for

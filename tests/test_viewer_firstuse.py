@@ -10,8 +10,9 @@ import pytest
 from viser import _messages as vm
 
 from app.viewer.backend import InMemoryBackend
+from app.viewer.labels import readable_time, spread_labels
 from app.viewer.manager import ViewerManager
-from app.viewer.scene import SceneSettings, readable_time, spread_labels
+from app.viewer.scene import SceneSettings
 from app.viewer.synthetic import write_synthetic_project
 
 FAST = SceneSettings(poll_s=0.05, fly_s=0.02, fly_steps=2, scan_delay_s=0.2, overview_points=3000)
@@ -41,7 +42,7 @@ def test_spread_labels_stacks_close_labels_only() -> None:
 
 
 def test_label_positions_spread_faces_and_corners_along_their_walls() -> None:
-    from app.viewer.scene import label_positions
+    from app.viewer.labels import label_positions
     from sbsc_core.types import WallFrame
 
     def wall(origin, u, width):  # noqa: ANN001
@@ -85,7 +86,7 @@ def test_scene_of_a_floor_stacks_wall_names_and_sizes_spots(tmp_path) -> None:
 
 
 def test_spot_labels_use_the_librarys_names() -> None:
-    from app.viewer.scene import class_names, spot_label
+    from app.viewer.labels import class_names, spot_label
     from sbsc_core.paths import bundled_models_dir
 
     names = class_names(bundled_models_dir())
@@ -97,7 +98,7 @@ def test_spot_labels_use_the_librarys_names() -> None:
 
 
 def test_class_choices_show_names_and_keep_ids() -> None:
-    from app.viewer.scene import class_choices
+    from app.viewer.labels import class_choices
 
     names = {"socket_x1": "Socket x1", "switch": "Switch", "a": "Same", "b": "Same", "c": "switch"}
     got = class_choices(["socket_x1", "switch", "mystery", "a", "b", "c"], names)

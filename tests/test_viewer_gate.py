@@ -16,8 +16,9 @@ from websockets.sync.client import connect
 
 from app.viewer.backend import InMemoryBackend, Reviewer
 from app.viewer.gate import COOKIE, ViewerGate, cookie_name
+from app.viewer.geometry import wall_hit
 from app.viewer.manager import ViewerManager
-from app.viewer.scene import SceneSettings, wall_hit
+from app.viewer.scene import SceneSettings
 from app.viewer.synthetic import write_synthetic_project
 
 

@@ -20,13 +20,9 @@ from app.viewer.backend import (
     NotFound,
     StaleVersion,
 )
+from app.viewer.geometry import rect_segments
+from app.viewer.labels import COLOUR_ROI_RGB, DEPTH_ROI_RGB, STATUS_RGB
 from app.viewer.manager import ViewerManager
-from app.viewer.scene import (
-    COLOUR_ROI_RGB,
-    DEPTH_ROI_RGB,
-    STATUS_RGB,
-    rect_segments,
-)
 from app.viewer.synthetic import write_synthetic_project
 from sbsc_core.types import WallFrame
 

@@ -11,8 +11,9 @@ import viser.transforms as vtf
 from viser import _messages as vm
 
 from app.viewer.backend import InMemoryBackend
+from app.viewer.geometry import column_meshes, surface_hit
+from app.viewer.labels import STATUS_RGB
 from app.viewer.manager import ViewerManager
-from app.viewer.scene import STATUS_RGB, column_meshes, surface_hit
 from sbsc_core.types import WallFrame
 
 from .surfaces_output import CEILING, ROOM_H, SURFACE_OBJECTS, surfaces, write_surfaces_output

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sbsc_core.colour_prep import prepare_colour
+from sbsc_core.imaging.colour_prep import prepare_colour
+from sbsc_core.imaging.wall_area import find_wall_area
 from sbsc_core.settings import WallAreaSettings
-from sbsc_core.wall_area import find_wall_area
 from tests.synthetic_rooms import Block, Hole, Patch, make_ortho
 
 PX = 0.005
@@ -122,9 +122,9 @@ def test_one_room_simulated_scan() -> None:
     the PLY and the model library, which this test does not need.
     """
     pytest.importorskip("sbsc_core.simulate.objects", reason="the simulator's objects are not there yet")
-    from sbsc_core.orthoimage import build_orthoimage
+    from sbsc_core.imaging.orthoimage import build_orthoimage
     from sbsc_core.paths import sample_projects_dir
-    from sbsc_core.segmentation import segment_floor_ceiling_walls
+    from sbsc_core.scene.segmentation import segment_floor_ceiling_walls
     from sbsc_core.simulate.building import build_building
     from sbsc_core.simulate.scanner import scan_mesh
     from sbsc_core.simulate.scene import load_scene

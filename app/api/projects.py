@@ -12,10 +12,11 @@ from sqlalchemy import func, select
 from sbsc_core.io.detections_model import bad_text
 
 from ..auth import create_user
+from ..libraries import library_classes
 from ..membership import add_creator, member_ids
 from ..models import DesignRow, Job, ModelLibraryRow, Project, Scan, User, iso
 from ..results import job_dict, review_counts
-from ..review_service import current_signoff, library_classes, signoff_dict
+from ..review_service import current_signoff, signoff_dict
 from .deps import DB, Admin, ReadSession, Reviewer, Settings, get_project
 
 router = APIRouter(prefix="/api")
@@ -145,7 +146,7 @@ def project_classes(pid: int, request: Request, _: Reviewer, s: ReadSession) -> 
 def job_admin_log(jid: int, _: Admin, s: ReadSession, settings: Settings) -> str:
     """The admin-only log of a job: full tracebacks and server paths (the reviewers' log,
     ``/api/jobs/{jid}/log``, and the job's ``error`` carry neither)."""
-    from ..jobs import ADMIN_LOG
+    from ..job_worker import ADMIN_LOG
 
     job = s.get(Job, jid)
     if job is None:

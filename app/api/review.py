@@ -22,6 +22,7 @@ from sqlalchemy import select
 
 from .. import bulk
 from .. import review_service as svc
+from ..libraries import models_dir
 from ..models import DetectionRow, Job, ReviewDecision, WallRow, iso
 from ..results import detection_dict, project_document, review_counts
 from ..review_rules import review_score, sort_score
@@ -301,7 +302,7 @@ def learn_exemplars(pid: int, user: Manager, db: DB, settings: Settings) -> dict
         if p.current_job_id is None:
             raise HTTPException(409, f"project {pid} has no reviewed results yet")
         job = s.get(Job, p.current_job_id)
-        source = svc.models_dir(s, job.models_id, settings.data_dir)
+        source = models_dir(s, job.models_id, settings.data_dir)
         rel = Path("projects", str(pid), "models", f"exemplars_{uuid.uuid4().hex[:12]}")
         dest = settings.data_dir / rel
         added = build_exemplar_library(s, p, settings.data_dir, source, dest)
@@ -325,7 +326,7 @@ def exemplars_zip(pid: int, _: Reviewer, s: ReadSession, settings: Settings) -> 
     import zipfile
 
     p = get_project(s, pid)
-    root = svc.models_dir(s, p.models_id, settings.data_dir)
+    root = models_dir(s, p.models_id, settings.data_dir)
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
         for f in sorted(root.rglob("*")):

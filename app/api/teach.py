@@ -26,9 +26,10 @@ from sqlalchemy import func, select
 
 from sbsc_core.errors import InputError
 
+from ..libraries import library_classes, models_dir
 from ..models import Job, ModelLibraryRow
 from ..results import job_dict
-from ..review_service import library_classes, models_dir, open_project
+from ..review_service import open_project
 from .deps import DB, Jobs, Reviewer, Settings
 from .jobs import check_new_job
 
@@ -97,7 +98,7 @@ def learn_and_search_again(pid: int, user: Reviewer, db: DB, jobs: Jobs, setting
 
     ``{"reteach": [class, ...]}``: those classes (learnt before, or removed) are taught afresh
     from their current examples."""
-    from sbsc_core.learning.forget import learnt_part
+    from sbsc_core.recognition.learning.forget import learnt_part
 
     from ..teach import learn, save_unlearnt, unlearnt
 
@@ -140,7 +141,7 @@ def learnt(pid: int, _: Reviewer, db: DB, settings: Settings) -> dict:
     """What the project's library learnt from examples: ``{"classes": [{"class", "part":
     "class"|"designs", "hits": {"pending", "accepted", "rejected"}}], "removed": [class, ...]}``;
     ``hits`` counts the current results' found objects of that class by review status."""
-    from sbsc_core.learning.forget import learnt_parts
+    from sbsc_core.recognition.learning.forget import learnt_parts
 
     from ..models import DetectionRow
     from ..teach import unlearnt
@@ -167,7 +168,7 @@ def remove_learnt(pid: int, class_id: str, user: Reviewer, db: DB, settings: Set
     the project's library without it, its untouched pending suggestions gone, and its examples
     skipped by the next learning until it is re-taught. Answers ``{"class", "part", "library",
     "suggestions_removed"}``."""
-    from sbsc_core.learning.forget import learnt_part
+    from sbsc_core.recognition.learning.forget import learnt_part
 
     from ..teach import brought_by, forget, save_unlearnt, unlearnt
 

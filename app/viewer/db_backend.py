@@ -26,6 +26,7 @@ from .. import review_service as svc
 from ..auth import Principal, authenticate
 from ..config import AppSettings
 from ..db import Database
+from ..libraries import bundled_classes
 from ..models import DetectionRow, Job, ModelLibraryRow, Project, ReviewDecision, Scan
 from ..results import detection_dict, project_document
 from ..review_rules import check_may_review
@@ -70,7 +71,7 @@ class DbReviewBackend:
             scans = [data_dir / path for path in s.scalars(
                 select(Scan.path).where(Scan.project_id == p.id).order_by(Scan.id))]
             lib = s.get(ModelLibraryRow, job.models_id) if job is not None and job.models_id else None
-            classes = dict(lib.classes) if lib is not None else svc.bundled_classes()
+            classes = dict(lib.classes) if lib is not None else bundled_classes()
             models_dir = data_dir / lib.path if lib is not None else bundled_models_dir()
             locked = p.status != "open"
             signoff = self._signoff(s, p.id) if locked else None

@@ -156,7 +156,7 @@ def _detected_size(item: ComparisonItem) -> tuple[float, float]:
 
 
 def mark_item(img: np.ndarray, frame: WallFrame, s: float, wall_id: str, item: ComparisonItem,
-              labels: _Labels | None = None) -> None:
+              *, labels: _Labels | None = None) -> None:
     """Draw one item's designed and/or found position if it lies on ``wall_id``; its label
     goes to ``labels`` (placed by :meth:`_Labels.draw` once every box is there), or is drawn
     at once without it."""
@@ -201,7 +201,7 @@ def wall_picture(comparison: Comparison, wall_id: str, image_dir: Path | None = 
     img, s = wall_background(frame, openings, load_orthoimage(image_dir, wall_id))
     labels = _Labels()
     for item in comparison.items:
-        mark_item(img, frame, s, wall_id, item, labels)
+        mark_item(img, frame, s, wall_id, item, labels=labels)
     labels.draw(img)
     return img, s
 

@@ -9,7 +9,7 @@ float64 ``origin`` and uint8 colours. A block is at most ``BLOCK_POINTS`` points
 float64 and parsing temporaries of a chunk in flight stay a few bytes per point of the
 chunk, whatever the file's size. :func:`read_scan` / :func:`read_scans` collect the
 chunks into one :class:`~sbsc_core.types.PointCloud` for callers that want the whole
-cloud; the detection pipeline streams instead (:mod:`sbsc_core.partition`).
+cloud; the detection pipeline streams instead (:mod:`sbsc_core.imaging.partition`).
 
 A file that cannot be used raises :class:`~sbsc_core.errors.InputError` naming the file
 and the reason, when it is opened or at the chunk where the problem is met; a caller that

@@ -5,7 +5,7 @@ In the ``standard`` and ``alt`` sets the extinguisher sign (0.21 x 0.30 m) and t
 point sign (0.21 x 0.21 m) differ in size, so the paper's recognizers tell them apart by
 their extent. Real products often do not: both are square plates of one size, and only the
 pictogram differs. These builders make that case from the development designs, so that the
-look-alike step (:mod:`sbsc_core.lookalikes`) can be developed and tested without ever
+look-alike step (:mod:`sbsc_core.recognition.lookalikes`) can be developed and tested without ever
 looking at the ``third`` set (which is for testing only).
 
 Each plate is ``side_m`` square, centred in its class's catalogue footprint (as products

@@ -129,7 +129,7 @@ def scan_mesh(mesh: ColouredMesh, stations: Sequence[Sequence[float]], settings:
     rays = 0
     origins = np.asarray(stations, float).reshape(-1, 3)
     for k, origin in enumerate(origins):
-        xyz, rgb, lab, n = scan_station(rc, origin, settings, seed, k, keep_labels, effects)
+        xyz, rgb, lab, n = scan_station(rc, origin, settings, seed, k, keep_labels=keep_labels, effects=effects)
         rays += n
         xyz_parts.append(xyz)
         rgb_parts.append(rgb)
@@ -151,7 +151,7 @@ def scan_mesh(mesh: ColouredMesh, stations: Sequence[Sequence[float]], settings:
 
 
 def scan_station(rc: MeshRaycaster, origin: np.ndarray, settings: ScannerSettings,
-                 seed: int = 0, station: int = 0, keep_labels: bool = False,
+                 seed: int = 0, station: int = 0, *, keep_labels: bool = False,
                  effects: ScanEffects | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, int]:
     """One station's sweep: (xyz float32, rgb uint8, labels or None, rays cast)."""

@@ -126,7 +126,7 @@ def simulate_scene(description_path: Path, out: Path, *, seed: int = 0, angular_
 
     ``station_index`` None writes the stations when the scanner has a registration error
     (the realistic scanner): then ``sbsc detect`` refines the merged file's registration
-    (:mod:`sbsc_core.merged_stations`). A scan without registration error is written as
+    (:mod:`sbsc_core.io.merged_stations`). A scan without registration error is written as
     before, so its detection does not spend the refinement's time on a registration that
     has nothing to refine.
 

@@ -1,0 +1,120 @@
+"""The stages beyond the walls: ceiling tiles and column faces, run as the walls' are.
+
+The geometry (which ceilings and columns there are, their tiles and faces, their partition) is
+``sbsc_core.scene``'s; here each tile or face goes through the walls' stages
+(:func:`~sbsc_core.pipeline.walls.process_orthoimage`) on the executor of the run."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..imaging.partition import ScanPart
+from ..scene.ceilings import (
+    CeilingLevels,
+    CeilingResults,
+    CeilingTile,
+    MemoryPart,
+    ceiling_part,
+    ceiling_tiles,
+    in_core,
+    tile_orthoimage,
+)
+from ..scene.columns import (
+    ColumnFace,
+    ColumnResults,
+    FoundColumn,
+    column_faces,
+    column_part,
+    face_orthoimage,
+)
+from ..stages import Stage
+from ..types import Segmentation
+
+
+def ceiling_tile_job(scratch: str, k: int, tile: CeilingTile, templates: dict, prototypes, s) -> tuple:
+    """One tile's work (what a worker runs): orthoimage, the walls' stages, candidates in its core."""
+    from .walls import WallResult, process_orthoimage
+
+    t = time.perf_counter()
+    ortho = tile_orthoimage(scratch, k, tile, s.orthoimage)
+    res, t_stage = process_orthoimage(ortho, templates, prototypes, s, {"orthoimage": time.perf_counter() - t})
+    px = s.orthoimage.pixel_m
+    res = WallResult(res.ortho, res.area, res.depth_rois, res.colour_rois,
+                     in_core(res.depth_candidates, tile, px), in_core(res.colour_candidates, tile, px))
+    return tile.id, res, t_stage
+
+
+def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg: Segmentation, library,
+                    expected: dict | None, s, *, executor, scratch: Path, parked: Path, in_flight: int, progress,
+                    timings: dict, log, levels: list[CeilingLevels] | None = None,
+                    part_executor=None) -> CeilingResults:
+    """Bin the ceilings' points into tiles, then run the walls' stages on every tile (see the module).
+
+    ``levels`` (:func:`ceiling_levels`) gives the storeys' lower ceilings their own tiles.
+    Tiles that got no point are left out.
+    """
+    from .executors import surface_stage
+    from .walls import search_classes
+
+    t0 = time.perf_counter()
+    tiles = ceiling_tiles(seg, s.ceilings, levels)
+    classes = search_classes(library, expected, kind="ceiling")
+    if not tiles or not classes:
+        return CeilingResults({}, {}, classes, [])
+    progress(Stage.CEILINGS, 0.0)
+    walls = [w.frame for w in seg.walls]
+    jobs = [(part, origin, tiles, walls, str(scratch), s.orthoimage, s.ceilings.wall_clear_m) for part in parts]
+    kept, results, templates = surface_stage(
+        executor, stage=Stage.CEILINGS, part_fn=ceiling_part, part_jobs=jobs, job_fn=ceiling_tile_job, surfaces=tiles,
+        library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress,
+        part_executor=part_executor)
+    timings[Stage.CEILINGS] = time.perf_counter() - t0
+    lower = [f"{lv.storey + ' ' if lv.storey else ''}{z:.2f} m" for lv in levels or [] for z in lv.z]
+    log(f"{len(results)} ceiling tiles" + (f" (lower ceilings at {', '.join(lower)})" if lower else "")
+        + f": {int(kept.sum()):,} points, searched for {', '.join(classes)} in {timings['ceilings']:.1f} s")
+    return CeilingResults(results, templates, classes, [t for t in tiles if t.id in results])
+
+
+def column_face_job(scratch: str, k: int, face: ColumnFace, templates: dict, prototypes, s) -> tuple:
+    """One face's work (what a worker runs): orthoimage and the walls' stages."""
+    from .walls import WallResult, process_orthoimage
+
+    t = time.perf_counter()
+    ortho = face_orthoimage(scratch, k, face, s.orthoimage)
+    res, t_stage = process_orthoimage(ortho, templates, prototypes, s, {"orthoimage": time.perf_counter() - t})
+    if face.radius_m is not None:  # one circumference of the wrapped image
+        px = s.orthoimage.pixel_m
+        res = WallResult(res.ortho, res.area, res.depth_rois, res.colour_rois,
+                         [c for c in res.depth_candidates if face.owns((c.centre[1] + 0.5) * px)],
+                         [c for c in res.colour_candidates if face.owns((c.centre[1] + 0.5) * px)])
+    return face.id, res, t_stage
+
+
+def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray, columns: list[FoundColumn], library,
+                   expected: dict | None, s, *, executor, scratch: Path, parked: Path, in_flight: int, progress,
+                   timings: dict, log, part_executor=None) -> ColumnResults:
+    """Bin the columns' points into their faces, then run the walls' stages on every face."""
+    from .executors import surface_stage
+    from .walls import search_classes
+
+    t0 = time.perf_counter()
+    faces = column_faces(columns, wrap_m=s.columns.wrap_m)
+    classes = search_classes(library, expected, kind="column")
+    if not faces or not classes:
+        return ColumnResults({}, {}, classes, columns, [])
+    progress(Stage.COLUMNS, 0.0)
+    by_id = {c.id: c for c in columns}
+    reach = [max(by_id[f.column].size_m) / 2 * math.sqrt(2) + s.orthoimage.depth_range_m[1] + 0.05 for f in faces]
+    jobs = [(part, origin, faces, reach, str(scratch), s.orthoimage) for part in parts]
+    kept, results, templates = surface_stage(
+        executor, stage=Stage.COLUMNS, part_fn=column_part, part_jobs=jobs, job_fn=column_face_job, surfaces=faces,
+        library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress,
+        part_executor=part_executor)
+    timings[Stage.COLUMNS] = time.perf_counter() - t0
+    log(f"{len(columns)} columns ({', '.join(c.shape for c in columns)}), {len(faces)} faces: "
+        f"{int(kept.sum()):,} points, searched for {', '.join(classes)} in {timings['columns']:.1f} s")
+    return ColumnResults(results, templates, classes, columns, [f for f in faces if f.id in results])

@@ -1,0 +1,137 @@
+"""How far a relief stands out, and whether a class's depth model can explain it.
+
+Depth is metric: the orthoimage's relief above the wall plane says how far an object
+stands out, and each class's depth model (contract 2) how far an object of that class does.
+The depth recognizer accepts a scene / model amplitude ratio within its ``gain_range``; the
+same range decides here, so that no other stage takes a place for a class that the relief
+there rules out. Nothing in it is fitted to a design family: the figures are the given
+library's and the given scan's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..types import Candidate
+from .matching import box_at, crop_padded
+
+_AMPLITUDE_Q = 90.0  # a relief's amplitude: this percentile of how far it stands out (robust to noise and spikes)
+_MIN_KNOWN = 0.5  # a footprint with a smaller share of known pixels has no measured amplitude
+
+
+def relief_amplitude(relief: np.ndarray) -> float | None:
+    """How far a relief (metres: a model's, or the scene's in a footprint) stands out: the
+    :data:`_AMPLITUDE_Q` percentile of its absolute value over its known pixels.
+
+    Returns
+    -------
+    float or None
+        None when fewer than half of the pixels are known.
+    """
+    r = np.abs(np.asarray(relief, np.float64))
+    ok = np.isfinite(r)
+    if r.size == 0 or ok.sum() < _MIN_KNOWN * r.size:
+        return None
+    return float(np.percentile(r[ok], _AMPLITUDE_Q))
+
+
+def scene_amplitude(relief: np.ndarray, shape: tuple[int, int], centre: tuple[float, float],
+                    rotation_deg: float) -> float | None:
+    """:func:`relief_amplitude` of the scene's ``relief`` in a footprint of ``shape`` (h, w
+    pixels) centred at ``centre`` (row, col) and turned by ``rotation_deg`` (its sides swap
+    when it is nearer a quarter turn than upright)."""
+    h, w = shape
+    if abs(((float(rotation_deg) + 45.0) % 180.0) - 45.0) > 45.0:
+        h, w = w, h
+    b = box_at(centre, h, w)
+    return relief_amplitude(crop_padded(relief, b.r0, b.r1, b.c0, b.c1))
+
+
+Models = dict[str, "np.ndarray | list[np.ndarray]"]  # class -> its depth model, or one per design
+
+
+def designs(m: np.ndarray | list[np.ndarray]) -> list[np.ndarray]:
+    """A class's models as a list: its one model, or one per design."""
+    return list(m) if isinstance(m, list) else [m]
+
+
+def amplitude_compatible(relief: np.ndarray, models: Models,
+                         centres: dict[str, tuple[float, float]], rotation_deg: float,
+                         gain_range: tuple[float, float]) -> dict[str, bool]:
+    """For each class of ``models`` (depth models cropped to their content; a class with
+    several designs is compatible when one of them is), whether the scene's relief in its
+    footprint (at ``centres[c]``, turned by ``rotation_deg``) stands out as far as the model
+    does, within ``gain_range`` (the depth recognizer's accepted scene / model amplitude ratio).
+
+    An object whose relief stands out 16 mm is not a 2.5 mm flush socket nor a 45 mm call
+    point, however alike their outlines and prints. A class whose amplitude cannot be
+    measured here counts as compatible.
+    """
+    out = {}
+    for c, designs_of in models.items():
+        out[c] = False
+        for m in designs(designs_of):
+            own = relief_amplitude(m)
+            seen = scene_amplitude(relief, m.shape[:2], centres[c], rotation_deg)
+            if own is None or seen is None or own <= 0 or gain_range[0] <= seen / own <= gain_range[1]:
+                out[c] = True
+                break
+    return out
+
+
+@dataclass(frozen=True)
+class FlatRefusal:
+    """A colour candidate refused because the relief there is too flat for its class."""
+
+    candidate: Candidate
+    model_m: float  # how far its class's depth model stands out
+    scene_m: float  # how far the scene does in its footprint
+
+
+def colour_where_relief_allows(colour: list[Candidate], relief: np.ndarray | None, models: Models,
+                               offsets: dict[str, tuple[float, float]], gain_range: tuple[float, float]
+                               ) -> tuple[list[Candidate], list[FlatRefusal]]:
+    """The colour candidates whose class's depth model the relief in their footprint does not
+    rule out, and the refused ones.
+
+    A colour candidate of a class that stands out (its depth model, ``models``, cropped to
+    its content whose centre lies ``offsets`` from the footprint's) at a place where the
+    scene stands out less than ``gain_range[0]`` times as far is a print without its object:
+    a specular highlight or a poster's white square taken for a flush socket. The relief is
+    measured where it is known (:func:`scene_amplitude`); noise only raises it, so a noisy
+    scan refuses less, never more. Classes without a depth model, and places seen too
+    sparsely to measure, are kept; a class with several designs is refused only when the
+    relief is too flat for every one of them.
+    """
+    if relief is None or not colour:
+        return colour, []
+    kept: list[Candidate] = []
+    refused: list[FlatRefusal] = []
+    centre_of = lambda cand: shifted_centre(cand.centre, offsets.get(cand.class_id), cand.rotation_deg)  # noqa: E731
+    for cand in colour:
+        flat: list[FlatRefusal] = []
+        per_design = designs(models[cand.class_id]) if cand.class_id in models else []
+        for m in per_design:
+            own = relief_amplitude(m)
+            seen = None if own is None or own <= 0 else scene_amplitude(relief, m.shape[:2], centre_of(cand),
+                                                                        cand.rotation_deg)
+            if seen is None or seen >= gain_range[0] * own:
+                break
+            flat.append(FlatRefusal(cand, own, seen))
+        if per_design and len(flat) == len(per_design):
+            refused.append(flat[0])
+        else:
+            kept.append(cand)
+    return kept, refused
+
+
+def shifted_centre(centre: tuple[float, float], offset: tuple[float, float] | None,
+             rotation_deg: float) -> tuple[float, float]:
+    """``centre`` moved by ``offset`` (row, col) turned by ``rotation_deg``."""
+    if offset is None or (offset[0] == 0 and offset[1] == 0):
+        return centre
+    a = np.deg2rad(float(rotation_deg))
+    dr, dc = offset
+    return (centre[0] + dr * np.cos(a) - dc * np.sin(a), centre[1] + dr * np.sin(a) + dc * np.cos(a))
