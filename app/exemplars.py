@@ -36,6 +36,7 @@ from sbsc_core.recognition.learning.crops import (
 )
 
 from .models import DetectionRow, Project, WallRow
+from .review_rules import review_score
 
 __all__ = ["build_exemplar_library", "footprint", "learnt_depth", "learnt_view", "upright"]
 
@@ -76,8 +77,7 @@ def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_
     reliefs: dict[str, list[np.ndarray]] = {}
     views: dict[str, list[np.ndarray]] = {}
     # the surest first: reviewer-added objects, then by confidence / alpha
-    dets.sort(key=lambda d: -(2.0 if d.source == "reviewer" else
-                              (d.confidence if d.confidence is not None else (d.alpha or 0.0))))
+    dets.sort(key=lambda d: -(2.0 if d.source == "reviewer" else (review_score(d.confidence, d.alpha) or 0.0)))
     for d in dets:
         cdir = dest / d.class_id
         wall = walls.get(d.wall_key)
