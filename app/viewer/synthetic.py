@@ -1,6 +1,6 @@
 """A synthetic ``sbsc detect`` output (and scan) for the viewer's tests, demos and timings.
 
-It writes exactly the layout of ``sbsc_core.pipeline.detect.write_outputs``: ``detections.json``
+It writes exactly the layout of ``sbsc_core.pipeline.outputs.write_outputs``: ``detections.json``
 (contract 4 + ``pixel_m``), ``rois.json``, ``orthoimages/<W>_colour.png``, ``_depth.png`` and
 ``_depth.npy``, plus ``scan.ply``: rectangular rooms in a row, four walls each, objects drawn
 on the walls as coloured rectangles standing out 2 cm, one door per room.

@@ -20,7 +20,7 @@ are left out (no surface, no work).
 The scan is read once more: the points within the orthoimage's depth range of a storey's
 ceiling, minus those on a wall's plane (the tops of the walls seen edge-on), are binned
 into each tile's partition like a wall's (:mod:`partition`). Each tile then goes through
-the walls' stages unchanged (:func:`~sbsc_core.pipeline.detect.process_orthoimage`: colour
+the walls' stages unchanged (:func:`~sbsc_core.pipeline.walls.process_orthoimage`: colour
 preparation, visible area, depth and colour recognition) with the classes whose ``mount``
 has ``ceiling``; only candidates centred in the tile's core are kept, so that an object in
 the overlap of two tiles is found once. The consensus runs over walls and ceilings together
