@@ -137,12 +137,12 @@ def test_spilled_formats_are_decoded_once(scene, tmp_path):
 
 @pytest.mark.slow
 def test_pool_workers_start_with_the_worker_environment(monkeypatch):
-    from sbsc_core.pipeline import detect as pipeline
+    from sbsc_core.pipeline import executors, worker_env
 
-    monkeypatch.setattr(pipeline, "worker_environment", lambda: {"SBSC_TEST_WORKER_MARK": "set"})
-    pool = pipeline.wall_pool(DetectionSettings(workers=2))
+    monkeypatch.setattr(executors, "worker_environment", lambda: {"SBSC_TEST_WORKER_MARK": "set"})
+    pool = executors.wall_pool(DetectionSettings(workers=2))
     try:
-        assert [pool.submit(pipeline._environ, "SBSC_TEST_WORKER_MARK").result() for _ in range(4)] == ["set"] * 4
+        assert [pool.submit(worker_env._environ, "SBSC_TEST_WORKER_MARK").result() for _ in range(4)] == ["set"] * 4
     finally:
         pool.shutdown()
     import os
