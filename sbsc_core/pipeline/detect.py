@@ -96,8 +96,7 @@ _TALL_STOREY_M = 5.0  # a storey higher than this is named in a warning (several
 
 if TYPE_CHECKING:  # the documents (and pydantic) are imported where used: the wall workers never need them
     from ..io.documents import ExpectedCounts
-
-    Expected = dict[str, int] | ExpectedCounts  # contract 3: counts, or counts with per-storey counts
+    from .walls import Expected
 
 
 def _collect_walls(results: Iterator[tuple[str, WallResult, dict[str, float]]], n_walls: int, progress: Progress,

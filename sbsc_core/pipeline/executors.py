@@ -16,7 +16,6 @@ from concurrent.futures import (
     wait,
 )
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -35,11 +34,6 @@ from ..types import (
     PointCloud,
     Segmentation,
 )
-
-if TYPE_CHECKING:  # the documents (and pydantic) are imported where used: the wall workers never need them
-    from ..io.documents import ExpectedCounts
-
-    Expected = dict[str, int] | ExpectedCounts  # contract 3: counts, or counts with per-storey counts
 from .walls import (
     WallResult,
     _process_wall_job,

@@ -10,7 +10,6 @@ from concurrent.futures import (
 )
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import cv2
 
@@ -20,11 +19,6 @@ from ..types import (
     Detection,
     Segmentation,
 )
-
-if TYPE_CHECKING:  # the documents (and pydantic) are imported where used: the wall workers never need them
-    from ..io.documents import ExpectedCounts
-
-    Expected = dict[str, int] | ExpectedCounts  # contract 3: counts, or counts with per-storey counts
 from .executors import _as_done
 from .walls import WallResult, _box_uv, _write_wall_images, overlay_image
 

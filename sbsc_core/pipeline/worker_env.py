@@ -6,15 +6,9 @@ from __future__ import annotations
 import contextlib
 import os
 from collections.abc import Iterator
-from typing import TYPE_CHECKING
 
 from ..settings import DetectionSettings
 from .cpu_features import numpy_environment
-
-if TYPE_CHECKING:  # the documents (and pydantic) are imported where used: the wall workers never need them
-    from ..io.documents import ExpectedCounts
-
-    Expected = dict[str, int] | ExpectedCounts  # contract 3: counts, or counts with per-storey counts
 
 
 def _worker_count(settings: DetectionSettings) -> int:

@@ -356,6 +356,20 @@ def _count_inside(xyz: np.ndarray, box: DenseBox) -> int:
     return sum(int(inside_box(xyz[a: a + _CHUNK], box).sum()) for a in range(0, len(xyz), _CHUNK))
 
 
+
+def _z_histogram_sample(z: np.ndarray, s: SegmentationSettings) -> tuple[np.ndarray, int, np.ndarray]:
+    """The finite values (float64) of a regular subsample of ``z`` of at most
+    ``s.histogram_max_points``, its step, and which of the subsample's values are finite.
+    Raises NoWallsError when there are none."""
+    z = np.asarray(z)
+    step = max(1, math.ceil(len(z) / s.histogram_max_points))
+    zs = z[::step]
+    keep = np.isfinite(zs)
+    zs = zs[keep].astype(np.float64)
+    if len(zs) == 0:
+        raise NoWallsError("no walls found: the scan has no points")
+    return zs, step, keep
+
 def find_storeys(z: np.ndarray, settings: SegmentationSettings | None = None,
                  xy: np.ndarray | None = None) -> list[tuple[float, float]]:
     """(floor, ceiling) of every storey, bottom up, in the frame of ``z``.
@@ -372,13 +386,7 @@ def find_storeys(z: np.ndarray, settings: SegmentationSettings | None = None,
     thresholds are fractions, so a regular subsample gives the same storeys.
     """
     s = settings or SegmentationSettings()
-    z = np.asarray(z)
-    step = max(1, math.ceil(len(z) / s.histogram_max_points))
-    zs = z[::step]
-    keep = np.isfinite(zs)
-    zs = zs[keep].astype(np.float64)
-    if len(zs) == 0:
-        raise NoWallsError("no walls found: the scan has no points")
+    zs, step, keep = _z_histogram_sample(z, s)
     xs = None if xy is None else np.asarray(xy)[::step][keep]
     lo, b = float(zs.min()), s.storey_bin_m
     counts = np.bincount(((zs - lo) / b).astype(np.int64)).astype(np.float64)
@@ -437,13 +445,7 @@ def find_floor_ceiling(z: np.ndarray, settings: SegmentationSettings | None = No
     in whatever frame ``z`` is given. Raises NoWallsError without a floor and a ceiling.
     """
     s = settings or SegmentationSettings()
-    z = np.asarray(z)
-    step = max(1, math.ceil(len(z) / s.histogram_max_points))
-    zs = z[::step]
-    keep = np.isfinite(zs)
-    zs = zs[keep].astype(np.float64)
-    if len(zs) == 0:
-        raise NoWallsError("no walls found: the scan has no points")
+    zs, step, keep = _z_histogram_sample(z, s)
     lo, b = float(zs.min()), s.z_bin_m
     counts = np.bincount(((zs - lo) / b).astype(np.int64)).astype(np.float64)
     smooth = np.convolve(counts, np.ones(3), mode="same")
