@@ -245,6 +245,24 @@ def idle_release(srv: ServerProcess, idle_s: float, res: dict) -> None:
     res["freed_mib"] = res["rss_scene_open_mib"] - res["rss_after_idle_mib"]
 
 
+
+def scene_figures(srv: ServerProcess, token: str, pid: int, title: str, idle_s: float, user: str = "rita") -> dict:
+    """The server's memory before the scene opens, the scene's first frame (:func:`open_scene`)
+    and the memory after its idle stop (:func:`idle_release`)."""
+    res = {"rss_before_mib": round(rss_mib(srv))}
+    res.update(open_scene(srv, token, pid, title, user))
+    idle_release(srv, idle_s, res)
+    return res
+
+
+def reviewer_member(settings: AppSettings, env: dict, name: str, pid: int) -> str:
+    """A reviewer ``name`` made a member of project ``pid`` as an admin does (``sbsc user
+    add-member``; an imported project has only the admins as members); their token."""
+    token = add_user(settings, name, "reviewer")
+    subprocess.run([sys.executable, "-m", "app", "user", "add-member", name, str(pid), "--role", "reviewer"],
+                   env=env, check=True)
+    return token
+
 def after_import(detect_out: Path, scan: Path, tmp: Path, idle_s: float) -> dict:
     """``sbsc import`` (its process tree's peak while preparing), then the first frame."""
     data = tmp / "import"
@@ -258,16 +276,11 @@ def after_import(detect_out: Path, scan: Path, tmp: Path, idle_s: float) -> dict
         raise SystemExit(f"sbsc import failed ({code})")
     res: dict = {"import_s": round(secs, 1), "prepare_peak_mib": round(peak)}
     pid = find_sample_project(settings, "first frame")
-    token = add_user(settings, "rita", "reviewer")
-    # an imported project has only the admins as members: rita is made one as an admin does
-    subprocess.run([sys.executable, "-m", "app", "user", "add-member", "rita", str(pid), "--role",
-                    "reviewer"], env=env, check=True)
+    token = reviewer_member(settings, env, "rita", pid)
     srv = ServerProcess(data, {"SBSC_VIEWER_IDLE_S": str(idle_s)}).start()
     try:
         time.sleep(2.0)
-        res["rss_before_mib"] = round(rss_mib(srv))
-        res.update(open_scene(srv, token, pid, "first frame"))
-        idle_release(srv, idle_s, res)
+        res.update(scene_figures(srv, token, pid, "first frame", idle_s))
     finally:
         srv.stop()
     return res
@@ -308,9 +321,7 @@ def after_job(detect_out: Path, scan: Path, tmp: Path, idle_s: float) -> dict:
             if job["status"] != "succeeded":
                 raise SystemExit(f"job failed: {job}")
             res["job_s"], res["prepare_peak_mib"] = round(time.perf_counter() - t, 1), round(peak.mib)
-        res["rss_before_mib"] = round(rss_mib(srv))
-        res.update(open_scene(srv, token, pid, "after a job"))
-        idle_release(srv, idle_s, res)
+        res.update(scene_figures(srv, token, pid, "after a job", idle_s))
     finally:
         srv.stop()
     return res
@@ -325,20 +336,13 @@ def open_only(data: Path, tmp: Path, idle_s: float) -> dict:
     if pid is None:
         raise SystemExit(f"{data}: no project 'first frame' (sbsc import ... --name 'first frame' makes it)")
     name = f"rita{int(time.time())}"
-    token = add_user(settings, name, "reviewer")
-    env = {**os.environ, "SBSC_DATA_DIR": str(data), "PYTHONPATH": str(ROOT)}
-    subprocess.run([sys.executable, "-m", "app", "user", "add-member", name, str(pid), "--role",
-                    "reviewer"], env=env, check=True)
+    token = reviewer_member(settings, {**os.environ, "SBSC_DATA_DIR": str(data), "PYTHONPATH": str(ROOT)}, name, pid)
     srv = ServerProcess(data, {"SBSC_VIEWER_IDLE_S": str(idle_s)}).start()
-    res: dict = {}
     try:
         time.sleep(2.0)
-        res["rss_before_mib"] = round(rss_mib(srv))
-        res.update(open_scene(srv, token, pid, "first frame", name))
-        idle_release(srv, idle_s, res)
+        return scene_figures(srv, token, pid, "first frame", idle_s, name)
     finally:
         srv.stop()
-    return res
 
 
 def main() -> int:
