@@ -230,3 +230,19 @@ def test_detect_no_ceilings_leaves_the_ceiling_unsearched(tmp_path):
                  str(sim / "expected.json"), "--no-ceilings", "--out", str(det)]) == 0
     doc = json.loads((det / "detections.json").read_text())
     assert not doc.get("surfaces") and not any(d.get("surface") == "ceiling" for d in doc["detections"])
+
+
+def test_cells_sorted_highest_first_as_lexsort():
+    """The packed-key sort of ceiling_levels orders cells and heights exactly as np.lexsort,
+    negative heights, signed zeros and subnormals included."""
+    from sbsc_core.scene.ceilings import _by_cell_highest_first
+
+    rng = np.random.default_rng(3)
+    z = rng.normal(0.0, 3.0, 20_000).astype(np.float32)
+    z[:4] = [0.0, -0.0, 1e-40, -1e-40]
+    cell = rng.integers(0, 300, len(z))
+    order = np.lexsort((-z.astype(np.float64), cell))
+    cell_s, z_s = _by_cell_highest_first(cell, z)
+    assert np.array_equal(cell_s, cell[order])
+    assert np.array_equal(z_s, z[order])
+    assert z_s.dtype == np.float32

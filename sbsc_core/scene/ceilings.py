@@ -130,6 +130,27 @@ class CeilingTile:
         return doc
 
 
+def _by_cell_highest_first(cell: np.ndarray, z32: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``cell`` (N,) int64 >= 0 (below 2**31) and ``z32`` (N,) float32 sorted by cell, then by ``z32``
+    from the highest: ``np.lexsort((-z32, cell))`` applied to both, as one sort of packed int64 keys.
+
+    Each key is the cell in the high 32 bits and, in the low 32, the bits of ``z32`` mapped so
+    that their unsigned order is the reverse of the values' order (IEEE 754 floats compare
+    as sign-magnitude integers); equal keys hold equal values, so any order among them is the
+    same output.
+    """
+    if z32.dtype != np.float32:  # not the cloud's float32: sorted as the values are
+        order = np.lexsort((-z32, cell))
+        return cell[order], z32[order]
+    u = z32.view(np.uint32).astype(np.int64)
+    up = np.where(u >> 31 == 1, ~u & 0xFFFFFFFF, u | 0x80000000)  # ascending with the value
+    key = (cell.astype(np.int64) << 32) | (0xFFFFFFFF - up)  # descending
+    key.sort()
+    up = 0xFFFFFFFF - (key & 0xFFFFFFFF)
+    bits = np.where(up >> 31 == 0, ~up & 0xFFFFFFFF, up & 0x7FFFFFFF).astype(np.uint32)
+    return key >> 32, bits.view(np.float32)
+
+
 def ceiling_levels(cloud: PointCloud, seg: Segmentation, s: CeilingSettings) -> list[CeilingLevels]:
     """The ceiling levels of every storey measured in ``cloud`` (the segmentation sample).
 
@@ -160,8 +181,8 @@ def ceiling_levels(cloud: PointCloud, seg: Segmentation, s: CeilingSettings) -> 
         ij = np.floor((xy - (x0, y0)) / c).astype(np.int64)
         nx, ny = int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1
         cell = ij[:, 1] * nx + ij[:, 0]
-        order = np.lexsort((-z, cell))  # by cell, highest first
-        cell_s, z_s = cell[order], z[order]
+        cell_s, z32_s = _by_cell_highest_first(cell, cloud.xyz[idx, 2])
+        z_s = z32_s.astype(np.float64) + origin[2]  # as z_all: the same values, in this order
         first = np.flatnonzero(np.r_[True, cell_s[1:] != cell_s[:-1]])
         count = np.diff(np.r_[first, len(cell_s)])
         pick = first + np.minimum(count, 3) - 1
