@@ -290,6 +290,7 @@ class ConfidenceSettings:
     calibration: str = ""  # a calibration JSON (empty: the one shipped in sbsc_core/recognition/calibration/)
     min_confidence: float = 0.5  # hits less likely right than this give no detection ...
     report_unknown: bool = False  # ... or, with this, a detection of class "unknown" for review
+    fill_by_confidence: bool = True  # expected counts are filled with each class's most probable hits
 
 
 @dataclass

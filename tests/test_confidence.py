@@ -269,3 +269,36 @@ def test_colour_only_print_is_the_lookalike_margin_of_a_colour_only_hit() -> Non
     deep = dict(zip(FEATURES, hit_features(make_hit(None, sign, 0.5), [], [sign], {"extinguisher_sign": 0.012}),
                     strict=True))  # a 12 mm relief depth should have seen: the print vouches for less
     assert deep["unmatched_relief"] == pytest.approx(0.6) and deep["colour_only_print"] == pytest.approx(0.1)
+
+
+def test_expected_counts_are_filled_with_the_most_probable_hits(tmp_path) -> None:
+    """Expected one switch: a look-alike seen in depth and colour (alpha 1, rho_D 0.95) comes
+    first in the consensus, a real switch seen in depth only (alpha 0.5, rho_D 0.995) second.
+    The count goes to the more probable one; the swap never changes the class's count."""
+    import json
+
+    from sbsc_core.recognition.confidence import fill_by_confidence, screened_consensus
+    from sbsc_core.settings import ConsensusSettings
+
+    cal = Calibration(np.array([0.0, 0.0, 50.0]), -45.0)  # the better the depth fit, the likelier
+    path = tmp_path / "cal.json"
+    path.write_text(json.dumps(cal.to_dict()))
+    lookalike_d = _cand("switch", "depth", 0.95, 50.0, 50.0)
+    lookalike_c = _cand("switch", "colour", 0.05, 50.0, 50.0)
+    real = _cand("switch", "depth", 0.995, 150.0, 150.0)
+    args = ([lookalike_d, real], [lookalike_c], {"switch": 1}, ["switch"], ConsensusSettings())
+    hits = screened_consensus(*args, ConfidenceSettings(calibration=str(path)))
+    assert [(h.centre, h.source) for h in hits] == [((150.0, 150.0), "depth")]
+    plain = screened_consensus(*args, ConfidenceSettings(calibration=str(path), fill_by_confidence=False))
+    assert [(h.centre, h.source) for h in plain] == [((50.0, 50.0), "both")]
+    both = screened_consensus([lookalike_d, real], [lookalike_c], {"switch": 2}, ["switch"], ConsensusSettings(),
+                              ConfidenceSettings(calibration=str(path)))
+    assert sorted(h.centre for h in both) == [(50.0, 50.0), (150.0, 150.0)]
+    # a more probable hit whose place is taken by a kept hit of another class does not come in
+    kept = make_hit(_cand("socket", "depth", 0.9, 150.0, 150.0), None, 0.5)
+    kept.confidence = 0.6
+    weak = make_hit(lookalike_d, lookalike_c, 1.0)
+    weak.confidence = 0.7
+    strong = make_hit(real, None, 0.5)
+    strong.confidence = 0.99
+    assert fill_by_confidence([weak, kept], [strong], 0.3) == [weak, kept]

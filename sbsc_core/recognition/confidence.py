@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -270,6 +270,13 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
     Without a calibration or with screening off this is the plain consensus. ``reliefs``:
     see :func:`hit_features` (:func:`model_reliefs` of the templates searched).
 
+    With expected counts and ``settings.fill_by_confidence``, each class's count is then
+    filled with its most probable hits (:func:`fill_by_confidence`): the counts say how many
+    objects of a class there are, the confidence which hits they most likely are. The
+    consensus alone fills a count in the order of alpha (equation 15), so a look-alike seen
+    in depth and colour (a room controller, alpha 1, rho_D 0.95) goes before a real object
+    of the class that the colour recognizer missed (alpha 0.5, rho_D 0.995).
+
     With ``frames`` (wall id -> frame and pixel size of its orthoimage), a hit that repeats
     a better one on another wall of the same plane
     (:func:`~sbsc_core.recognition.duplicates.cross_surface_duplicates`: two overlapping pieces of one
@@ -287,6 +294,7 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
         return cross_surface_duplicates(hits, frames, overlap=consensus_settings.suppress_overlap)
 
     cal = load_calibration(Path(settings.calibration) if settings.calibration else None) if settings.enabled else None
+    all_depth, all_colour = depth, colour
     refused: list[ConsensusHit] = []
     for _ in range(max(1, max_rounds)):
         hits = run(depth, colour)
@@ -309,12 +317,44 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
                 hits.append(h)
                 left[h.class_id] -= 1
         refused = [h for h in refused if not any(h is k for k in hits)]
+        if settings.fill_by_confidence:
+            free = screened_consensus(all_depth, all_colour, None, classes, consensus_settings,
+                                      replace(settings, report_unknown=False, fill_by_confidence=False),
+                                      reliefs=reliefs, max_rounds=max_rounds, frames=frames)
+            hits = fill_by_confidence(hits, free, consensus_settings.suppress_overlap)
+            hits = [h for cls in classes for h in hits if h.class_id == cls]
     if settings.report_unknown:
         for h in refused:
             if not _overlaps(h, hits, consensus_settings.suppress_overlap):
                 h.unknown = True
                 hits.append(h)
     return hits
+
+
+def fill_by_confidence(hits: list[ConsensusHit], pool: list[ConsensusHit], overlap: float) -> list[ConsensusHit]:
+    """``hits`` (selected under expected counts) with each class's least probable hits swapped
+    for more probable hits of the same class from ``pool`` (the hits found without counts).
+
+    A hit of ``pool`` replaces the least confident kept hit of its class when its confidence
+    is higher and its footprint overlaps no kept hit by more than ``overlap`` (a free place);
+    the best of ``pool`` are tried first. Each class keeps its number of hits. Hits without a
+    confidence are neither swapped out nor in.
+    """
+    kept = list(hits)
+    for cls in sorted({h.class_id for h in kept}):
+        spare = sorted((p for p in pool if p.class_id == cls and p.confidence is not None),
+                       key=lambda p: -p.confidence)
+        for p in spare:
+            mine = [h for h in kept if h.class_id == cls and h.confidence is not None]
+            if not mine:
+                break
+            worst = min(mine, key=lambda h: h.confidence)
+            if not p.confidence > worst.confidence:
+                break
+            if _overlaps(p, kept, overlap):  # its place is taken (by this object, or another's)
+                continue
+            kept = [h for h in kept if h is not worst] + [p]
+    return kept
 
 
 def _overlaps(hit: ConsensusHit, hits: list[ConsensusHit], overlap: float) -> bool:
