@@ -38,11 +38,17 @@ RUNNER = """
 import json, sys
 from pathlib import Path
 try:  # what `sbsc detect` does before numpy is imported (where the checkout has it)
-    from sbsc_core.pipeline.cpu_features import prefer_fast_sort
+    try:
+        from sbsc_core.pipeline.cpu_features import prefer_fast_sort
+    except ImportError:  # a checkout of the flat layout (before issue 31)
+        from sbsc_core.cpu_features import prefer_fast_sort
     prefer_fast_sort()
 except ImportError:
     pass
-from sbsc_core.pipeline.detect import detect_to_dir
+try:
+    from sbsc_core.pipeline.detect import detect_to_dir
+except ImportError:  # a checkout of the flat layout (before issue 31)
+    from sbsc_core.pipeline import detect_to_dir
 args = json.loads(sys.argv[1])
 s = detect_to_dir([Path(p) for p in args["scans"]], Path(args["models"]), expected=args["expected"] and Path(args["expected"]),
                   out=Path(args["out"]))
