@@ -183,7 +183,7 @@ def test_surfaces_without_points_are_left_out(tmp_path):
     def part_fn(n):
         return [0, n, 0]
 
-    def job_fn(scratch, k, sf, templates, prototypes, s):
+    def job_fn(scratch, k, sf, *, templates, prototypes, s):
         ran.append(k)
         return sf, "result", {}
 

@@ -128,7 +128,7 @@ def _surface_differences(built: list[_Placed], surfaces: Mapping[str, Surface], 
             return False
         return not any(_overlaps(rect, r, 0.05) for r in occupied[sf.id] if r != skip_rect)
 
-    def placed(o_cls: str, sf: Surface, u: float, v: float, w: float, h: float, turn: float = 0.0) -> _Placed:
+    def placed(o_cls: str, sf: Surface, u: float, v: float, *, w: float, h: float, turn: float = 0.0) -> _Placed:
         pos = _surface_point(sf, u, v)
         return _Placed(o_cls, None, u, v, w, h, pos, surface_normal(sf, pos), sf.kind, sf.id, turn)
 
@@ -155,7 +155,7 @@ def _surface_differences(built: list[_Placed], surfaces: Mapping[str, Surface], 
                 else:
                     u, v = o.u, o.v + dist * (1 if rng.random() < 0.5 else -1)
                 rect = _rect(u, v, o.width, o.height)
-                cand = placed(o.class_id, sf, u, v, o.width, o.height, o.rotation_deg)
+                cand = placed(o.class_id, sf, u, v, w=o.width, h=o.height, turn=o.rotation_deg)
                 if fits(sf, rect, _rect(o.u, o.v, o.width, o.height)) and far_from_class(cand.position, o.class_id, o):
                     moved[i] = cand
                     occupied[sf.id].append(rect)
@@ -178,7 +178,7 @@ def _surface_differences(built: list[_Placed], surfaces: Mapping[str, Surface], 
                 u = float(rng.uniform(0, sf.frame.width_m)) if sf.round else sf.frame.width_m / 2
                 v = float(np.median([o.v for o in same]))
             rect = _rect(u, v, w, h)
-            cand = placed(cid, sf, u, v, w, h)
+            cand = placed(cid, sf, u, v, w=w, h=h)
             if fits(sf, rect) and far_from_class(cand.position, cid, None):
                 added.append(cand)
                 occupied[sf.id].append(rect)

@@ -356,8 +356,8 @@ class IfcModelBuilder:
         self._wall_thickness[wall_id] = float(thickness)
         return wall
 
-    def add_opening(self, wall_id: str, kind: str, u_min: float, u_max: float, v_min: float,
-                    v_max: float, *, fill: bool = True, name: str | None = None) -> tuple[Any, Any | None]:
+    def add_opening(self, wall_id: str, kind: str, *, u_min: float, u_max: float, v_min: float,
+                    v_max: float, fill: bool = True, name: str | None = None) -> tuple[Any, Any | None]:
         """An IfcOpeningElement through the wall, filled by an IfcDoor/IfcWindow if ``fill``."""
         f = self.file
         wall = self.walls[wall_id]
@@ -610,8 +610,8 @@ def add_walls_and_openings(builder: IfcModelBuilder, walls: dict[str, WallFrame]
     for o in openings:
         frame = walls[o["wall"]]
         twin = any(_same_opening(o, frame, p, walls[p["wall"]]) for p in filled)
-        builder.add_opening(o["wall"], str(o.get("kind", "door")), o["u_min"], o["u_max"],
-                            o["v_min"], o["v_max"], fill=not twin)
+        builder.add_opening(o["wall"], str(o.get("kind", "door")), u_min=o["u_min"], u_max=o["u_max"],
+                            v_min=o["v_min"], v_max=o["v_max"], fill=not twin)
         if not twin:
             filled.append(o)
 

@@ -228,7 +228,7 @@ def sample_part(part: ScanPart, origin: np.ndarray, step: int, scratch: str | No
     src = open_scan(part.path)
     pose = part.pose
     if src.seekable:  # fixed-size records: only the sampled points are converted
-        xyz, rgb, n = sample_scan(src, origin, step, part.first, part.start, part.stop)
+        xyz, rgb, n = sample_scan(src, origin, step, first=part.first, start=part.start, stop=part.stop)
         return PartSample(apply_pose(xyz, pose), rgb, n, False)
     spill = scratch is not None
     xs, cs = [], []
@@ -450,7 +450,7 @@ def band_rows(frame: WallFrame, ortho: OrthoimageSettings) -> int:
     return max(1, BAND_PIXELS // ortho_shape(frame, ortho.pixel_m)[1])
 
 
-def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch: str, points: int,
+def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch: str, *, points: int,
                    spilled: bool, ortho: OrthoimageSettings) -> list[int]:
     """Stream one part again (or its spill) and append each wall's binned points to its partition.
 

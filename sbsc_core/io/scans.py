@@ -222,7 +222,7 @@ def iter_scan(path: Path | str | ScanSource, origin: np.ndarray | None = None, *
         raise InputError(path, "no points")
 
 
-def sample_scan(src: ScanSource, origin: np.ndarray, every: int, first: int = 0, start: int = 0,
+def sample_scan(src: ScanSource, origin: np.ndarray, every: int, *, first: int = 0, start: int = 0,
                 stop: int | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """A regular sample of points ``start:stop`` of a ``seekable`` source, and the points read.
 

@@ -48,7 +48,7 @@ def _parked_overlay_job(parked: str, w: WallResult, detections: list[Detection])
     return wid
 
 
-def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dict | None = None,
+def write_outputs(result: DetectionResult, out: Path, pixel_m: float, *, extra: dict | None = None,
                   parked: Path | None = None, executor: Executor | None = None) -> None:
     """Write detections.json, rois.json and the per-wall images into ``out``.
 
