@@ -207,10 +207,38 @@ def write_as_designed_ifc(truth_doc: dict, out: Path, *, seed: int = 0, n_moved:
     (:func:`_surface_differences`); the walls' differences are drawn among wall objects only.
     With ``storeys`` in the truth, one IfcBuildingStorey each.
 
-    Returns ``{"as_designed": out.name, "design_differences": [...]}``, each difference
-    ``{"kind": "moved"|"removed"|"added", "class", "wall", "designed_position",
-    "built_position"}`` (null where it does not exist; with surfaces also ``"surface"``: wall,
-    ceiling or column, and ``wall`` names the surface), to be stored in the ground truth.
+    Parameters
+    ----------
+    truth_doc
+        The ground truth of the simulated scene (contract 5).
+    out
+        The IFC file to write.
+    seed
+        Picks which objects differ, and where the added ones go.
+    n_moved, n_removed, n_added
+        How many wall objects are moved, left out of the design and added.
+    library
+        The model library; None: the bundled one.
+    schema
+        ``IFC4``, ``IFC4X3`` or ``IFC2X3``.
+    shift_m
+        The range of a moved object's shift along its wall, metres.
+    separation_m
+        The least distance from a moved or added position to a built object of its class.
+    typings
+        How each class is written in IFC, when already made from the library.
+    mount_heights
+        Class id -> height of an added object whose class has no built object.
+    surface_changes
+        How many objects are removed, moved and added on each kind of surface beyond walls.
+
+    Returns
+    -------
+    dict
+        ``{"as_designed": out.name, "design_differences": [...]}``, each difference
+        ``{"kind": "moved"|"removed"|"added", "class", "wall", "designed_position",
+        "built_position"}`` (null where it does not exist; with surfaces also ``"surface"``:
+        wall, ceiling or column, and ``wall`` names the surface), to be stored in the ground truth.
     """
     from .export import add_storeys_and_surfaces
 

@@ -842,7 +842,27 @@ def export_ifc_file(detections: Path, out: Path, *, schema: str = "IFC4", accept
                     models: Path | None = None, crs: str | None = None) -> dict[str, Any]:
     """``sbsc export-ifc``: read ``detections``, write ``out`` (nothing on error).
 
-    Returns a summary: the schema and how many walls, openings and objects were written.
+    Parameters
+    ----------
+    detections
+        A detections document (contract 4).
+    out
+        The IFC file to write (atomically).
+    schema
+        ``IFC4``, ``IFC4X3`` or ``IFC2X3``.
+    accepted_only
+        Only the detections a reviewer accepted.
+    models
+        The model library whose ``model.json`` give each class's IFC class; None: the bundled one.
+    crs
+        The scan's coordinate system (``"EPSG:NNNN"``) to georeference the model in; None:
+        the document's ``crs``, if any.
+
+    Returns
+    -------
+    dict
+        A summary: the schema, the coordinate system and how many walls, openings, ceilings,
+        columns and objects were written.
     """
     detections = Path(detections)
     schema = normalise_schema(schema, where="--schema")

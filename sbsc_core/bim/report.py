@@ -354,4 +354,16 @@ def render_report(comparison: Comparison, image_dir: Path | None = None) -> str:
 
 
 def write_report(comparison: Comparison, path: Path, image_dir: Path | None = None) -> None:
+    """Write the comparison's self-contained HTML report (:func:`render_report`).
+
+    Parameters
+    ----------
+    comparison
+        What :func:`~sbsc_core.bim.compare.compare` found.
+    path
+        The HTML file to write; its pictures are embedded.
+    image_dir
+        The detect output's ``orthoimages`` folder: the walls' pictures are drawn on their
+        colour orthoimages; None: on plain walls.
+    """
     Path(path).write_text(render_report(comparison, image_dir), encoding="utf-8")

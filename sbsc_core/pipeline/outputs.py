@@ -25,6 +25,26 @@ from .walls import WallResult, _box_uv, _write_wall_images, overlay_image
 
 @dataclass
 class DetectionResult:
+    """What :func:`~sbsc_core.pipeline.detect.detect` found, before it is written out.
+
+    Attributes
+    ----------
+    segmentation
+        The storeys, floors, ceilings and walls found in the cloud.
+    walls
+        Each surface's orthoimages, RoIs and candidates, by wall (or ceiling tile, column face) id.
+    detections
+        The recognized objects (the consensus of depth and colour, placed and scored).
+    timings
+        Seconds per stage.
+    classes
+        The classes searched for.
+    surfaces
+        The surfaces beyond walls (ceiling tiles, column faces) as in contract 4.
+    registration
+        Per scan file, how its registration was refined.
+    """
+
     segmentation: Segmentation
     walls: dict[str, WallResult]
     detections: list[Detection]
