@@ -561,14 +561,14 @@ def wall_orthoimage(scratch: Path | str, w: int, wall_id: str, frame: WallFrame,
         pixel -= r0 * width
         pd, prgb = np.ascontiguousarray(rec["depth"]), np.ascontiguousarray(rec["rgb"])
         del rec
-        d, c, m = rasterize_median(pixel, pd, prgb, (r1 - r0, width), settings.depth_range_m,
-                                   settings.depth_quantum_m, **layer_options(settings))
+        d, c, m = rasterize_median(pixel, pd, prgb, (r1 - r0, width), depth_range=settings.depth_range_m,
+                                   quantum=settings.depth_quantum_m, **layer_options(settings))
         depth[r0:r1], colour[r0:r1], mask[r0:r1] = d, c, m
         band_front = front_images(pixel, pd, prgb, (r1 - r0, width), settings)
         if band_front is not None:
             bands.append((r0, band_front))
         del pixel, pd, prgb
-    return orthoimage_from_images(wall_id, frame, depth, colour, mask, settings, front=stack_front(bands, (h, width)))
+    return orthoimage_from_images(wall_id, frame, depth, colour, mask, settings=settings, front=stack_front(bands, (h, width)))
 
 
 def worker_ready() -> bool:
