@@ -216,7 +216,7 @@ def test_round_column_image_wraps_its_seam(tmp_path):
     origin = scan_origin(tmp_path / "scan.ply")
     ortho = OrthoimageSettings()
     for p in parts:
-        column_part(p, origin, [rf], [0.6], str(tmp_path), ortho)
+        column_part(p, origin, [rf], [0.6], str(tmp_path), ortho=ortho)
     img: Orthoimage = face_orthoimage(tmp_path, 0, rf, ortho)
     # the box is whole past the circumference (the start repeated) and cut at the start
     r = int(img.uv_to_pixel(0.0, 1.2)[0])

@@ -337,7 +337,7 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, lev
     if s.ceilings.enabled:  # objects on ceilings: the tiles join the walls in the consensus
         from .surfaces import detect_ceilings
 
-        ceil = detect_ceilings(parts, origin, seg, library, counts, s, executor=executor, scratch=scratch,
+        ceil = detect_ceilings(parts, origin, seg, library=library, expected=counts, s=s, executor=executor, scratch=scratch,
                                parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
                                levels=levels, part_executor=part_executor)
         out.walls.update(ceil.walls)
@@ -347,7 +347,7 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, lev
     if columns:  # objects on columns: their faces join the walls in the consensus too
         from .surfaces import detect_columns
 
-        cols = detect_columns(parts, origin, columns, library, counts, s, executor=executor, scratch=scratch,
+        cols = detect_columns(parts, origin, columns, library=library, expected=counts, s=s, executor=executor, scratch=scratch,
                               parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
                               part_executor=part_executor)
         out.walls.update(cols.walls)
