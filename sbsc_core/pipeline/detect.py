@@ -165,7 +165,7 @@ def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[
     frames = {k: (o.frame, o.pixel_m) for k, o in orthos.items()}  # one object seen on two pieces of a wall
 
     def run(d: list[Candidate], c: list[Candidate], counts: dict[str, int] | None) -> list[ConsensusHit]:
-        return screened_consensus(d, c, counts, classes, s.consensus, s.confidence, reliefs=reliefs, frames=frames)
+        return screened_consensus(d, c, counts, classes, consensus_settings=s.consensus, settings=s.confidence, reliefs=reliefs, frames=frames)
 
     per_storey = storey_counts(seg, expected, log)
     if per_storey is not None:
