@@ -122,7 +122,8 @@ def test_storey_part_keeps_every_step_th_point_over_all_files(tmp_path, storeys)
     high = np.flatnonzero(z >= bounds[1][0])
     high = high[high % 3 == 0]
     assert got == [len(low), len(high)]
-    a = storey_cloud(tmp_path, parts, 0, cloud.origin, sources=(), limit=(len(low) + 1) // 2)  # thinned: every 2nd
+    a = storey_cloud(tmp_path, parts, 0, cloud.origin, sources=(),
+                     limit=(len(low) + 1) // 2)  # thinned: every 2nd
     np.testing.assert_array_equal(a.xyz, cloud.xyz[low[::2]])
     b = storey_cloud(tmp_path, parts, 1, cloud.origin, sources=(), limit=10**9)
     np.testing.assert_array_equal(b.xyz, cloud.xyz[high])
@@ -146,7 +147,8 @@ def test_detect_scans_reads_each_storey_again_as_alone(tmp_path, storey_files) -
     scratch = tmp_path / "scratch"
     scratch.mkdir()
     with ThreadPoolExecutor(2) as ex:
-        again = _storey_points(ex, parts, [(0, False)] * len(parts), sample.origin, sources=sample.sources, points=total, s=s,
+        again = _storey_points(ex, parts, [(0, False)] * len(parts), sample.origin,
+                               sources=sample.sources, points=total, s=s,
                                scratch=scratch, in_flight=4, log=said.append)
         seg = segment_storeys(find_scan_storeys(sample, s.segmentation), again, s.segmentation)
     assert said and "S1" in said[0] and "(every 1)" in said[0]

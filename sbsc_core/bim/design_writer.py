@@ -128,7 +128,8 @@ def _surface_differences(built: list[_Placed], surfaces: Mapping[str, Surface], 
             return False
         return not any(_overlaps(rect, r, 0.05) for r in occupied[sf.id] if r != skip_rect)
 
-    def placed(o_cls: str, sf: Surface, u: float, v: float, *, w: float, h: float, turn: float = 0.0) -> _Placed:
+    def placed(o_cls: str, sf: Surface, u: float, v: float, *, w: float, h: float,
+               turn: float = 0.0) -> _Placed:
         pos = _surface_point(sf, u, v)
         return _Placed(o_cls, None, u, v, w, h, pos, surface_normal(sf, pos), sf.kind, sf.id, turn)
 

@@ -94,7 +94,8 @@ def illumination_field(ortho: Orthoimage, settings: ColourPrepSettings | None = 
     if k > 1:
         filled = np.stack([ndimage.median_filter(filled[..., ch], size=k, mode="nearest") for ch in range(3)],
                           axis=-1)
-    field = _upsample(filled, ortho.colour.astype(np.float32), ortho.mask, g=g, shape=(h, w), snap=s.snap_tolerance)
+    field = _upsample(filled, ortho.colour.astype(np.float32), ortho.mask, g=g, shape=(h, w),
+                      snap=s.snap_tolerance)
     return field, ref.astype(np.float32)
 
 

@@ -80,8 +80,10 @@ def orthoimage_from_pixels(wall_id: str, frame: WallFrame, pixel: np.ndarray, de
     px = float(s.pixel_m)
     d0, d1 = s.depth_range_m
     shape = ortho_shape(frame, px)
-    images = rasterize_median(pixel, depth, rgb, shape, depth_range=(d0, d1), quantum=s.depth_quantum_m, **layer_options(s))
-    return orthoimage_from_images(wall_id, frame, *images, settings=s, front=front_images(pixel, depth, rgb, shape, s))
+    images = rasterize_median(pixel, depth, rgb, shape, depth_range=(d0, d1),
+                              quantum=s.depth_quantum_m, **layer_options(s))
+    return orthoimage_from_images(wall_id, frame, *images, settings=s,
+                                  front=front_images(pixel, depth, rgb, shape, s))
 
 
 def front_images(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shape: tuple[int, int],

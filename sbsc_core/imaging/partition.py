@@ -568,7 +568,8 @@ def wall_orthoimage(scratch: Path | str, w: int, wall_id: str, frame: WallFrame,
         if band_front is not None:
             bands.append((r0, band_front))
         del pixel, pd, prgb
-    return orthoimage_from_images(wall_id, frame, depth, colour, mask, settings=settings, front=stack_front(bands, (h, width)))
+    return orthoimage_from_images(wall_id, frame, depth, colour, mask, settings=settings,
+                                  front=stack_front(bands, (h, width)))
 
 
 def worker_ready() -> bool:

@@ -120,7 +120,8 @@ def _read_ply(path: Path) -> ScanSource:
         raise InputError(path, f"unsupported PLY colour type '{rgb_kind}'")
     wide = rgb_kind != "u1" and rgb_kind[0] != "f"
     if fmt == "ascii":
-        blocks = _ply_ascii_blocks(path, elements, vi=vi, header_len=header_len, xyz_names=xyz_names, rgb_names=rgb_names, rgb_kind=rgb_kind)
+        blocks = _ply_ascii_blocks(path, elements, vi=vi, header_len=header_len,
+                                   xyz_names=xyz_names, rgb_names=rgb_names, rgb_kind=rgb_kind)
         return ScanSource(path, vertex.count, blocks, wide)
     blocks, records = _ply_binary_blocks(path, fmt, elements, vi=vi, header_len=header_len, xyz_names=xyz_names, rgb_names=rgb_names, rgb_kind=rgb_kind)
     field = station_field([n for n in dict(vertex.props) if n not in (*xyz_names, *rgb_names)])

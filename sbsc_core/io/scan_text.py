@@ -99,7 +99,8 @@ def _read_xyz(path: Path) -> ScanSource:
     def blocks() -> Iterator[RawBlock]:
         with open(path, encoding="latin-1") as fh:
             first, skipped = _next_data_line(fh)
-            yield from _text_blocks(path, itertools.chain([first], fh), usecols, delimiter=delimiter, first_line=skipped, limit=None, counter=[0])
+            yield from _text_blocks(path, itertools.chain([first], fh), usecols,
+                                    delimiter=delimiter, first_line=skipped, limit=None, counter=[0])
 
     return ScanSource(path, None, blocks, True)
 

@@ -165,11 +165,13 @@ def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[
     frames = {k: (o.frame, o.pixel_m) for k, o in orthos.items()}  # one object seen on two pieces of a wall
 
     def run(d: list[Candidate], c: list[Candidate], counts: dict[str, int] | None) -> list[ConsensusHit]:
-        return screened_consensus(d, c, counts, classes, consensus_settings=s.consensus, settings=s.confidence, reliefs=reliefs, frames=frames)
+        return screened_consensus(d, c, counts, classes, consensus_settings=s.consensus,
+                                  settings=s.confidence, reliefs=reliefs, frames=frames)
 
     per_storey = storey_counts(seg, expected, log)
     if per_storey is not None:
-        chosen = consensus_by_storey(depth_c, colour_c, {w.id: w.storey for w in seg.walls}, counts=per_storey, classes=classes, run=run)
+        chosen = consensus_by_storey(depth_c, colour_c, {w.id: w.storey for w in seg.walls},
+                                     counts=per_storey, classes=classes, run=run)
     else:
         chosen = run(depth_c, colour_c, None if expected is None else expected.counts)
     if s.confidence.enabled and s.confidence.report_unknown:  # regions like no class, for review
@@ -291,8 +293,10 @@ def _beyond_walls_in_memory(cloud: PointCloud, seg: Segmentation, library: Model
     executor: Executor = (wall_pool(s) if own else pool) or InlineExecutor()
     try:
         with tempfile.TemporaryDirectory(prefix=".sbsc-surfaces-", dir=os.environ.get("SBSC_SCRATCH_DIR")) as tmp:
-            return _beyond_walls(memory_parts(cloud), np.asarray(cloud.origin, np.float64), seg, levels=levels, columns=columns,
-                                 library=library, expected=expected, s=s, executor=executor, scratch=Path(tmp), parked=None,
+            return _beyond_walls(memory_parts(cloud), np.asarray(cloud.origin, np.float64), seg,
+                                 levels=levels, columns=columns,
+                                 library=library, expected=expected, s=s, executor=executor,
+                                 scratch=Path(tmp), parked=None,
                                  in_flight=2 * max(1, _worker_count(s)), progress=progress, timings=timings,
                                  log=lambda msg: None, part_executor=InlineExecutor())
     finally:
@@ -326,7 +330,8 @@ class _BeyondWalls:
         result.surfaces = self.surfaces
 
 
-def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, levels: list | None, columns: list,
+def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, levels: list | None,
+                  columns: list,
                   library: ModelLibrary, expected: ExpectedCounts | None, s: DetectionSettings,
                   executor: Executor, scratch: Path, parked: Path | None, in_flight: int, progress: Progress,
                   timings: dict[str, float], log: Callable[[str], None],
@@ -337,7 +342,8 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, lev
     if s.ceilings.enabled:  # objects on ceilings: the tiles join the walls in the consensus
         from .surfaces import detect_ceilings
 
-        ceil = detect_ceilings(parts, origin, seg, library=library, expected=counts, s=s, executor=executor, scratch=scratch,
+        ceil = detect_ceilings(parts, origin, seg, library=library, expected=counts, s=s,
+                               executor=executor, scratch=scratch,
                                parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
                                levels=levels, part_executor=part_executor)
         out.walls.update(ceil.walls)
@@ -347,7 +353,8 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, lev
     if columns:  # objects on columns: their faces join the walls in the consensus too
         from .surfaces import detect_columns
 
-        cols = detect_columns(parts, origin, columns, library=library, expected=counts, s=s, executor=executor, scratch=scratch,
+        cols = detect_columns(parts, origin, columns, library=library, expected=counts, s=s,
+                              executor=executor, scratch=scratch,
                               parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
                               part_executor=part_executor)
         out.walls.update(cols.walls)
@@ -359,7 +366,8 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, lev
 
 
 def _storey_points(executor: Executor, parts: Sequence, sample_meta: list[tuple[int, bool]], origin: np.ndarray,
-                   *, sources: Sequence[str], points: int, s: DetectionSettings, scratch: Path, in_flight: int,
+                   *, sources: Sequence[str], points: int, s: DetectionSettings, scratch: Path,
+                   in_flight: int,
                    log: Callable[[str], None]) -> StoreyPoints:
     """The ``storey_points`` of :func:`segment_storeys` for a scan of ``points`` points read out
     of core: one more pass over the parts (:func:`~sbsc_core.scene.storey_samples.storey_part`)
@@ -553,7 +561,8 @@ def detect_scans(
 
         done = _collect_walls(results(), len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
-    beyond = _beyond_walls(parts, origin, seg, levels=levels, columns=found_columns, library=library, expected=expected, s=s, executor=executor,
+    beyond = _beyond_walls(parts, origin, seg, levels=levels, columns=found_columns,
+                           library=library, expected=expected, s=s, executor=executor,
                            scratch=Path(scratch), parked=parked, in_flight=2 * workers, progress=progress,
                            timings=timings, log=log)
     walls.update(beyond.walls)

@@ -189,7 +189,8 @@ def _in_order(ex: Executor, jobs: Iterable[Job], fn: Callable, in_flight: int) -
             nxt += 1
 
 
-def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_jobs: list[Job], job_fn: Callable,
+def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_jobs: list[Job],
+                  job_fn: Callable,
                   surfaces: Sequence, library: ModelLibrary, classes: list[str], s: DetectionSettings,
                   scratch: Path, parked: Path | None, in_flight: int, progress: Progress,
                   part_executor: Executor | None = None,

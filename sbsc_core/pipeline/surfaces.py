@@ -95,7 +95,8 @@ def column_face_job(scratch: str, k: int, face: ColumnFace, *, templates: dict, 
     return face.id, res, t_stage
 
 
-def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray, columns: list[FoundColumn], *, library,
+def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray,
+                   columns: list[FoundColumn], *, library,
                    expected: dict | None, s, executor, scratch: Path, parked: Path, in_flight: int, progress,
                    timings: dict, log, part_executor=None) -> ColumnResults:
     """Bin the columns' points into their faces, then run the walls' stages on every face."""
@@ -110,7 +111,8 @@ def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray, colum
     progress(Stage.COLUMNS, 0.0)
     by_id = {c.id: c for c in columns}
     reach = [max(by_id[f.column].size_m) / 2 * math.sqrt(2) + s.orthoimage.depth_range_m[1] + 0.05 for f in faces]
-    jobs = [dict(part=part, origin=origin, faces=faces, reach_m=reach, scratch=str(scratch), ortho=s.orthoimage)
+    jobs = [dict(part=part, origin=origin, faces=faces, reach_m=reach, scratch=str(scratch),
+                 ortho=s.orthoimage)
             for part in parts]
     kept, results, templates = surface_stage(
         executor, stage=Stage.COLUMNS, part_fn=column_part, part_jobs=jobs, job_fn=column_face_job, surfaces=faces,

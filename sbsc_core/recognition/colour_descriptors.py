@@ -98,7 +98,8 @@ def _kmeans_1d(values: np.ndarray, k: int, merge_tol: float, bins: int = 256,
     cum_w = [0.0] + cw.tolist()
     cum_s = [0.0] + np.cumsum(hist * mids).tolist()
     width, tol = (hi - lo) / bins, 1e-9 * (hi - lo)
-    c = _lloyd3(centres.tolist(), cum_w, cum_s, lo=lo, width=width, tol=tol, bins=bins, iterations=iterations) if k == 3 else \
+    c = _lloyd3(centres.tolist(), cum_w, cum_s, lo=lo, width=width, tol=tol, bins=bins,
+                iterations=iterations) if k == 3 else \
         _lloyd(centres.tolist(), cum_w, cum_s, lo=lo, width=width, tol=tol, bins=bins, iterations=iterations)
     # the classes that hold any bin (a bin goes to the nearest centre, ties to the lower)
     bounds = [0.5 * (q + p) for p, q in zip(c, c[1:], strict=False)]

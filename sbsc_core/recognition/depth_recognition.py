@@ -768,7 +768,8 @@ def match_depth(
                                     gap_px=int(round(settings.part_gap_fraction * min(rot.shape))),
                                     slack_px=settings.template_pad_px) \
                     if settings.part_gap_fraction > 0 else []
-                found.extend(search(cid, deg, rot, rois + [b for b in parts if b not in rois], peak_m=peak, area_px=area))
+                found.extend(search(cid, deg, rot, rois + [b for b in parts if b not in rois],
+                                    peak_m=peak, area_px=area))
 
             def turned(a: float, where: list[Box], *, cid: str = cid, model: np.ndarray = model,
                        peak: float = peak, area: int = area) -> list[Candidate]:

@@ -342,7 +342,8 @@ def _storey_walls(xyz: np.ndarray, sample: np.ndarray, box: DenseBox, floor: flo
     walls: list[tuple[WallFrame, np.ndarray]] = []
     threads = min(_ASSIGN_THREADS, os.cpu_count() or 1) if len(xyz) >= _THREAD_MIN_POINTS else 1
     with ThreadPoolExecutor(max_workers=threads) as pool:  # each wall on its own (numpy releases the GIL)
-        for done in pool.map(lambda job: _final_frame(xyz, job[1], job[0], floor, ceiling, origin=origin, s=s),
+        for done in pool.map(lambda job: _final_frame(xyz, job[1], job[0], floor, ceiling,
+                                                      origin=origin, s=s),
                              zip(segs, index, strict=True)):
             if done is not None and done[0].width_m >= s.min_wall_length_m:
                 walls.append(done)

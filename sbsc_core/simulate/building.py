@@ -188,7 +188,8 @@ def add_distractors(scene: SceneDescription, layout: Layout, stations: np.ndarra
 
 
 def add_surface_objects(scene: SceneDescription, layout: Layout, stations: np.ndarray,
-                        object_builder: ObjectBuilder, *, parts: list[ColouredMesh], objects: list[PlacedObject],
+                        object_builder: ObjectBuilder, *, parts: list[ColouredMesh],
+                        objects: list[PlacedObject],
                         ceilings: dict[str, float] | None = None) -> tuple[list, list]:
     """Columns and objects on ceilings and columns (the scene's options; :mod:`surfaces`).
 

@@ -191,7 +191,8 @@ def place_furniture(scene: SceneDescription, layout: Layout, stations: np.ndarra
     return placed
 
 
-def _furniture_blocked(layout: Layout, wall: str, box, h: float, *, scene: SceneDescription, kind: str) -> bool:
+def _furniture_blocked(layout: Layout, wall: str, box, h: float, *, scene: SceneDescription,
+                       kind: str) -> bool:
     fr = layout.walls[wall].frame
     if box[0] < 0.02 or box[1] > fr.width_m - 0.02:
         return True
@@ -240,7 +241,8 @@ def _print(w: float, h: float, rng: np.random.Generator, background=None) -> np.
         else:
             p.circle((x0, y0), rng.uniform(0.02, min(w, h) / 4), col)
     if rng.random() < 0.6:
-        p.text_lines(w * 0.1, h * 0.75, w * 0.9, int(rng.integers(2, 5)), pitch_m=0.02, height_m=0.01, colour=(20, 20, 20),
+        p.text_lines(w * 0.1, h * 0.75, w * 0.9, int(rng.integers(2, 5)), pitch_m=0.02,
+                     height_m=0.01, colour=(20, 20, 20),
                      seed=int(rng.integers(1 << 30)))
     return p.img
 
@@ -249,8 +251,10 @@ def _picture(d: Distractor, rng) -> ColouredMesh:
     w, h, t = d.width_m, d.height_m, d.depth_m
     b = float(rng.uniform(0.02, 0.04))
     frame_col = [(30, 30, 30), (150, 110, 70), (190, 190, 195), (235, 235, 230)][int(rng.integers(4))]
-    parts = [_span(-w / 2, w / 2, -h / 2, -h / 2 + b, z0=0, z1=t, colour=frame_col), _span(-w / 2, w / 2, h / 2 - b, h / 2, z0=0, z1=t, colour=frame_col),
-             _span(-w / 2, -w / 2 + b, -h / 2, h / 2, z0=0, z1=t, colour=frame_col), _span(w / 2 - b, w / 2, -h / 2, h / 2, z0=0, z1=t, colour=frame_col),
+    parts = [_span(-w / 2, w / 2, -h / 2, -h / 2 + b, z0=0, z1=t, colour=frame_col),
+             _span(-w / 2, w / 2, h / 2 - b, h / 2, z0=0, z1=t, colour=frame_col),
+             _span(-w / 2, -w / 2 + b, -h / 2, h / 2, z0=0, z1=t, colour=frame_col),
+             _span(w / 2 - b, w / 2, -h / 2, h / 2, z0=0, z1=t, colour=frame_col),
              _span(-w / 2 + b, w / 2 - b, -h / 2 + b, h / 2 - b, z0=0, z1=t - 0.008, colour=(240, 240, 240))]
     parts.append(_front(_print(w - 2 * b, h - 2 * b, rng), w - 2 * b, h - 2 * b, t - 0.008 + 1e-4))
     return M.merge(parts)
@@ -273,7 +277,8 @@ def _notice_board(d: Distractor, rng) -> ColouredMesh:
         p.rect(x0, y0, x0 + 0.21, y0 + 0.297 * rng.uniform(0.5, 1.0), col)
         p.text_lines(x0 + 0.02, y0 + 0.03, x0 + 0.19, 4, pitch_m=0.02, height_m=0.008, colour=(40, 40, 40),
                      seed=int(rng.integers(1 << 30)))
-    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t - 0.0005, colour=(176, 134, 92)), _front(p.img, w, h, t)])
+    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t - 0.0005, colour=(176, 134, 92)),
+                    _front(p.img, w, h, t)])
 
 
 def _whiteboard(d: Distractor, rng) -> ColouredMesh:
@@ -283,9 +288,11 @@ def _whiteboard(d: Distractor, rng) -> ColouredMesh:
         p.rect(*edge, (190, 192, 196))
     if rng.random() < 0.7:  # some writing left on it
         p.text_lines(0.1, 0.1, w * 0.6, int(rng.integers(2, 6)), pitch_m=0.06, height_m=0.03,
-                     colour=[(30, 60, 160), (20, 20, 20), (180, 30, 30)][int(rng.integers(3))], seed=int(rng.integers(1 << 30)))
+                     colour=[(30, 60, 160), (20, 20, 20), (180, 30, 30)][int(rng.integers(3))],
+                     seed=int(rng.integers(1 << 30)))
     tray = _span(-w / 2 + 0.1, w / 2 - 0.1, -h / 2 - 0.03, -h / 2, z0=0, z1=0.06, colour=(190, 192, 196))
-    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t - 0.0005, colour=(246, 247, 247)), _front(p.img, w, h, t), tray])
+    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t - 0.0005,
+                          colour=(246, 247, 247)), _front(p.img, w, h, t), tray])
 
 
 def _clock(d: Distractor, rng) -> ColouredMesh:
@@ -313,7 +320,8 @@ def _thermostat(d: Distractor, rng) -> ColouredMesh:
     p.round_rect(w * 0.2, h * 0.2, w * 0.8, h * 0.45, 0.003, colour=(60, 70, 75))  # display
     p.text(f"{rng.integers(18, 24)}.{rng.integers(0, 10)}", w * 0.25, h * 0.4, h * 0.12, (170, 220, 200))
     p.circle((w * 0.5, h * 0.72), min(w, h) * 0.12, (205, 205, 200))
-    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t - 0.0005, colour=col), _front(p.img, w, h, t)])
+    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t - 0.0005, colour=col),
+                    _front(p.img, w, h, t)])
 
 
 def _room_controller(d: Distractor, rng) -> ColouredMesh:
@@ -323,14 +331,16 @@ def _room_controller(d: Distractor, rng) -> ColouredMesh:
     p.circle((w / 2, h / 2), w * 0.32, (215, 215, 210), width_m=0.004)  # a dial ring
     p.circle((w / 2, h * 0.2), 0.002, (40, 160, 60))  # status LED
     dial = M.cylinder(w * 0.3, 0.008, (232, 232, 228), segments=24, centre=(0, 0, t + 0.004), axis=2)
-    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t - 0.0005, colour=col), _front(p.img, w, h, t), dial])
+    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t - 0.0005, colour=col),
+                    _front(p.img, w, h, t), dial])
 
 
 def _trunking(d: Distractor, rng) -> ColouredMesh:
     w, h, t = d.width_m, d.height_m, d.depth_m
     col = (236, 236, 232)
     return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t, colour=col),
-                    _span(-w / 2, w / 2, -0.001, 0.001, z0=t, z1=t + 0.001, colour=(215, 215, 210))])  # cover seam
+                    _span(-w / 2, w / 2, -0.001, 0.001, z0=t, z1=t + 0.001,
+                          colour=(215, 215, 210))])  # cover seam
 
 
 def _coat_hooks(d: Distractor, rng) -> ColouredMesh:
@@ -345,8 +355,10 @@ def _coat_hooks(d: Distractor, rng) -> ColouredMesh:
 
 
 def _door_stop(d: Distractor, rng) -> ColouredMesh:
-    return M.merge([M.cylinder(0.02, d.depth_m - 0.015, (120, 120, 125), segments=16, centre=(0, 0, (d.depth_m - 0.015) / 2), axis=2),
-                    M.cylinder(0.018, 0.015, (35, 35, 35), segments=16, centre=(0, 0, d.depth_m - 0.0075), axis=2)])
+    return M.merge([M.cylinder(0.02, d.depth_m - 0.015, (120, 120, 125), segments=16,
+                               centre=(0, 0, (d.depth_m - 0.015) / 2), axis=2),
+                    M.cylinder(0.018, 0.015, (35, 35, 35), segments=16,
+                               centre=(0, 0, d.depth_m - 0.0075), axis=2)])
 
 
 def _furniture_colour(rng) -> tuple[int, int, int]:
@@ -360,8 +372,10 @@ def _desk(d: Distractor, rng) -> ColouredMesh:
     parts = [_span(-w / 2, w / 2, h / 2 - 0.03, h / 2, z0=0, z1=dd, colour=top)]
     for x in (-w / 2 + 0.03, w / 2 - 0.03):
         for z in (0.03, dd - 0.03):
-            parts.append(_span(x - 0.025, x + 0.025, y0, h / 2 - 0.03, z0=z - 0.025, z1=z + 0.025, colour=leg))
-    parts.append(_span(-w / 2 + 0.06, w / 2 - 0.06, h / 2 - 0.35, h / 2 - 0.03, z0=0.02, z1=0.035, colour=top))  # modesty panel
+            parts.append(_span(x - 0.025, x + 0.025, y0, h / 2 - 0.03, z0=z - 0.025, z1=z + 0.025,
+                               colour=leg))
+    parts.append(_span(-w / 2 + 0.06, w / 2 - 0.06, h / 2 - 0.35, h / 2 - 0.03, z0=0.02, z1=0.035,
+                       colour=top))  # modesty panel
     if rng.random() < 0.5:  # a drawer unit under one side
         x = w / 2 - 0.26 if rng.random() < 0.5 else -w / 2 + 0.26
         parts.append(_span(x - 0.2, x + 0.2, y0, y0 + 0.6, z0=0.05, z1=dd - 0.05, colour=top))
@@ -374,7 +388,8 @@ def _cabinet(d: Distractor, rng) -> ColouredMesh:
     parts = [_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=dd, colour=col),
              _span(-0.002, 0.002, -h / 2 + 0.05, h / 2 - 0.02, z0=dd, z1=dd + 0.002, colour=(70, 70, 70))]
     for x in (-0.04, 0.04):
-        parts.append(_span(x - 0.006, x + 0.006, h / 2 - 0.25, h / 2 - 0.1, z0=dd, z1=dd + 0.025, colour=(180, 180, 185)))
+        parts.append(_span(x - 0.006, x + 0.006, h / 2 - 0.25, h / 2 - 0.1, z0=dd, z1=dd + 0.025,
+                           colour=(180, 180, 185)))
     return M.merge(parts)
 
 
@@ -382,7 +397,8 @@ def _shelf(d: Distractor, rng) -> ColouredMesh:
     w, h, dd = d.width_m, d.height_m, d.depth_m
     col = _furniture_colour(rng)
     t = 0.018
-    parts = [_span(-w / 2, -w / 2 + t, -h / 2, h / 2, z0=0, z1=dd, colour=col), _span(w / 2 - t, w / 2, -h / 2, h / 2, z0=0, z1=dd, colour=col)]
+    parts = [_span(-w / 2, -w / 2 + t, -h / 2, h / 2, z0=0, z1=dd, colour=col),
+             _span(w / 2 - t, w / 2, -h / 2, h / 2, z0=0, z1=dd, colour=col)]
     n = 5
     for k in range(n):
         y = -h / 2 + k * (h - t) / (n - 1)
@@ -404,10 +420,12 @@ def _chair(d: Distractor, rng) -> ColouredMesh:
     y0 = -h / 2
     seat = y0 + 0.45
     parts = [_span(-w / 2, w / 2, seat - 0.03, seat, z0=0.0, z1=dd, colour=col),
-             _span(-w / 2, w / 2, seat + 0.15, h / 2, z0=0.0, z1=0.03, colour=col)]  # back rest towards the wall
+             _span(-w / 2, w / 2, seat + 0.15, h / 2, z0=0.0, z1=0.03,
+                   colour=col)]  # back rest towards the wall
     for x in (-w / 2 + 0.02, w / 2 - 0.02):
         for z in (0.02, dd - 0.02):
-            parts.append(_span(x - 0.012, x + 0.012, y0, seat - 0.03, z0=z - 0.012, z1=z + 0.012, colour=metal))
+            parts.append(_span(x - 0.012, x + 0.012, y0, seat - 0.03, z0=z - 0.012, z1=z + 0.012,
+                               colour=metal))
         parts.append(_span(x - 0.012, x + 0.012, seat, seat + 0.15, z0=0.005, z1=0.029, colour=metal))
     return M.merge(parts)
 

@@ -332,9 +332,11 @@ def _radiator() -> ColouredMesh:
         parts.append(element)
     for y in (-hh + 0.05, hh - 0.05):
         # headers run through all elements; their end plugs reach the footprint's sides
-        parts.append(cylinder(0.020, spec.width_m, (228, 228, 222), segments=20, centre=(0, y, 0.052), axis=0))
+        parts.append(cylinder(0.020, spec.width_m, (228, 228, 222), segments=20,
+                              centre=(0, y, 0.052), axis=0))
     for x in (-0.6 * hw, 0.6 * hw):
-        parts.append(_box_span(x - 0.015, x + 0.015, hh - 0.09, hh - 0.04, z0=0.0, z1=0.034, colour=(120, 120, 118)))
+        parts.append(_box_span(x - 0.015, x + 0.015, hh - 0.09, hh - 0.04, z0=0.0, z1=0.034,
+                               colour=(120, 120, 118)))
     return merge(parts)
 
 
@@ -389,7 +391,8 @@ def _electrical_panel() -> ColouredMesh:
     # lock / handle on the door's right edge (matches the texture's lock plate)
     lx = -dw + 0.95 * 2 * dw
     ly = dh - 0.50 * 2 * dh
-    handle = _box_span(lx - 0.008, lx + 0.008, ly - 0.045, ly + 0.045, z0=d - 0.003, z1=d, colour=(90, 92, 94))
+    handle = _box_span(lx - 0.008, lx + 0.008, ly - 0.045, ly + 0.045, z0=d - 0.003, z1=d,
+                       colour=(90, 92, 94))
     return merge([body, door, handle])
 
 

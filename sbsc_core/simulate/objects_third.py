@@ -44,7 +44,8 @@ EPS = 0.0004
 SIGN_SIDE_M = 0.20
 
 
-def _span(x0: float, x1: float, y0: float, y1: float, *, z0: float, z1: float, colour: Colour) -> ColouredMesh:
+def _span(x0: float, x1: float, y0: float, y1: float, *, z0: float, z1: float,
+          colour: Colour) -> ColouredMesh:
     return box((x1 - x0, y1 - y0, z1 - z0), colour, ((x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2))
 
 
@@ -72,12 +73,14 @@ def _sockets(n: int) -> Callable[[], ColouredMesh]:
     def build() -> ColouredMesh:
         spec = CATALOGUE[f"socket_x{n}"]
         w, h, d = spec.width_m, spec.height_m, spec.depth_m
-        parts = [_span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d * 0.35, colour=(214, 206, 186))]  # mounting frame
+        parts = [_span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d * 0.35,
+                       colour=(214, 206, 186))]  # mounting frame
         pitch = w / n
         side = min(pitch - 0.006, h - 0.006)
         for k in range(n):
             x = -w / 2 + (k + 0.5) * pitch
-            parts.append(_span(x - side / 2, x + side / 2, -side / 2, side / 2, z0=d * 0.35, z1=d, colour=IVORY))
+            parts.append(_span(x - side / 2, x + side / 2, -side / 2, side / 2, z0=d * 0.35, z1=d,
+                               colour=IVORY))
             # rounded-square recess as a sunken inner block (darker floor)
             r = side * 0.34
             parts.append(_span(x - r, x + r, -r, r, z0=d * 0.35, z1=d - 0.004, colour=(190, 182, 164)))
@@ -94,7 +97,8 @@ def _builtin_socket() -> ColouredMesh:
         p.rect(k / 1000, 0, k / 1000 + 0.0004, h, (158, 160, 162))
     p.round_rect(w * 0.15, h * 0.15, w * 0.85, h * 0.85, 0.01, colour=(120, 122, 126))  # flip lid seam
     p.rect(w * 0.4, h * 0.78, w * 0.6, h * 0.83, (70, 70, 72))  # finger slot
-    return merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d, colour=STAINLESS), _front(w, h, d + EPS, p.img)])
+    return merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d, colour=STAINLESS),
+                  _front(w, h, d + EPS, p.img)])
 
 
 def _switch() -> ColouredMesh:
@@ -102,7 +106,8 @@ def _switch() -> ColouredMesh:
     w, h, d = spec.width_m, spec.height_m, spec.depth_m
     plate = _span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d * 0.6, colour=ANTHRACITE)
     b = 0.026
-    buttons = [_span(x - b / 2, x + b / 2, -b, b, z0=d * 0.6, z1=d, colour=(86, 88, 92)) for x in (-0.016, 0.016)]
+    buttons = [_span(x - b / 2, x + b / 2, -b, b, z0=d * 0.6, z1=d,
+                     colour=(86, 88, 92)) for x in (-0.016, 0.016)]
     p = pic.Painter.new(b, 2 * b, (86, 88, 92))
     p.circle((b / 2, 0.3 * b), 0.0015, (230, 160, 40))  # orientation LED
     leds = [_front(b, 2 * b, d + EPS, p.img, (x, 0.0)) for x in (-0.016, 0.016)]
@@ -129,7 +134,8 @@ def _electrical_panel() -> ColouredMesh:
     spec = CATALOGUE["electrical_panel"]
     w, h, d = spec.width_m, spec.height_m, spec.depth_m
     body = _span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d - 0.006, colour=RAL_7035)
-    door = _span(-w / 2 + 0.004, w / 2 - 0.004, -h / 2 + 0.004, h / 2 - 0.004, z0=d - 0.006, z1=d - 0.002, colour=RAL_7035)
+    door = _span(-w / 2 + 0.004, w / 2 - 0.004, -h / 2 + 0.004, h / 2 - 0.004, z0=d - 0.006,
+                 z1=d - 0.002, colour=RAL_7035)
     handle = _span(-w / 2 + 0.016, -w / 2 + 0.028, -0.04, 0.04, z0=d - 0.002, z1=d, colour=(40, 40, 42))
     return merge([body, door, handle, _front(w - 0.008, h - 0.008, d - 0.002 + EPS, _panel_front(w - 0.008, h - 0.008))])
 
@@ -144,11 +150,16 @@ def _fire_extinguisher() -> ColouredMesh:
     y0 = -h / 2
     parts = [cylinder(r, body_h, CO2_RED, segments=28, centre=(0.02, y0 + body_h / 2, zc), axis=1),
              cylinder(r * 0.55, 0.04, CO2_RED, segments=20, centre=(0.02, y0 + body_h + 0.02, zc), axis=1),
-             _span(0.0, 0.04, y0 + body_h + 0.04, y0 + body_h + 0.1, z0=zc - 0.02, z1=zc + 0.02, colour=(150, 150, 152)),
-             _span(0.04, 0.09, y0 + body_h + 0.085, y0 + body_h + 0.1, z0=zc - 0.01, z1=zc + 0.01, colour=BLACK),  # lever
-             _span(-w / 2, -w / 2 + 0.035, y0 + 0.12, y0 + body_h * 0.7, z0=zc - 0.02, z1=zc + 0.02, colour=BLACK),  # horn
-             _span(-0.06, 0.1, y0 + body_h * 0.75, y0 + body_h * 0.78, z0=0.0, z1=zc + 0.002, colour=(40, 40, 40)),  # strap
-             _span(-0.03, 0.07, y0 + body_h * 0.55, y0 + body_h * 0.8, z0=0.0, z1=0.03, colour=(60, 60, 62))]  # bracket
+             _span(0.0, 0.04, y0 + body_h + 0.04, y0 + body_h + 0.1, z0=zc - 0.02, z1=zc + 0.02,
+                   colour=(150, 150, 152)),
+             _span(0.04, 0.09, y0 + body_h + 0.085, y0 + body_h + 0.1, z0=zc - 0.01, z1=zc + 0.01,
+                   colour=BLACK),  # lever
+             _span(-w / 2, -w / 2 + 0.035, y0 + 0.12, y0 + body_h * 0.7, z0=zc - 0.02, z1=zc + 0.02,
+                   colour=BLACK),  # horn
+             _span(-0.06, 0.1, y0 + body_h * 0.75, y0 + body_h * 0.78, z0=0.0, z1=zc + 0.002,
+                   colour=(40, 40, 40)),  # strap
+             _span(-0.03, 0.07, y0 + body_h * 0.55, y0 + body_h * 0.8, z0=0.0, z1=0.03,
+                   colour=(60, 60, 62))]  # bracket
     p = pic.Painter.new(0.09, body_h * 0.3, WHITE)
     p.text("CO2", 0.045, body_h * 0.08, 0.02, BLACK)
     p.text_lines(0.01, body_h * 0.14, 0.08, 5, pitch_m=0.012, height_m=0.005, colour=BLACK, seed=3)
@@ -160,13 +171,16 @@ def _radiator() -> ColouredMesh:
     """A designer radiator of horizontal flat tubes on two vertical collectors, anthracite."""
     spec = CATALOGUE["radiator"]
     w, h, d = spec.width_m, spec.height_m, spec.depth_m
-    parts = [_span(x - 0.025, x + 0.025, -h / 2, h / 2, z0=0.02, z1=d - 0.01, colour=ANTHRACITE) for x in (-w / 2 + 0.025, w / 2 - 0.025)]
+    parts = [_span(x - 0.025, x + 0.025, -h / 2, h / 2, z0=0.02, z1=d - 0.01,
+                   colour=ANTHRACITE) for x in (-w / 2 + 0.025, w / 2 - 0.025)]
     n = 12
     pitch = h / n
     for k in range(n):
         y = -h / 2 + (k + 0.5) * pitch
-        parts.append(_span(-w / 2 + 0.05, w / 2 - 0.05, y - pitch * 0.3, y + pitch * 0.3, z0=0.04, z1=d, colour=ANTHRACITE))
-    parts += [_span(x - 0.01, x + 0.01, -0.02, 0.02, z0=0.0, z1=0.02, colour=(50, 50, 52)) for x in (-w / 3, w / 3)]
+        parts.append(_span(-w / 2 + 0.05, w / 2 - 0.05, y - pitch * 0.3, y + pitch * 0.3, z0=0.04,
+                           z1=d, colour=ANTHRACITE))
+    parts += [_span(x - 0.01, x + 0.01, -0.02, 0.02, z0=0.0, z1=0.02,
+                    colour=(50, 50, 52)) for x in (-w / 3, w / 3)]
     return merge(parts)
 
 
@@ -187,7 +201,8 @@ def _smoke_detector() -> ColouredMesh:
     spec = CATALOGUE["smoke_detector"]
     w, h, d = spec.width_m, spec.height_m, spec.depth_m
     base = _span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d * 0.5, colour=(236, 236, 232))
-    top = _span(-w / 2 + 0.012, w / 2 - 0.012, -h / 2 + 0.012, h / 2 - 0.012, z0=d * 0.5, z1=d, colour=(236, 236, 232))
+    top = _span(-w / 2 + 0.012, w / 2 - 0.012, -h / 2 + 0.012, h / 2 - 0.012, z0=d * 0.5, z1=d,
+                colour=(236, 236, 232))
     p = pic.Painter.new(w - 0.024, h - 0.024, (236, 236, 232))
     for k in range(5):  # slot vents
         y = 0.012 + k * 0.016
@@ -202,7 +217,8 @@ def _exit_light() -> ColouredMesh:
     w, h, d = spec.width_m, spec.height_m, spec.depth_m
     base = _span(-w / 2, w / 2, h / 2 - 0.03, h / 2, z0=0.0, z1=d, colour=(200, 202, 206))
     pw, ph = w * 0.9, h - 0.035
-    panel = _span(-pw / 2, pw / 2, -h / 2, h / 2 - 0.03, z0=d / 2 - 0.004, z1=d / 2 + 0.004, colour=(236, 242, 238))
+    panel = _span(-pw / 2, pw / 2, -h / 2, h / 2 - 0.03, z0=d / 2 - 0.004, z1=d / 2 + 0.004,
+                  colour=(236, 242, 238))
     p = pic.Painter.new(pw, ph, (236, 242, 238))
     p.rect(0.01, 0.01, pw - 0.01, ph - 0.01, pic.SAFETY_GREEN)
     pic.running_man(p, pw * 0.58, 0.015, ph - 0.03, colour=WHITE)
@@ -244,7 +260,8 @@ def _sign(class_id: str, draw: Callable[[float], np.ndarray]) -> Callable[[], Co
     def build() -> ColouredMesh:
         d = CATALOGUE[class_id].depth_m
         s = SIGN_SIDE_M
-        return merge([_span(-s / 2, s / 2, -s / 2, s / 2, z0=0.0, z1=d, colour=SIGN_RED), _front(s, s, d + EPS, draw(s))])
+        return merge([_span(-s / 2, s / 2, -s / 2, s / 2, z0=0.0, z1=d, colour=SIGN_RED),
+                      _front(s, s, d + EPS, draw(s))])
     return build
 
 

@@ -336,7 +336,8 @@ def call_point_front(width_m: float = 0.10, height_m: float = 0.10,
                      [cx + 0.14 * win, cy - 0.02 * win], [cx + 0.14 * win, cy + 0.16 * win],
                      [cx - 0.14 * win, cy + 0.16 * win]]), BLACK)
     p.poly(flame_outline(cx, cy + 0.13 * win, 0.13 * win, 0.20 * win), (238, 240, 238))
-    p.text_lines(x0 + 0.12 * win, y0 + 0.78 * win, x0 + 0.88 * win, 2, pitch_m=0.08 * win, height_m=0.035 * win,
+    p.text_lines(x0 + 0.12 * win, y0 + 0.78 * win, x0 + 0.88 * win, 2, pitch_m=0.08 * win,
+                 height_m=0.035 * win,
                  colour=(40, 40, 40), seed=5)
     # key slot and test hole under the window
     p.rect(w / 2 - 0.05 * w, 0.86 * h, w / 2 + 0.05 * w, 0.89 * h, BLACK)

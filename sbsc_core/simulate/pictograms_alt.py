@@ -171,7 +171,8 @@ def call_point_front(width_m: float = 0.10, height_m: float = 0.10,
     p.poly(np.array([[cx - 0.11 * win, cy], [cx, cy - 0.11 * win], [cx + 0.11 * win, cy],
                      [cx + 0.11 * win, cy + 0.12 * win], [cx - 0.11 * win, cy + 0.12 * win]]), BLACK)
     p.poly(flame_outline(cx, cy + 0.10 * win, 0.10 * win, 0.15 * win), (244, 244, 240))
-    p.text_lines(x0 + 0.50 * win, y0 + 0.70 * win, x0 + 0.92 * win, 3, pitch_m=0.07 * win, height_m=0.03 * win,
+    p.text_lines(x0 + 0.50 * win, y0 + 0.70 * win, x0 + 0.92 * win, 3, pitch_m=0.07 * win,
+                 height_m=0.03 * win,
                  colour=(50, 50, 50), seed=9)
     p.circle((0.06 * w, 0.50 * h), 0.012 * w, BLACK)  # test key hole in the side border
     return p.img

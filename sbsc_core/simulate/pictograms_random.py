@@ -94,7 +94,8 @@ def _extras(p: Painter, rect: tuple[float, float, float, float], style: PrintSty
     pitch = 1.8 * bar
     top = (y0 + y1) / 2 - (rows * pitch - 0.8 * bar) / 2
     if x1 - 0.06 * w - tx0 > 2 * bar:
-        p.text_lines(tx0, top, x1 - 0.06 * w, rows, pitch_m=pitch, height_m=bar, colour=style.ink, seed=style.bars_seed)
+        p.text_lines(tx0, top, x1 - 0.06 * w, rows, pitch_m=pitch, height_m=bar, colour=style.ink,
+                     seed=style.bars_seed)
 
 
 def _arrow(p: Painter, cx: float, cy: float, size: float, *, direction: int, ink: RGB) -> None:
@@ -169,7 +170,8 @@ def _exit(p: Painter, x0: float, y0: float, size: float, style: PrintStyle) -> N
 _GLYPH = {"extinguisher": _extinguisher, "call_point": _call_point, "exit": _exit}
 
 
-def panel_front(width_m: float, height_m: float, *, door: RGB, rows: int, window: bool, label_seed: int) -> np.ndarray:
+def panel_front(width_m: float, height_m: float, *, door: RGB, rows: int, window: bool,
+                label_seed: int) -> np.ndarray:
     """A distribution board's door: smoked windows onto ``rows`` breaker rows (or a plain
     door with a label) and a small label."""
     p = Painter.new(width_m, height_m, door)
@@ -185,5 +187,6 @@ def panel_front(width_m: float, height_m: float, *, door: RGB, rows: int, window
                 colour = (40, 90, 170) if (i + k) % 6 == 0 else (232, 232, 226)
                 p.rect(x, y + 0.15 * pitch, x + 0.6 * 0.78 * w / n, y + 0.6 * pitch, colour)
     p.rect(0.35 * w, 0.88 * h, 0.65 * w, 0.94 * h, (250, 250, 246))
-    p.text_lines(0.37 * w, 0.895 * h, 0.63 * w, 1, pitch_m=0.02, height_m=0.025 * h, colour=pg.BLACK, seed=label_seed)
+    p.text_lines(0.37 * w, 0.895 * h, 0.63 * w, 1, pitch_m=0.02, height_m=0.025 * h,
+                 colour=pg.BLACK, seed=label_seed)
     return p.img

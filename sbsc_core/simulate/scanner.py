@@ -186,7 +186,8 @@ def scan_station(rc: MeshRaycaster, origin: np.ndarray, settings: ScannerSetting
             g_eff = np.random.default_rng([int(seed), int(station), a0, 0xE1])
             grid = (len(a), len(el))
             mt, mrgb, _ = mix_edges(t.reshape(grid), surface.reshape(*grid, 3), dirs.reshape(*grid, 3),
-                                    hits.normal.reshape(*grid, 3), math.radians(s.angular_step_deg), e=e, rng=g_eff)
+                                    hits.normal.reshape(*grid, 3), math.radians(s.angular_step_deg),
+                                    e=e, rng=g_eff)
             t, surface = mt.ravel(), mrgb.reshape(-1, 3)
         keep = np.isfinite(t) & (t >= s.min_range_m) & (t <= s.max_range_m)
         keep &= np.abs(cos_inc) >= s.grazing_cos

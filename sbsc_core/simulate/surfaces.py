@@ -175,7 +175,8 @@ def _plan_ceilings(scene: SceneDescription, layout: Layout, stations: np.ndarray
                 for y in axis_positions(y0, y1, SMOKE_SPACING_M, CEILING_MARGIN_M + 0.5):
                     xy = _away_from_stations(np.array([x, y]), stations, room, (x0, y0, x1, y1), plan.columns)
                     if xy is not None:
-                        _try_ceiling(plan, taken, room, frame, class_id="smoke_detector", xy=xy, rotation_deg=0.0, specs=scene.specs)
+                        _try_ceiling(plan, taken, room, frame, class_id="smoke_detector", xy=xy,
+                                     rotation_deg=0.0, specs=scene.specs)
     doors = [o for o in layout.openings if o.kind == "door"]
     n_doors: dict[str, int] = {}
     for o in doors:
@@ -194,7 +195,8 @@ def _plan_ceilings(scene: SceneDescription, layout: Layout, stations: np.ndarray
         fr = wall.frame
         centre = fr.to_world((o.u_min + o.u_max) / 2, 0.0, EXIT_OFFSET_M)[:2]
         turn = math.degrees(math.atan2(-fr.axis_u[1], fr.axis_u[0]))  # wall's u in the ceiling's (u, v)
-        _try_ceiling(plan, taken, rooms[wall.room], frames[wall.room], class_id="exit_light", xy=centre, rotation_deg=round(turn, 6),
+        _try_ceiling(plan, taken, rooms[wall.room], frames[wall.room], class_id="exit_light",
+                     xy=centre, rotation_deg=round(turn, 6),
                      specs=scene.specs)
 
 

@@ -276,7 +276,8 @@ def cut(label: str, class_id: str, s: Surface, *, u: float, v: float, width_m: f
         rho: float | None = None) -> Example:
     """The example's crops over its footprint; InputError when it leaves the surface or is not scanned."""
     depth = s.depth()
-    win: Window | None = footprint(depth.shape, s.frame.height_m, s.pixel_m, u=u, v=v, width_m=width_m, height_m=height_m)
+    win: Window | None = footprint(depth.shape, s.frame.height_m, s.pixel_m, u=u, v=v,
+                                   width_m=width_m, height_m=height_m)
     if win is None:
         raise InputError(label, f"off the surface: its {width_m:.2f} x {height_m:.2f} m footprint at "
                                 f"u={u:.2f}, v={v:.2f} leaves {s.kind} {s.id}")

@@ -285,7 +285,8 @@ def learn_library(detect_out: Path, reviewed: Path, models: Path, out: Path, *,
                 rho = None
                 if tmodels:
                     su, sv, rho = snap_known(s, tmodels, u, v)
-                    if not given and trust_snap(s, u, v, su=su, sv=sv, rho=rho, width_m=m.width_m, height_m=m.height_m, min_rho=min_rho):
+                    if not given and trust_snap(s, u, v, su=su, sv=sv, rho=rho, width_m=m.width_m,
+                                                height_m=m.height_m, min_rho=min_rho):
                         u, v = su, sv
                 examples.append(cut(lab, cid, s, u=u, v=v, width_m=m.width_m, height_m=m.height_m, rho=rho))
             rho = _median([e.rho if e.rho is not None else 0.0 for e in examples]) if tmodels else None
