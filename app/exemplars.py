@@ -89,8 +89,8 @@ def build_exemplar_library(s: Session, project: Project, data_dir: Path, source_
         colour, depth = image(wall, "colour"), image(wall, "depth")
         if colour is None:
             continue
-        win = footprint(colour.shape, wall.height_m, wall.pixel_m, d.u, d.v,
-                        float(meta["width_m"]), float(meta["height_m"]))
+        win = footprint(colour.shape, wall.height_m, wall.pixel_m, u=d.u, v=d.v,
+                        width_m=float(meta["width_m"]), height_m=float(meta["height_m"]))
         if win is None:
             continue
         r0, c0, r1, c1 = win

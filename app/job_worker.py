@@ -25,7 +25,8 @@ from .db import Database
 from .failures import reason as failure_reason
 from .job_processes import _watch_parent, log
 from .job_progress import JobAbandoned, ProgressWriter
-from .models import Job, ModelLibraryRow, Project, Scan, utcnow
+from .libraries import models_dir
+from .models import Job, Project, Scan, utcnow
 from .results import import_results
 
 
@@ -81,8 +82,7 @@ def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
             return
         scans = [settings.data_dir / p for p in s.scalars(
             select(Scan.path).where(Scan.project_id == job.project_id).order_by(Scan.id))]
-        models_rel = s.scalar(select(ModelLibraryRow.path).where(ModelLibraryRow.id == job.models_id)) \
-            if job.models_id else None
+        models = models_dir(s, job.models_id, settings.data_dir)
         expected = runner_expected(dict(job.expected) if job.expected else None, job.expected_storeys)
         out = settings.data_dir / job.out_dir
         project_id = job.project_id
@@ -103,9 +103,6 @@ def _run(db: Database, settings: AppSettings, job_id: int, owner: str) -> None:
             progress("starting", 1.0, force=True)
             if not scans:
                 raise InputError("project", "no scan uploaded yet")
-            from sbsc_core.paths import bundled_models_dir
-
-            models = settings.data_dir / models_rel if models_rel else bundled_models_dir()
             say(f"job {job_id}: {len(scans)} scan(s), models {models.name}")
             admin(f"job {job_id}: scans {[str(p) for p in scans]}, models {models}, pid {os.getpid()}")
             runner = load_runner(settings.job_runner)

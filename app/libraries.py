@@ -47,7 +47,9 @@ def library_classes(s: Session, models_id: int | None) -> dict:
 
 
 def models_dir(s: Session, models_id: int | None, data_dir: Path) -> Path:
-    """The model library directory (contract 2) a job used."""
+    """The model library directory (contract 2) a job used: the uploaded library's folder under
+    ``data_dir``, or the bundled one (no library, or its row is gone). The one place the app
+    resolves it (the job worker, the 3D scene, the exports and the review API ask here)."""
     from sbsc_core.paths import bundled_models_dir
 
     row = s.get(ModelLibraryRow, models_id) if models_id is not None else None

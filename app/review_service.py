@@ -288,7 +288,7 @@ def _snap(s: Session, job: Job, wall: WallRow, class_id: str, where: Snap, data_
     tpl = depth_template(models_dir(s, job.models_id, data_dir) / class_id, wall.pixel_m)
     if tpl is None:
         return where
-    return snap_to_relief(depth, wall.pixel_m, wall.height_m, tpl, where.u, where.v)
+    return snap_to_relief(depth, wall.pixel_m, wall.height_m, tpl, u=where.u, v=where.v)
 
 
 def promote(s: Session, sid: int, user: Principal, data_dir: Path, *, pid: int | None = None) -> dict:

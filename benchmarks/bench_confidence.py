@@ -111,7 +111,8 @@ def candidates_of(scan: Path, settings: DetectionSettings) -> dict:
     cache = scan / "candidates.pkl"
     if cache.is_file():
         return pickle.loads(cache.read_bytes())
-    res = detect(read_scans([scan / "scan.ply"]), load_model_library(scan / "models"), None, settings)
+    res = detect(read_scans([scan / "scan.ply"]), load_model_library(scan / "models"), None,
+                 settings=settings)
     data = {"depth": [c for w in res.walls.values() for c in w.depth_candidates],
             "colour": [c for w in res.walls.values() for c in w.colour_candidates],
             "classes": res.classes,

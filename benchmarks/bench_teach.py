@@ -128,7 +128,8 @@ def seen_shares(det_dir: Path, truth: TruthDocument) -> dict[int, float]:
         except InputError:
             out[i] = 0.0
             continue
-        win = footprint(s.depth().shape, s.frame.height_m, s.pixel_m, u, v, o.width_m, o.height_m)
+        win = footprint(s.depth().shape, s.frame.height_m, s.pixel_m, u=u, v=v, width_m=o.width_m,
+                        height_m=o.height_m)
         out[i] = 0.0 if win is None else seen_share(s.depth(), win)
     return out
 

@@ -13,7 +13,15 @@ class SbscError(Exception):
 class InputError(SbscError):
     """Bad user input: a file or a field that cannot be used.
 
-    ``InputError("scan.ply", "no colour")`` reads ``scan.ply: no colour``.
+    ``InputError("scan.ply", "no colour")`` reads ``scan.ply: no colour``. The CLI turns it
+    into exit code 2, the review app into an HTTP 4xx.
+
+    Parameters
+    ----------
+    where
+        The file or field at fault (a path, an option, a JSON field).
+    reason
+        What is wrong with it, in a few words.
     """
 
     def __init__(self, where: object, reason: str) -> None:

@@ -232,6 +232,12 @@ def evaluate(detections_doc: dict, truth: TruthDocument, max_distance_m: float =
         Class id -> ``model.json`` fields, in the library's order
         (:func:`~sbsc_core.io.models.read_library_metadata`): the rows' order and names.
         Default: the bundled library's.
+
+    Returns
+    -------
+    EvaluationTable
+        One row per class and the total (TP, FP, FN, recall, precision), every match, and
+        the figures on distractors and per surface kind when the truth has them.
     """
     meta = read_library_metadata(bundled_models_dir()) if library is None else library
     dets = detections_doc["detections"]
@@ -353,7 +359,23 @@ def evaluate_files(detections: Path, truth: Path, json_out: Path | None = None,
                    max_distance_m: float = 0.10, *, models: Path | None = None) -> str:
     """``sbsc evaluate``: read both files, return the text table, optionally write the JSON.
 
-    ``models``: the model library whose order and names the table uses (default: the bundled one).
+    Parameters
+    ----------
+    detections
+        A detections document (contract 4).
+    truth
+        Its ground truth (contract 5).
+    json_out
+        Where to write the table as JSON (atomically); None: not written.
+    max_distance_m
+        The match radius, > 0.
+    models
+        The model library whose order and names the table uses; None: the bundled one.
+
+    Returns
+    -------
+    str
+        The table as text, as ``sbsc evaluate`` prints it.
     """
     if not (max_distance_m > 0):
         raise InputError("--max-distance", f"must be > 0, got {max_distance_m}")

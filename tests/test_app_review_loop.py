@@ -68,11 +68,11 @@ def test_snap_moves_a_click_onto_the_relief_of_the_model():
     tpl[6:10, 6:10] = 0.02
     depth[100:116, 150:166] = tpl  # object centre: row 107.5, col 157.5
     true_u, true_v = (157.5 + 0.5) * px, h_m - (107.5 + 0.5) * px
-    s = snap_to_relief(depth, px, h_m, tpl, true_u + 0.04, true_v - 0.03)
+    s = snap_to_relief(depth, px, h_m, tpl, u=true_u + 0.04, v=true_v - 0.03)
     assert s.snapped and s.rho > 0.95
     assert (s.u, s.v) == pytest.approx((true_u, true_v), abs=1e-6)
     # nothing there within the radius: the click stays
-    s = snap_to_relief(depth, px, h_m, tpl, 0.2, 0.2)
+    s = snap_to_relief(depth, px, h_m, tpl, u=0.2, v=0.2)
     assert not s.snapped and (s.u, s.v) == (0.2, 0.2)
 
 

@@ -69,7 +69,8 @@ def test_ceiling_points_are_binned_into_tiles_without_the_walls(tmp_path):
     origin = scan_origin(tmp_path / "scan.ply")
     ortho = OrthoimageSettings()
     walls = [w.frame for w in seg.walls]
-    written = sum(np.asarray(ceiling_part(p, origin, [tile], walls, str(tmp_path), ortho, 0.05)) for p in parts)
+    written = sum(np.asarray(ceiling_part(p, origin, [tile], walls, str(tmp_path), ortho=ortho,
+                                          wall_clear_m=0.05)) for p in parts)
     assert written[0] == len(ceiling)  # every ceiling point, none of the wall's
     img = tile_orthoimage(tmp_path, 0, tile, ortho)
     assert img.depth.shape == (600, 800)
@@ -163,7 +164,8 @@ def test_a_lower_ceiling_gets_its_own_level_and_tiles(tmp_path):
     origin = scan_origin(tmp_path / "scan.ply")
     ortho = OrthoimageSettings()
     walls = [w.frame for w in seg.walls]
-    written = sum(np.asarray(ceiling_part(p, origin, tiles, walls, str(tmp_path), ortho, 0.05)) for p in parts)
+    written = sum(np.asarray(ceiling_part(p, origin, tiles, walls, str(tmp_path), ortho=ortho,
+                                          wall_clear_m=0.05)) for p in parts)
     img = tile_orthoimage(tmp_path, 6, low[0], ortho)
     assert written[6] > 10_000 and np.nanmedian(img.depth) == pytest.approx(0.0, abs=0.003)
     for k, t in enumerate(main):
@@ -183,7 +185,7 @@ def test_surfaces_without_points_are_left_out(tmp_path):
     def part_fn(n):
         return [0, n, 0]
 
-    def job_fn(scratch, k, sf, templates, prototypes, s):
+    def job_fn(scratch, k, sf, *, templates, prototypes, s):
         ran.append(k)
         return sf, "result", {}
 

@@ -176,7 +176,7 @@ def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
 
     settings = DetectionSettings()  # ceilings and columns searched by default
     res = detect(read_scan(sim / "scan.ply"), load_model_library(sim / "models"),
-                 read_expected_counts(sim / "expected.json"), settings)
+                 read_expected_counts(sim / "expected.json"), settings=settings)
     assert [sf["id"] for sf in res.surfaces] == [sf["id"] for sf in doc["surfaces"]]
     mem = sorted((d.class_id, d.wall_id, d.surface) for d in res.detections)
     assert mem == sorted((d["class"], d["wall"], d.get("surface")) for d in doc["detections"])
@@ -187,7 +187,7 @@ def test_detect_columns_and_ceilings_on_a_hall(tmp_path):
     off = DetectionSettings()
     off.ceilings.enabled = off.columns.enabled = False
     plain = detect(read_scan(sim / "scan.ply"), load_model_library(sim / "models"),
-                   read_expected_counts(sim / "expected.json"), off)
+                   read_expected_counts(sim / "expected.json"), settings=off)
     assert not plain.surfaces and all(d.surface is None for d in plain.detections)
     assert [(w.id, list(np.round(w.frame.origin, 4))) for w in plain.segmentation.walls] == \
         [(w["id"], list(np.round(w["origin"], 4))) for w in doc["walls"]]
@@ -216,7 +216,7 @@ def test_round_column_image_wraps_its_seam(tmp_path):
     origin = scan_origin(tmp_path / "scan.ply")
     ortho = OrthoimageSettings()
     for p in parts:
-        column_part(p, origin, [rf], [0.6], str(tmp_path), ortho)
+        column_part(p, origin, [rf], [0.6], str(tmp_path), ortho=ortho)
     img: Orthoimage = face_orthoimage(tmp_path, 0, rf, ortho)
     # the box is whole past the circumference (the start repeated) and cut at the start
     r = int(img.uv_to_pixel(0.0, 1.2)[0])

@@ -166,17 +166,21 @@ def test_screened_consensus_does_not_spend_the_count_on_a_place_like_no_class(tm
     switch.gain = 1.02
     s = ConfidenceSettings(calibration=str(path))
     hits = screened_consensus([controller, other, switch], [], {"switch": 1, "socket": 1}, ["socket", "switch"],
-                              ConsensusSettings(), s)
+                              consensus_settings=ConsensusSettings(), settings=s)
     assert [(h.class_id, h.centre) for h in hits] == [("switch", (150.0, 150.0))]
     plain = screened_consensus([controller, other, switch], [], {"switch": 1, "socket": 1}, ["socket", "switch"],
-                               ConsensusSettings(), ConfidenceSettings(enabled=False))
+                               consensus_settings=ConsensusSettings(),
+                               settings=ConfidenceSettings(enabled=False))
     assert ("switch", (50.0, 50.0)) in [(h.class_id, h.centre) for h in plain]
     review = screened_consensus([controller, other, switch], [], {"switch": 1, "socket": 1}, ["socket", "switch"],
-                                ConsensusSettings(), ConfidenceSettings(calibration=str(path), report_unknown=True))
+                                consensus_settings=ConsensusSettings(),
+                                settings=ConfidenceSettings(calibration=str(path), report_unknown=True))
     assert sorted((h.unknown, h.centre) for h in review) == [(False, (150.0, 150.0)), (True, (50.0, 50.0))]
-    two = screened_consensus([controller, other, switch], [], {"switch": 2}, ["switch"], ConsensusSettings(), s)
+    two = screened_consensus([controller, other, switch], [], {"switch": 2}, ["switch"],
+                             consensus_settings=ConsensusSettings(), settings=s)
     assert sorted(h.centre for h in two) == [(50.0, 50.0), (150.0, 150.0)]  # a count still open vouches for it
-    free = screened_consensus([controller, other, switch], [], None, ["socket", "switch"], ConsensusSettings(), s)
+    free = screened_consensus([controller, other, switch], [], None, ["socket", "switch"],
+                              consensus_settings=ConsensusSettings(), settings=s)
     assert [(h.class_id, h.centre) for h in free] == [("switch", (150.0, 150.0))]
 
 
@@ -250,7 +254,8 @@ def test_screening_goes_on_until_the_count_reaches_the_real_objects(tmp_path) ->
         c.gain = 1.0
         real.append(c)
     s = ConfidenceSettings(calibration=str(path))
-    hits = screened_consensus(controllers + real, [], {"switch": 2}, ["switch"], ConsensusSettings(), s)
+    hits = screened_consensus(controllers + real, [], {"switch": 2}, ["switch"],
+                              consensus_settings=ConsensusSettings(), settings=s)
     assert sorted(h.centre for h in hits) == [(150.0, 50.0), (150.0, 90.0)]
 
 

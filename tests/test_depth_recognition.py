@@ -225,10 +225,10 @@ def test_plausibility_checks_ignore_unseen_pixels() -> None:
     known[30:] = False
     box = Box(20, 20, 40, 40)
     tp = padded_template(model, 4)
-    assert relief_overlap(jd, tp, box, 4, 0.005, 1.0) < 0.5
-    assert relief_overlap(jd, tp, box, 4, 0.005, 1.0, known) == pytest.approx(1.0)
+    assert relief_overlap(jd, tp, box, 4, 0.005, gain=1.0) < 0.5
+    assert relief_overlap(jd, tp, box, 4, 0.005, gain=1.0, known=known) == pytest.approx(1.0)
     assert isolation(jd, box, 0.005, 2, 3) == 1.0  # the strip below "has relief"
-    assert isolation(jd, box, 0.005, 2, 3, known) == 0.0  # ... but it is unseen
+    assert isolation(jd, box, 0.005, 2, 3, known=known) == 0.0  # ... but it is unseen
 
 
 def test_a_mixed_pixel_trail_is_not_something_larger() -> None:

@@ -32,6 +32,8 @@ def test_mkdocs_builds_strict(tmp_path) -> None:
                          cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
     assert (tmp_path / "site" / "formats" / "index.html").is_file()
+    api = (tmp_path / "site" / "api" / "index.html").read_text(encoding="utf-8")  # mkdocstrings' numpydoc
+    assert "detect_to_dir" in api and "register_reader" in api and api.count("Parameters") >= 15
     shutil.rmtree(tmp_path / "site")
 
 

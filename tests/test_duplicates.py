@@ -57,10 +57,13 @@ def test_screened_consensus_drops_the_duplicate_and_it_spends_no_count() -> None
     seen_twice = [_cand("sign", "W18", long, 19.65, 1.95, 0.97), _cand("sign", "W19", short, 19.65, 1.95, 0.96)]
     other = _cand("sign", "W18", long, 5.0, 1.95, 0.90)
     off = ConfidenceSettings(enabled=False)
-    free = screened_consensus(seen_twice + [other], [], None, ["sign"], ConsensusSettings(), off, frames=frames)
+    free = screened_consensus(seen_twice + [other], [], None, ["sign"],
+                              consensus_settings=ConsensusSettings(), settings=off, frames=frames)
     assert sorted(h.wall_id for h in free) == ["W18", "W18"]
-    counted = screened_consensus(seen_twice + [other], [], {"sign": 2}, ["sign"], ConsensusSettings(), off,
+    counted = screened_consensus(seen_twice + [other], [], {"sign": 2}, ["sign"],
+                                 consensus_settings=ConsensusSettings(), settings=off,
                                  frames=frames)
     assert sorted(round(h.centre[1]) for h in counted) == sorted(round(_pixel(long, x, 1.95)[1]) for x in (19.65, 5.0))
-    plain = screened_consensus(seen_twice + [other], [], {"sign": 2}, ["sign"], ConsensusSettings(), off)
+    plain = screened_consensus(seen_twice + [other], [], {"sign": 2}, ["sign"],
+                               consensus_settings=ConsensusSettings(), settings=off)
     assert sorted(h.wall_id for h in plain) == ["W18", "W19"]

@@ -259,11 +259,13 @@ def test_an_example_moves_to_a_snap_only_where_the_relief_agrees(tmp_path: Path)
     surface = read_detect_output(write_detect_output([ortho], tmp_path / "det"))["W01"]
     u, v = (float(x) for x in ortho.pixel_to_uv(*READER_AT))
     # the relief blob is the 0.08 m plate at the click: a snap 1 cm off agrees, 4 cm off does not
-    assert trust_snap(surface, u, v, u + 0.01, v, 0.9, 0.08, 0.08, 0.75)
-    assert not trust_snap(surface, u, v, u + 0.04, v, 0.9, 0.08, 0.08, 0.75)
-    assert not trust_snap(surface, u, v, u + 0.01, v, 0.6, 0.08, 0.08, 0.75)  # a weak match
+    assert trust_snap(surface, u, v, su=u + 0.01, sv=v, rho=0.9, width_m=0.08, height_m=0.08, min_rho=0.75)
+    assert not trust_snap(surface, u, v, su=u + 0.04, sv=v, rho=0.9, width_m=0.08, height_m=0.08,
+                          min_rho=0.75)
+    assert not trust_snap(surface, u, v, su=u + 0.01, sv=v, rho=0.6, width_m=0.08, height_m=0.08,
+                          min_rho=0.75)  # a weak match
     # a class of another size (no blob of its size there): the match alone decides
-    assert trust_snap(surface, u, v, u + 0.04, v, 0.9, 0.30, 0.30, 0.75)
+    assert trust_snap(surface, u, v, su=u + 0.04, sv=v, rho=0.9, width_m=0.30, height_m=0.30, min_rho=0.75)
 
 
 def test_what_was_learnt_for_a_class_can_be_removed_and_nothing_else(taught) -> None:

@@ -100,7 +100,7 @@ def test_hide_occluded_needs_a_coherent_front() -> None:
     rgb = np.where((depth > 0.05)[:, None], [[200, 20, 20]], [[210, 200, 170]]).astype(np.uint8)
     from sbsc_core.imaging.orthoimage import rasterize_median
 
-    d, c, m = rasterize_median(pixel, depth, rgb, (h, w), (-0.06, 0.3), 0.0001)
+    d, c, m = rasterize_median(pixel, depth, rgb, (h, w), depth_range=(-0.06, 0.3), quantum=0.0001)
     assert d[3, 3] == pytest.approx(0.0, abs=1e-3)  # the plain median: the wall
     front = front_layers(pixel, depth, rgb, (h, w), gap_m=0.02, far_m=0.25)
     fd = front.depth

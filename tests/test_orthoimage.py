@@ -111,7 +111,7 @@ def test_rasterize_median_even_counts_and_empty_pixels() -> None:
     pixel = np.array([0, 0, 3, 3, 3, 5])
     depth = np.array([0.01, 0.03, 0.0, 0.02, 0.2, -0.01])
     rgb = np.array([[10, 20, 30], [30, 40, 50], [1, 1, 1], [3, 3, 3], [250, 250, 250], [7, 8, 9]])
-    d, c, m = rasterize_median(pixel, depth, rgb, (2, 3), (-0.06, 0.3), 0.0001)
+    d, c, m = rasterize_median(pixel, depth, rgb, (2, 3), depth_range=(-0.06, 0.3), quantum=0.0001)
     np.testing.assert_array_equal(m.ravel(), [True, False, False, True, False, True])
     assert d.ravel()[0] == pytest.approx(0.02, abs=1e-4)
     assert d.ravel()[3] == pytest.approx(0.02, abs=1e-4)
@@ -159,7 +159,7 @@ def test_layers_keep_the_wall_behind_furniture_and_hide_furniture_alone() -> Non
     rgb[10:12] = (20, 20, 200)
     rgb[12:15] = (200, 190, 180)
     rgb[15] = (90, 60, 30)
-    d, c, m = rasterize_median(pixel, depth, rgb, (1, 5), (-0.06, 0.3), 0.0001, layer_gap=0.02,
+    d, c, m = rasterize_median(pixel, depth, rgb, (1, 5), depth_range=(-0.06, 0.3), quantum=0.0001, layer_gap=0.02,
                                furniture_depth=0.25, min_layer_share=0.5)
     np.testing.assert_array_equal(m.ravel(), [True, False, True, True, True])
     assert d.ravel()[0] == pytest.approx(0.0, abs=2e-4) and d.ravel()[4] == pytest.approx(0.0, abs=2e-4)
@@ -167,7 +167,7 @@ def test_layers_keep_the_wall_behind_furniture_and_hide_furniture_alone() -> Non
     assert (c[0, 4] == (200, 190, 180)).all()
     assert d.ravel()[2] == pytest.approx(0.12, abs=2e-4) and (c[0, 2] == (220, 30, 30)).all()
     assert d.ravel()[3] == pytest.approx(0.0505, abs=2e-4) and (c[0, 3] == (20, 20, 200)).all()
-    plain = rasterize_median(pixel, depth, rgb, (1, 5), (-0.06, 0.3), 0.0001)
+    plain = rasterize_median(pixel, depth, rgb, (1, 5), depth_range=(-0.06, 0.3), quantum=0.0001)
     assert plain[2].all() and plain[0].ravel()[0] == pytest.approx(0.0605, abs=2e-4)
 
 

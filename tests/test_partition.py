@@ -103,7 +103,8 @@ def test_partition_orthoimage_equals_the_in_memory_one(scene, tmp_path, monkeypa
     assert sum(x.points for x in samples) == len(cloud)
     index = WallIndex.build(seg.walls, origin, s.segmentation)
     for p, smp in reversed(list(zip(parts, samples, strict=True))):  # any order
-        partition_part(p, origin, index, str(tmp_path), smp.points, smp.spilled, s.orthoimage)
+        partition_part(p, origin, index, str(tmp_path), points=smp.points, spilled=smp.spilled,
+                       ortho=s.orthoimage)
     # the same walls, their points assigned in memory
     local = cloud.xyz.astype(np.float64) + (cloud.origin - origin)
     mine = _assigned(local.astype(np.float32), index, len(seg.walls))

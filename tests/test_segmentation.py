@@ -198,14 +198,14 @@ def test_nearest_planes_blockwise_equals_all_at_once(monkeypatch):
     pa = rng.uniform(0, np.pi, 40)
     ns = np.stack([np.cos(pa), np.sin(pa)], axis=1)
     ss = rng.uniform(-20, 20, 40)
-    best, ok = seg._nearest_planes(xy, nxy, ns, ss, 0.95, 0.5)
+    best, ok = seg._nearest_planes(xy, nxy, ns, ss, min_cos=0.95, tolerance=0.5)
     dist = np.abs(xy @ ns.T - ss)
     dist[np.abs(nxy @ ns.T) < 0.95] = np.inf
     assert ok.any() and not ok.all()
     assert np.array_equal(ok, dist.min(axis=1) <= 0.5)
     assert np.array_equal(best[ok], np.argmin(dist, axis=1)[ok])
     monkeypatch.setattr(seg, "_PLANE_BLOCK", 77)
-    best2, ok2 = seg._nearest_planes(xy, nxy, ns, ss, 0.95, 0.5)
+    best2, ok2 = seg._nearest_planes(xy, nxy, ns, ss, min_cos=0.95, tolerance=0.5)
     assert np.array_equal(best, best2) and np.array_equal(ok, ok2)
 
 

@@ -48,7 +48,8 @@ def room():
     scene = load_scene(ONE_ROOM)
     building = build_building(scene, _builder())
     scan = scan_mesh(building.mesh, building.stations, scene.scanner, seed=0)
-    views = {wid: wall_view(scan.xyz, scan.rgb, w.frame, PX) for wid, w in building.layout.walls.items()}
+    views = {wid: wall_view(scan.xyz, scan.rgb, w.frame, pixel_m=PX) for wid,
+             w in building.layout.walls.items()}
     return building, views
 
 

@@ -91,9 +91,9 @@ def test_storeys_read_again_from_files_are_segmented_as_alone(tmp_path, storey_f
         steps = storey_steps(shares, total, limit)
         steps_seen.append(steps)
         for part in parts:
-            storey_part(part, origin, bounds, steps, str(tmp_path), 0, False)
+            storey_part(part, origin, bounds, steps, str(tmp_path), points=0, spilled=False)
         for k in range(len(bounds)):
-            yield storey_cloud(tmp_path, parts, k, origin, sample.sources, limit)
+            yield storey_cloud(tmp_path, parts, k, origin, sources=sample.sources, limit=limit)
 
     found = find_scan_storeys(sample, s)
     assert found.sample is None and sum(found.shares) == pytest.approx(1.0)
@@ -115,16 +115,17 @@ def test_storey_part_keeps_every_step_th_point_over_all_files(tmp_path, storeys)
     bounds = [(-math.inf, 3.0 - cloud.origin[2]), (3.0 - cloud.origin[2], math.inf)]
     got = [0, 0]
     for part in parts:
-        got = [a + b for a, b in zip(got, storey_part(part, cloud.origin, bounds, [1, 3], str(tmp_path), 0, False),
+        got = [a + b for a, b in zip(got, storey_part(part, cloud.origin, bounds, [1, 3], str(tmp_path), points=0, spilled=False),
                                      strict=True)]
     z = cloud.xyz[:, 2]
     low = np.flatnonzero(z < bounds[0][1])
     high = np.flatnonzero(z >= bounds[1][0])
     high = high[high % 3 == 0]
     assert got == [len(low), len(high)]
-    a = storey_cloud(tmp_path, parts, 0, cloud.origin, (), limit=(len(low) + 1) // 2)  # thinned: every 2nd
+    a = storey_cloud(tmp_path, parts, 0, cloud.origin, sources=(),
+                     limit=(len(low) + 1) // 2)  # thinned: every 2nd
     np.testing.assert_array_equal(a.xyz, cloud.xyz[low[::2]])
-    b = storey_cloud(tmp_path, parts, 1, cloud.origin, (), limit=10**9)
+    b = storey_cloud(tmp_path, parts, 1, cloud.origin, sources=(), limit=10**9)
     np.testing.assert_array_equal(b.xyz, cloud.xyz[high])
     np.testing.assert_array_equal(b.rgb, cloud.rgb[high])
 
@@ -146,7 +147,8 @@ def test_detect_scans_reads_each_storey_again_as_alone(tmp_path, storey_files) -
     scratch = tmp_path / "scratch"
     scratch.mkdir()
     with ThreadPoolExecutor(2) as ex:
-        again = _storey_points(ex, parts, [(0, False)] * len(parts), sample.origin, sample.sources, total, s,
+        again = _storey_points(ex, parts, [(0, False)] * len(parts), sample.origin,
+                               sources=sample.sources, points=total, s=s,
                                scratch=scratch, in_flight=4, log=said.append)
         seg = segment_storeys(find_scan_storeys(sample, s.segmentation), again, s.segmentation)
     assert said and "S1" in said[0] and "(every 1)" in said[0]

@@ -285,7 +285,8 @@ def test_each_storey_keeps_its_own_expected_counts() -> None:
     def run(d: list, c: list, n: dict) -> list:
         return consensus_all(d, c, n, s.consensus, ["switch"])["switch"]
 
-    hits = consensus_by_storey(depth, colour, {"S1-W01": "S1", "S2-W01": "S2"}, counts, ["switch"], run)
+    hits = consensus_by_storey(depth, colour, {"S1-W01": "S1", "S2-W01": "S2"}, counts=counts,
+                               classes=["switch"], run=run)
     assert sorted(h.wall_id for h in hits) == ["S1-W01", "S2-W01"]
     # the building's counts alone: both places go to S2's stronger candidates
     assert [h.wall_id for h in consensus_all(depth, colour, {"switch": 2}, s.consensus, ["switch"])["switch"]] == [

@@ -10,7 +10,8 @@ from fastapi.responses import JSONResponse, Response
 
 from sbsc_core.errors import SbscError
 
-from ..models import Job, ModelLibraryRow, Project
+from ..libraries import models_dir
+from ..models import Job, Project
 from ..results import project_document
 from ..review_service import current_signoff, signoff_dict
 from .deps import ReadSession, Reviewer, Settings, get_project
@@ -21,12 +22,9 @@ router = APIRouter(prefix="/api", tags=["export"])
 def _library(settings, s, models_id):  # noqa: ANN001, ANN202
     """The ModelLibrary the results were computed with (uploaded or bundled)."""
     from sbsc_core.io.models import load_model_library
-    from sbsc_core.paths import bundled_models_dir
 
-    row = s.get(ModelLibraryRow, models_id) if models_id else None
-    root = settings.data_dir / row.path if row else bundled_models_dir()
     try:
-        return load_model_library(root)
+        return load_model_library(models_dir(s, models_id, settings.data_dir))
     except SbscError:
         return None  # the export falls back to its own class table
 

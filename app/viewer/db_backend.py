@@ -15,19 +15,16 @@ increasing id, so "what changed since cursor" is one indexed query; a new curren
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from typing import Any
 
 from sqlalchemy import func, select
-
-from sbsc_core.paths import bundled_models_dir
 
 from .. import review_service as svc
 from ..auth import Principal, authenticate
 from ..config import AppSettings
 from ..db import Database
-from ..libraries import bundled_classes
-from ..models import DetectionRow, Job, ModelLibraryRow, Project, ReviewDecision, Scan
+from ..libraries import library_classes, models_dir
+from ..models import DetectionRow, Job, Project, ReviewDecision, Scan
 from ..results import detection_dict, project_document
 from ..review_rules import check_may_review
 from .backend import (
@@ -70,9 +67,9 @@ class DbReviewBackend:
             out = data_dir / job.out_dir if job is not None and job.out_dir else None
             scans = [data_dir / path for path in s.scalars(
                 select(Scan.path).where(Scan.project_id == p.id).order_by(Scan.id))]
-            lib = s.get(ModelLibraryRow, job.models_id) if job is not None and job.models_id else None
-            classes = dict(lib.classes) if lib is not None else bundled_classes()
-            models_dir = data_dir / lib.path if lib is not None else bundled_models_dir()
+            models_id = job.models_id if job is not None else None
+            classes = library_classes(s, models_id)
+            library = models_dir(s, models_id, data_dir)
             locked = p.status != "open"
             signoff = self._signoff(s, p.id) if locked else None
             name = p.name
@@ -87,7 +84,7 @@ class DbReviewBackend:
             pid=pid, name=name, detections=doc, rois=rois,
             ortho_dir=ortho if ortho is not None and ortho.is_dir() else None, scans=scans,
             cache_dir=self.settings.projects_dir / str(int(pid)) / "viewer",
-            models_dir=Path(models_dir), classes=sorted(classes), locked=locked, signoff=signoff,
+            models_dir=library, classes=sorted(classes), locked=locked, signoff=signoff,
             revision=doc.get("job"))
 
     def changes_since(self, pid: ProjectId, cursor: Any) -> Changes:

@@ -36,7 +36,17 @@ MIN_DEPTH_M = 0.002  # thinnest box body written (a sign is ~3 mm)
 
 @dataclass(frozen=True)
 class ClassTyping:
-    """How one library class is written to / recognized in IFC."""
+    """How one library class is written to / recognized in IFC.
+
+    Attributes
+    ----------
+    class_id, name
+        The class's id (its folder in the model library) and its name.
+    ifc_class, predefined_type, object_type
+        The IFC entity, its PredefinedType and ObjectType (``model.json``).
+    width_m, height_m, depth_m
+        The box written as the object's body: footprint and depth, metres.
+    """
 
     class_id: str
     name: str
@@ -49,8 +59,25 @@ class ClassTyping:
 
 
 def normalise_schema(schema: str, where: str = "schema") -> str:
-    """``"ifc4"`` -> ``"IFC4"``; ``IFC4X3`` (any ADD) -> ``"IFC4X3"``; ``IFC2X3`` (any TC) ->
-    ``"IFC2X3"``; else InputError."""
+    """``"ifc4"`` -> ``"IFC4"``; ``IFC4X3`` (any ADD) -> ``"IFC4X3"``; ``IFC2X3`` (any TC) -> ``"IFC2X3"``.
+
+    Parameters
+    ----------
+    schema
+        An IFC schema name, in any case.
+    where
+        The option or field named by the error.
+
+    Returns
+    -------
+    str
+        One of :data:`SCHEMAS`.
+
+    Raises
+    ------
+    InputError
+        For any other schema.
+    """
     s = str(schema).strip().upper()
     if s.startswith("IFC4X3"):
         return "IFC4X3"
@@ -96,7 +123,20 @@ def bundled_typings() -> dict[str, ClassTyping]:
 
 def class_typings(library: ModelLibrary | None = None, models: Path | None = None) -> dict[str, ClassTyping]:
     """Typing of every class: from ``library``, else the directory ``models``, else the
-    bundled library."""
+    bundled library.
+
+    Parameters
+    ----------
+    library
+        A model library already read.
+    models
+        A model library's folder (contract 2), read when ``library`` is None.
+
+    Returns
+    -------
+    dict[str, ClassTyping]
+        Class id -> how it is written in IFC, in the library's order.
+    """
     if library is None and models is not None:
         from ..io.models import load_model_library
 

@@ -187,7 +187,23 @@ def build_bcf(comparison: Comparison, image_dir: Path | None = None, project_nam
 
 def write_bcf(comparison: Comparison, path: Path, image_dir: Path | None = None, *,
               project_name: str = "Scan-vs-BIM", asis: AsIs | None = None, author: str = AUTHOR) -> None:
-    """Write the findings' BCF zip to ``path`` (atomically); see :func:`build_bcf`."""
+    """Write the findings' BCF zip to ``path`` (atomically); see :func:`build_bcf`.
+
+    Parameters
+    ----------
+    comparison
+        What :func:`~sbsc_core.bim.compare.compare` found: one topic per finding.
+    path
+        The ``.bcf`` file to write.
+    image_dir
+        The detect output's ``orthoimages`` folder, for each topic's snapshot; None: plain walls.
+    project_name
+        The BCF project's name.
+    asis
+        The as-is IFC the topics select their objects in (its file name and GlobalId seed).
+    author
+        The topics' author.
+    """
     path = Path(path)
     doc = build_bcf(comparison, image_dir, project_name, asis=asis, author=author)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.partial-", suffix=".bcf", dir=path.parent)

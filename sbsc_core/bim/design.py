@@ -454,7 +454,23 @@ def _pick_face(centre: np.ndarray, faces: list[tuple[DesignWall, WallFrame]], st
 
 def read_as_designed(path: Path, library: ModelLibrary | None = None, *,
                      typings: dict[str, ClassTyping] | None = None) -> AsDesigned:
-    """The secondary components of an as-designed IFC file that map to library classes."""
+    """The secondary components of an as-designed IFC file that map to library classes.
+
+    Parameters
+    ----------
+    path
+        The as-designed IFC file (it needs an IfcBuildingStorey).
+    library
+        The model library whose classes are looked for; None: the bundled one.
+    typings
+        How each class is written in IFC, when already made from the library.
+
+    Returns
+    -------
+    AsDesigned
+        The designed walls, ceilings and columns, and the objects on them with their class
+        and the surface they are on.
+    """
     path = Path(path)
     f = open_ifc(path)
     if not f.by_type("IfcBuildingStorey"):

@@ -128,7 +128,8 @@ def _surface_differences(built: list[_Placed], surfaces: Mapping[str, Surface], 
             return False
         return not any(_overlaps(rect, r, 0.05) for r in occupied[sf.id] if r != skip_rect)
 
-    def placed(o_cls: str, sf: Surface, u: float, v: float, w: float, h: float, turn: float = 0.0) -> _Placed:
+    def placed(o_cls: str, sf: Surface, u: float, v: float, *, w: float, h: float,
+               turn: float = 0.0) -> _Placed:
         pos = _surface_point(sf, u, v)
         return _Placed(o_cls, None, u, v, w, h, pos, surface_normal(sf, pos), sf.kind, sf.id, turn)
 
@@ -155,7 +156,7 @@ def _surface_differences(built: list[_Placed], surfaces: Mapping[str, Surface], 
                 else:
                     u, v = o.u, o.v + dist * (1 if rng.random() < 0.5 else -1)
                 rect = _rect(u, v, o.width, o.height)
-                cand = placed(o.class_id, sf, u, v, o.width, o.height, o.rotation_deg)
+                cand = placed(o.class_id, sf, u, v, w=o.width, h=o.height, turn=o.rotation_deg)
                 if fits(sf, rect, _rect(o.u, o.v, o.width, o.height)) and far_from_class(cand.position, o.class_id, o):
                     moved[i] = cand
                     occupied[sf.id].append(rect)
@@ -178,7 +179,7 @@ def _surface_differences(built: list[_Placed], surfaces: Mapping[str, Surface], 
                 u = float(rng.uniform(0, sf.frame.width_m)) if sf.round else sf.frame.width_m / 2
                 v = float(np.median([o.v for o in same]))
             rect = _rect(u, v, w, h)
-            cand = placed(cid, sf, u, v, w, h)
+            cand = placed(cid, sf, u, v, w=w, h=h)
             if fits(sf, rect) and far_from_class(cand.position, cid, None):
                 added.append(cand)
                 occupied[sf.id].append(rect)
@@ -207,10 +208,38 @@ def write_as_designed_ifc(truth_doc: dict, out: Path, *, seed: int = 0, n_moved:
     (:func:`_surface_differences`); the walls' differences are drawn among wall objects only.
     With ``storeys`` in the truth, one IfcBuildingStorey each.
 
-    Returns ``{"as_designed": out.name, "design_differences": [...]}``, each difference
-    ``{"kind": "moved"|"removed"|"added", "class", "wall", "designed_position",
-    "built_position"}`` (null where it does not exist; with surfaces also ``"surface"``: wall,
-    ceiling or column, and ``wall`` names the surface), to be stored in the ground truth.
+    Parameters
+    ----------
+    truth_doc
+        The ground truth of the simulated scene (contract 5).
+    out
+        The IFC file to write.
+    seed
+        Picks which objects differ, and where the added ones go.
+    n_moved, n_removed, n_added
+        How many wall objects are moved, left out of the design and added.
+    library
+        The model library; None: the bundled one.
+    schema
+        ``IFC4``, ``IFC4X3`` or ``IFC2X3``.
+    shift_m
+        The range of a moved object's shift along its wall, metres.
+    separation_m
+        The least distance from a moved or added position to a built object of its class.
+    typings
+        How each class is written in IFC, when already made from the library.
+    mount_heights
+        Class id -> height of an added object whose class has no built object.
+    surface_changes
+        How many objects are removed, moved and added on each kind of surface beyond walls.
+
+    Returns
+    -------
+    dict
+        ``{"as_designed": out.name, "design_differences": [...]}``, each difference
+        ``{"kind": "moved"|"removed"|"added", "class", "wall", "designed_position",
+        "built_position"}`` (null where it does not exist; with surfaces also ``"surface"``:
+        wall, ceiling or column, and ``wall`` names the surface), to be stored in the ground truth.
     """
     from .export import add_storeys_and_surfaces
 

@@ -356,8 +356,8 @@ class IfcModelBuilder:
         self._wall_thickness[wall_id] = float(thickness)
         return wall
 
-    def add_opening(self, wall_id: str, kind: str, u_min: float, u_max: float, v_min: float,
-                    v_max: float, *, fill: bool = True, name: str | None = None) -> tuple[Any, Any | None]:
+    def add_opening(self, wall_id: str, kind: str, *, u_min: float, u_max: float, v_min: float,
+                    v_max: float, fill: bool = True, name: str | None = None) -> tuple[Any, Any | None]:
         """An IfcOpeningElement through the wall, filled by an IfcDoor/IfcWindow if ``fill``."""
         f = self.file
         wall = self.walls[wall_id]
@@ -610,8 +610,8 @@ def add_walls_and_openings(builder: IfcModelBuilder, walls: dict[str, WallFrame]
     for o in openings:
         frame = walls[o["wall"]]
         twin = any(_same_opening(o, frame, p, walls[p["wall"]]) for p in filled)
-        builder.add_opening(o["wall"], str(o.get("kind", "door")), o["u_min"], o["u_max"],
-                            o["v_min"], o["v_max"], fill=not twin)
+        builder.add_opening(o["wall"], str(o.get("kind", "door")), u_min=o["u_min"], u_max=o["u_max"],
+                            v_min=o["v_min"], v_max=o["v_max"], fill=not twin)
         if not twin:
             filled.append(o)
 
@@ -842,7 +842,27 @@ def export_ifc_file(detections: Path, out: Path, *, schema: str = "IFC4", accept
                     models: Path | None = None, crs: str | None = None) -> dict[str, Any]:
     """``sbsc export-ifc``: read ``detections``, write ``out`` (nothing on error).
 
-    Returns a summary: the schema and how many walls, openings and objects were written.
+    Parameters
+    ----------
+    detections
+        A detections document (contract 4).
+    out
+        The IFC file to write (atomically).
+    schema
+        ``IFC4``, ``IFC4X3`` or ``IFC2X3``.
+    accepted_only
+        Only the detections a reviewer accepted.
+    models
+        The model library whose ``model.json`` give each class's IFC class; None: the bundled one.
+    crs
+        The scan's coordinate system (``"EPSG:NNNN"``) to georeference the model in; None:
+        the document's ``crs``, if any.
+
+    Returns
+    -------
+    dict
+        A summary: the schema, the coordinate system and how many walls, openings, ceilings,
+        columns and objects were written.
     """
     detections = Path(detections)
     schema = normalise_schema(schema, where="--schema")

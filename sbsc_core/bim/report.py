@@ -88,9 +88,10 @@ def _to_px(frame: WallFrame, s: float, u: float, v: float) -> tuple[int, int]:
     return _px(u * s), _px((frame.height_m - v) * s)
 
 
-def _box(img: np.ndarray, frame: WallFrame, s: float, u: float, v: float, w: float, h: float,
+def _box(img: np.ndarray, frame: WallFrame, s: float, u: float, v: float, *, size: tuple[float, float],
          colour: tuple[int, int, int], thickness: int = 2) -> tuple[tuple[int, int], tuple[int, int]]:
     cx, cy = _to_px(frame, s, u, v)
+    w, h = size
     hw, hh = max(MIN_MARK_PX / 2, w * s / 2), max(MIN_MARK_PX / 2, h * s / 2)
     hw, hh = min(hw, PX_LIMIT), min(hh, PX_LIMIT)
     p0, p1 = (_px(cx - hw), _px(cy - hh)), (_px(cx + hw), _px(cy + hh))
@@ -171,8 +172,8 @@ def mark_item(img: np.ndarray, frame: WallFrame, s: float, wall_id: str, item: C
             c = _to_px(frame, s, du, dv)
             cv2.drawMarker(img, c, C_DESIGN, cv2.MARKER_CROSS, 12, 2, cv2.LINE_AA)
         else:
-            p0, p1 = _box(img, frame, s, du, dv, *_designed_size(item),
-                          C_DESIGN if item.status == "displaced" else colour)
+            p0, p1 = _box(img, frame, s, du, dv, size=_designed_size(item),
+                          colour=C_DESIGN if item.status == "displaced" else colour)
             labels.box(p0, p1)
             if item.status == "missing":
                 cv2.line(img, p0, p1, colour, 2, cv2.LINE_AA)
@@ -180,7 +181,7 @@ def mark_item(img: np.ndarray, frame: WallFrame, s: float, wall_id: str, item: C
                 labels.add(f"missing {item.class_id}", p0, p1, colour)
     if on_found:
         fu, fv = _uv(frame, item.detected_position)
-        p0, p1 = _box(img, frame, s, fu, fv, *_detected_size(item), colour)
+        p0, p1 = _box(img, frame, s, fu, fv, size=_detected_size(item), colour=colour)
         labels.box(p0, p1)
         if item.status == "unexpected":
             labels.add(f"unexpected {item.detection.get('class')}", p0, p1, colour)
@@ -353,4 +354,16 @@ def render_report(comparison: Comparison, image_dir: Path | None = None) -> str:
 
 
 def write_report(comparison: Comparison, path: Path, image_dir: Path | None = None) -> None:
+    """Write the comparison's self-contained HTML report (:func:`render_report`).
+
+    Parameters
+    ----------
+    comparison
+        What :func:`~sbsc_core.bim.compare.compare` found.
+    path
+        The HTML file to write; its pictures are embedded.
+    image_dir
+        The detect output's ``orthoimages`` folder: the walls' pictures are drawn on their
+        colour orthoimages; None: on plain walls.
+    """
     Path(path).write_text(render_report(comparison, image_dir), encoding="utf-8")

@@ -81,7 +81,7 @@ def illumination_field(ortho: Orthoimage, settings: ColourPrepSettings | None = 
     cell_dep = np.zeros((hc, wc), np.float32)
     cell_col[valid] = _median_valid(col_b[valid], cnt[valid])
     cell_dep[valid] = _median_valid(dep_b[valid][..., None], cnt[valid])[:, 0]
-    mixed = _mixed_fraction(col_b, dep_b, cell_col, cell_dep, valid, s)
+    mixed = _mixed_fraction(col_b, dep_b, cell_col, cell_dep, valid, s=s)
     wall = _wall_cells(cell_col, cell_dep, valid, s, mixed)
     if not wall.any():
         return None, np.zeros(3)
@@ -94,7 +94,8 @@ def illumination_field(ortho: Orthoimage, settings: ColourPrepSettings | None = 
     if k > 1:
         filled = np.stack([ndimage.median_filter(filled[..., ch], size=k, mode="nearest") for ch in range(3)],
                           axis=-1)
-    field = _upsample(filled, ortho.colour.astype(np.float32), ortho.mask, g, (h, w), s.snap_tolerance)
+    field = _upsample(filled, ortho.colour.astype(np.float32), ortho.mask, g=g, shape=(h, w),
+                      snap=s.snap_tolerance)
     return field, ref.astype(np.float32)
 
 
@@ -116,7 +117,7 @@ def _chroma(rgb: np.ndarray) -> np.ndarray:
 
 
 def _mixed_fraction(col_b: np.ndarray, dep_b: np.ndarray, cell_col: np.ndarray, cell_dep: np.ndarray,
-                    valid: np.ndarray, s: ColourPrepSettings) -> np.ndarray:
+                    valid: np.ndarray, *, s: ColourPrepSettings) -> np.ndarray:
     """Per cell, the share of its pixels whose chromaticity or depth differs from the cell's median.
 
     A cell of plain wall is uniform under any illumination: a station step or a smooth
@@ -163,7 +164,7 @@ def _wall_cells(cell_col: np.ndarray, cell_dep: np.ndarray, valid: np.ndarray, s
     return wall
 
 
-def _upsample(cells: np.ndarray, colour: np.ndarray, mask: np.ndarray, g: int, shape: tuple[int, int],
+def _upsample(cells: np.ndarray, colour: np.ndarray, mask: np.ndarray, *, g: int, shape: tuple[int, int],
               snap: float) -> np.ndarray:
     """Cell field to pixels: bilinear, except near steps of the field (station boundaries).
 

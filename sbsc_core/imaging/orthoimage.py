@@ -80,8 +80,10 @@ def orthoimage_from_pixels(wall_id: str, frame: WallFrame, pixel: np.ndarray, de
     px = float(s.pixel_m)
     d0, d1 = s.depth_range_m
     shape = ortho_shape(frame, px)
-    images = rasterize_median(pixel, depth, rgb, shape, (d0, d1), s.depth_quantum_m, **layer_options(s))
-    return orthoimage_from_images(wall_id, frame, *images, s, front=front_images(pixel, depth, rgb, shape, s))
+    images = rasterize_median(pixel, depth, rgb, shape, depth_range=(d0, d1),
+                              quantum=s.depth_quantum_m, **layer_options(s))
+    return orthoimage_from_images(wall_id, frame, *images, settings=s,
+                                  front=front_images(pixel, depth, rgb, shape, s))
 
 
 def front_images(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shape: tuple[int, int],
@@ -102,7 +104,7 @@ def layer_options(settings: OrthoimageSettings) -> dict[str, float | None]:
 
 
 def orthoimage_from_images(wall_id: str, frame: WallFrame, depth: np.ndarray, colour: np.ndarray, mask: np.ndarray,
-                           settings: OrthoimageSettings | None = None, *,
+                           *, settings: OrthoimageSettings | None = None,
                            front: FrontLayers | None = None) -> Orthoimage:
     """Orthoimage J_CD from the per-pixel medians (:func:`rasterize_median`): the pixels hidden
     behind a coherent front surface (``front``, from :func:`front_images`; see
@@ -166,7 +168,7 @@ def in_plan_box(xyz: np.ndarray, lo: np.ndarray, hi: np.ndarray, cloud_origin: n
 
 
 def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shape: tuple[int, int],
-                     depth_range: tuple[float, float], quantum: float, *, layer_gap: float | None = None,
+                     *, depth_range: tuple[float, float], quantum: float, layer_gap: float | None = None,
                      furniture_depth: float | None = None, min_layer_share: float = 0.5
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-pixel median depth and the colour of the point with the median luminance.
@@ -216,7 +218,7 @@ def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shap
             far = nq if furniture_depth is None else int(round((furniture_depth - depth_range[0]) / quantum))
             zero = int(round(-depth_range[0] / quantum))
             sq = key % nq
-            first, size = _pixel_layers(sq, start, n, int(round(layer_gap / quantum)), far, zero, min_layer_share)
+            first, size = _pixel_layers(sq, start, n, gap_q=int(round(layer_gap / quantum)), far_q=far, zero_q=zero, min_share=min_layer_share)
             good = size > 0
             first, size = first[good], size[good]
             med = 0.5 * (sq[first + (size - 1) // 2] + sq[first + size // 2])
@@ -265,7 +267,7 @@ def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shap
     return depth_img.reshape(h, w), colour.reshape(h, w, 3), mask.reshape(h, w)
 
 
-def _pixel_layers(q: np.ndarray, start: np.ndarray, n: np.ndarray, gap_q: int, far_q: int, zero_q: int,
+def _pixel_layers(q: np.ndarray, start: np.ndarray, n: np.ndarray, *, gap_q: int, far_q: int, zero_q: int,
                   min_share: float) -> tuple[np.ndarray, np.ndarray]:
     """The kept layer of each pixel: (index of its first point in ``q``, its point count; 0: none).
 

@@ -228,7 +228,7 @@ def sample_part(part: ScanPart, origin: np.ndarray, step: int, scratch: str | No
     src = open_scan(part.path)
     pose = part.pose
     if src.seekable:  # fixed-size records: only the sampled points are converted
-        xyz, rgb, n = sample_scan(src, origin, step, part.first, part.start, part.stop)
+        xyz, rgb, n = sample_scan(src, origin, step, first=part.first, start=part.start, stop=part.stop)
         return PartSample(apply_pose(xyz, pose), rgb, n, False)
     spill = scratch is not None
     xs, cs = [], []
@@ -450,7 +450,7 @@ def band_rows(frame: WallFrame, ortho: OrthoimageSettings) -> int:
     return max(1, BAND_PIXELS // ortho_shape(frame, ortho.pixel_m)[1])
 
 
-def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch: str, points: int,
+def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch: str, *, points: int,
                    spilled: bool, ortho: OrthoimageSettings) -> list[int]:
     """Stream one part again (or its spill) and append each wall's binned points to its partition.
 
@@ -561,14 +561,15 @@ def wall_orthoimage(scratch: Path | str, w: int, wall_id: str, frame: WallFrame,
         pixel -= r0 * width
         pd, prgb = np.ascontiguousarray(rec["depth"]), np.ascontiguousarray(rec["rgb"])
         del rec
-        d, c, m = rasterize_median(pixel, pd, prgb, (r1 - r0, width), settings.depth_range_m,
-                                   settings.depth_quantum_m, **layer_options(settings))
+        d, c, m = rasterize_median(pixel, pd, prgb, (r1 - r0, width), depth_range=settings.depth_range_m,
+                                   quantum=settings.depth_quantum_m, **layer_options(settings))
         depth[r0:r1], colour[r0:r1], mask[r0:r1] = d, c, m
         band_front = front_images(pixel, pd, prgb, (r1 - r0, width), settings)
         if band_front is not None:
             bands.append((r0, band_front))
         del pixel, pd, prgb
-    return orthoimage_from_images(wall_id, frame, depth, colour, mask, settings, front=stack_front(bands, (h, width)))
+    return orthoimage_from_images(wall_id, frame, depth, colour, mask, settings=settings,
+                                  front=stack_front(bands, (h, width)))
 
 
 def worker_ready() -> bool:

@@ -243,7 +243,7 @@ def find_openings(ortho: Orthoimage, settings: WallAreaSettings | None = None, l
     for _, kind, r0, c0, r1, c1 in cands:
         if out_mask[r0:r1, c0:c1].any():
             continue
-        r0, c0, r1, c1 = _snap(open_, r0, c0, r1, c1, tol + 1)
+        r0, c0, r1, c1 = _snap(open_, r0, c0, r1, c1, reach=tol + 1)
         if out_mask[r0:r1, c0:c1].any():
             continue
         out_mask[r0:r1, c0:c1] = True
@@ -309,7 +309,7 @@ def _within(x, rng: tuple[float, float]):
     return (x >= rng[0]) & (x <= rng[1])
 
 
-def _snap(open_: np.ndarray, r0: int, c0: int, r1: int, c1: int, reach: int) -> tuple[int, int, int, int]:
+def _snap(open_: np.ndarray, r0: int, c0: int, r1: int, c1: int, *, reach: int) -> tuple[int, int, int, int]:
     """Move each side to where the hole really starts (within ``reach`` pixels)."""
     h, w = open_.shape
 

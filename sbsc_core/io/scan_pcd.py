@@ -96,7 +96,7 @@ def _read_pcd(path: Path) -> ScanSource:
         raise InputError(path, f"truncated: {n} points need {need} bytes, file has {size}")
 
     def blocks(start: int = 0, stop: int | None = None) -> Iterator[RawBlock]:
-        for rec in _records(path, dtype, pos, n, start, stop):
+        for rec in _records(path, dtype, pos, n, start=start, stop=stop):
             yield rec["x"], rec["y"], rec["z"], _pcd_rgb(rec[colour])
 
     return ScanSource(path, n, blocks, False, seekable=True)

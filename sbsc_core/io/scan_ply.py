@@ -120,9 +120,10 @@ def _read_ply(path: Path) -> ScanSource:
         raise InputError(path, f"unsupported PLY colour type '{rgb_kind}'")
     wide = rgb_kind != "u1" and rgb_kind[0] != "f"
     if fmt == "ascii":
-        blocks = _ply_ascii_blocks(path, elements, vi, header_len, xyz_names, rgb_names, rgb_kind)
+        blocks = _ply_ascii_blocks(path, elements, vi=vi, header_len=header_len,
+                                   xyz_names=xyz_names, rgb_names=rgb_names, rgb_kind=rgb_kind)
         return ScanSource(path, vertex.count, blocks, wide)
-    blocks, records = _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names, rgb_kind)
+    blocks, records = _ply_binary_blocks(path, fmt, elements, vi=vi, header_len=header_len, xyz_names=xyz_names, rgb_names=rgb_names, rgb_kind=rgb_kind)
     field = station_field([n for n in dict(vertex.props) if n not in (*xyz_names, *rgb_names)])
     column = None
     if field is not None:
@@ -133,7 +134,7 @@ def _read_ply(path: Path) -> ScanSource:
     return ScanSource(path, vertex.count, blocks, wide, seekable=True, station_field=field, station_blocks=column)
 
 
-def _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names, rgb_kind
+def _ply_binary_blocks(path, fmt, elements, *, vi, header_len, xyz_names, rgb_names, rgb_kind
                        ) -> tuple[Callable[..., Iterator[RawBlock]], Callable[..., Iterator[np.ndarray]]]:
     endian = "<" if fmt == "binary_little_endian" else ">"
     offset = header_len
@@ -149,7 +150,7 @@ def _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names
         raise InputError(path, f"truncated: {vertex.count} vertices need {need} bytes, file has {size}")
 
     def records(start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
-        return _records(path, dtype, offset, vertex.count, start, stop)
+        return _records(path, dtype, offset, vertex.count, start=start, stop=stop)
 
     def blocks(start: int = 0, stop: int | None = None) -> Iterator[RawBlock]:
         for rec in records(start, stop):
@@ -159,7 +160,7 @@ def _ply_binary_blocks(path, fmt, elements, vi, header_len, xyz_names, rgb_names
     return blocks, records
 
 
-def _ply_ascii_blocks(path, elements, vi, header_len, xyz_names, rgb_names, rgb_kind
+def _ply_ascii_blocks(path, elements, *, vi, header_len, xyz_names, rgb_names, rgb_kind
                       ) -> Callable[[], Iterator[RawBlock]]:
     vertex = elements[vi]
     names = [p[0] for p in vertex.props]

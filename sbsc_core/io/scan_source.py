@@ -94,7 +94,7 @@ def _float_colours_to_8(rgb: np.ndarray) -> np.ndarray:
         return np.clip(np.rint(np.nan_to_num(np.asarray(rgb, np.float32)) * 255.0), 0, 255).astype(np.uint8)
 
 
-def _records(path: Path, dtype: np.dtype, offset: int, n: int, start: int, stop: int | None
+def _records(path: Path, dtype: np.dtype, offset: int, n: int, *, start: int, stop: int | None
              ) -> Iterator[np.ndarray]:
     """Blocks of fixed-size binary records ``start:stop`` of ``n`` read into small buffers
     (not memory-mapped: no file pages stay mapped in the reading process)."""

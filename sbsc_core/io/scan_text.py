@@ -68,7 +68,7 @@ def _text_layout(path: Path, sample: str, pts: bool) -> tuple[str | None, list[i
     return delimiter, [0, 1, 2, 3, 4, 5] if ncols == 6 else [0, 1, 2, ncols - 3, ncols - 2, ncols - 1]
 
 
-def _text_blocks(path: Path, lines: Iterator[str], usecols: list[int], delimiter: str | None,
+def _text_blocks(path: Path, lines: Iterator[str], usecols: list[int], *, delimiter: str | None,
                  first_line: int, limit: int | None, counter: list[int]) -> Iterator[RawBlock]:
     """Up to ``limit`` (or all) of ``lines`` parsed in blocks; ``counter[0]`` counts the lines read."""
     done = 0
@@ -99,7 +99,8 @@ def _read_xyz(path: Path) -> ScanSource:
     def blocks() -> Iterator[RawBlock]:
         with open(path, encoding="latin-1") as fh:
             first, skipped = _next_data_line(fh)
-            yield from _text_blocks(path, itertools.chain([first], fh), usecols, delimiter, skipped, None, [0])
+            yield from _text_blocks(path, itertools.chain([first], fh), usecols,
+                                    delimiter=delimiter, first_line=skipped, limit=None, counter=[0])
 
     return ScanSource(path, None, blocks, True)
 
@@ -133,8 +134,8 @@ def _read_pts(path: Path) -> ScanSource:
                     raise InputError(path, f"truncated: line {line_no} announces {count} points, file has 0")
                 delimiter, usecols = _text_layout(path, first, True)
                 got = [0]
-                yield from _text_blocks(path, itertools.chain([first], fh), usecols, delimiter,
-                                        line_no + read, count, got)
+                yield from _text_blocks(path, itertools.chain([first], fh), usecols, delimiter=delimiter,
+                                        first_line=line_no + read, limit=count, counter=got)
                 if got[0] < count:
                     raise InputError(path, f"truncated: line {line_no} announces {count} points, "
                                            f"file has {got[0]}")

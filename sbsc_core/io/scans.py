@@ -50,9 +50,23 @@ _CRS: dict[str, CrsReader] = {}
 
 def register_reader(extension: str, reader: ScanReader, *, count: PointCount | None = None,
                     crs: CrsReader | None = None) -> None:
-    """Make ``reader`` the reader of files ending in ``extension`` (e.g. ``".ply"``), ``count``
-    its upload check (the review app refuses a format without one) and ``crs`` the reader of
-    the coordinate system its files record (none: they record none)."""
+    """Make ``reader`` the reader of files ending in ``extension``.
+
+    Each format registers itself once, in ``sbsc_core/io/formats.py``; the readers, the
+    upload checks and :func:`scan_extensions` all come from this registry.
+
+    Parameters
+    ----------
+    extension
+        The file name's ending, with its dot (``".ply"``); matched without case.
+    reader
+        Opens a file of the format as a :class:`~sbsc_core.io.scan_source.ScanSource`.
+    count
+        The upload check: the point count in the file's header. The review app refuses a
+        format without one.
+    crs
+        Reads the coordinate system the files record; None: they record none.
+    """
     _READERS[extension.lower()] = reader
     if count is not None:
         _COUNTS[extension.lower()] = count
@@ -71,7 +85,13 @@ def point_count_check(extension: str) -> PointCount | None:
 
 
 def scan_readers() -> dict[str, ScanReader]:
-    """The registered readers by extension."""
+    """The registered readers by extension.
+
+    Returns
+    -------
+    dict[str, ScanReader]
+        A copy of the registry: extension (``".ply"``) -> reader.
+    """
     return dict(_READERS)
 
 
@@ -80,6 +100,11 @@ def scan_extensions() -> tuple[str, ...]:
 
     The one list of them: the CLI's help, the review app's upload check and its upload page
     take it from here.
+
+    Returns
+    -------
+    tuple[str, ...]
+        The extensions in the order they were registered, lower case, with their dot.
     """
     return tuple(_READERS)
 
@@ -136,7 +161,18 @@ def open_scan(path: Path | str) -> ScanSource:
 
 
 def scan_point_count(path: Path | str) -> int | None:
-    """The point count in the file's header (None for text files), without reading the points."""
+    """The point count in the file's header, without reading the points.
+
+    Parameters
+    ----------
+    path
+        A scan file of a registered format.
+
+    Returns
+    -------
+    int or None
+        The header's point count; None for formats whose header has none (text files).
+    """
     return open_scan(path).count
 
 
@@ -222,7 +258,7 @@ def iter_scan(path: Path | str | ScanSource, origin: np.ndarray | None = None, *
         raise InputError(path, "no points")
 
 
-def sample_scan(src: ScanSource, origin: np.ndarray, every: int, first: int = 0, start: int = 0,
+def sample_scan(src: ScanSource, origin: np.ndarray, every: int, *, first: int = 0, start: int = 0,
                 stop: int | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """A regular sample of points ``start:stop`` of a ``seekable`` source, and the points read.
 

@@ -131,7 +131,7 @@ def storey_counts(seg: Segmentation, expected: ExpectedCounts | None,
 
 
 def consensus_by_storey(depth: list[Candidate], colour: list[Candidate], wall_storey: dict[str, str],
-                        counts: dict[str, dict[str, int]], classes: list[str],
+                        *, counts: dict[str, dict[str, int]], classes: list[str],
                         run: Callable[[list[Candidate], list[Candidate], dict[str, int]], list[ConsensusHit]],
                         ) -> list[ConsensusHit]:
     """The consensus ``run(depth, colour, counts)`` on each storey with that storey's expected counts.
@@ -165,11 +165,13 @@ def _consensus(seg: Segmentation, walls: dict[str, WallResult], templates: dict[
     frames = {k: (o.frame, o.pixel_m) for k, o in orthos.items()}  # one object seen on two pieces of a wall
 
     def run(d: list[Candidate], c: list[Candidate], counts: dict[str, int] | None) -> list[ConsensusHit]:
-        return screened_consensus(d, c, counts, classes, s.consensus, s.confidence, reliefs=reliefs, frames=frames)
+        return screened_consensus(d, c, counts, classes, consensus_settings=s.consensus,
+                                  settings=s.confidence, reliefs=reliefs, frames=frames)
 
     per_storey = storey_counts(seg, expected, log)
     if per_storey is not None:
-        chosen = consensus_by_storey(depth_c, colour_c, {w.id: w.storey for w in seg.walls}, per_storey, classes, run)
+        chosen = consensus_by_storey(depth_c, colour_c, {w.id: w.storey for w in seg.walls},
+                                     counts=per_storey, classes=classes, run=run)
     else:
         chosen = run(depth_c, colour_c, None if expected is None else expected.counts)
     if s.confidence.enabled and s.confidence.report_unknown:  # regions like no class, for review
@@ -184,7 +186,7 @@ def detect(
     cloud: PointCloud,
     library: ModelLibrary,
     expected: Expected | None = None,
-    settings: DetectionSettings | None = None,
+    *, settings: DetectionSettings | None = None,
     progress: Progress | None = None,
     pool: ProcessPoolExecutor | None = None,
 ) -> DetectionResult:
@@ -236,7 +238,7 @@ def detect(
     templates = make_templates(library, s.orthoimage.pixel_m, classes)
     prototypes = learn_prototypes(templates, s.colour)
     timings["templates"] = time.perf_counter() - t
-    walls = _collect_walls(_walls_results(cloud, seg, templates, prototypes, s, pool), len(seg.walls),
+    walls = _collect_walls(_walls_results(cloud, seg, templates, prototypes, s, pool=pool), len(seg.walls),
                            progress, timings)
     if s.ceilings.enabled or s.columns.enabled:  # objects on ceilings and columns (issue 11)
         beyond = _beyond_walls_in_memory(cloud, seg, library, expected, s, pool=pool, progress=progress, timings=timings, columns=columns)
@@ -291,8 +293,10 @@ def _beyond_walls_in_memory(cloud: PointCloud, seg: Segmentation, library: Model
     executor: Executor = (wall_pool(s) if own else pool) or InlineExecutor()
     try:
         with tempfile.TemporaryDirectory(prefix=".sbsc-surfaces-", dir=os.environ.get("SBSC_SCRATCH_DIR")) as tmp:
-            return _beyond_walls(memory_parts(cloud), np.asarray(cloud.origin, np.float64), seg, levels, columns,
-                                 library, expected, s, executor=executor, scratch=Path(tmp), parked=None,
+            return _beyond_walls(memory_parts(cloud), np.asarray(cloud.origin, np.float64), seg,
+                                 levels=levels, columns=columns,
+                                 library=library, expected=expected, s=s, executor=executor,
+                                 scratch=Path(tmp), parked=None,
                                  in_flight=2 * max(1, _worker_count(s)), progress=progress, timings=timings,
                                  log=lambda msg: None, part_executor=InlineExecutor())
     finally:
@@ -326,8 +330,9 @@ class _BeyondWalls:
         result.surfaces = self.surfaces
 
 
-def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, levels: list | None, columns: list,
-                  library: ModelLibrary, expected: ExpectedCounts | None, s: DetectionSettings, *,
+def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, levels: list | None,
+                  columns: list,
+                  library: ModelLibrary, expected: ExpectedCounts | None, s: DetectionSettings,
                   executor: Executor, scratch: Path, parked: Path | None, in_flight: int, progress: Progress,
                   timings: dict[str, float], log: Callable[[str], None],
                   part_executor: Executor | None = None) -> _BeyondWalls:
@@ -337,7 +342,8 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, levels
     if s.ceilings.enabled:  # objects on ceilings: the tiles join the walls in the consensus
         from .surfaces import detect_ceilings
 
-        ceil = detect_ceilings(parts, origin, seg, library, counts, s, executor=executor, scratch=scratch,
+        ceil = detect_ceilings(parts, origin, seg, library=library, expected=counts, s=s,
+                               executor=executor, scratch=scratch,
                                parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
                                levels=levels, part_executor=part_executor)
         out.walls.update(ceil.walls)
@@ -347,7 +353,8 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, levels
     if columns:  # objects on columns: their faces join the walls in the consensus too
         from .surfaces import detect_columns
 
-        cols = detect_columns(parts, origin, columns, library, counts, s, executor=executor, scratch=scratch,
+        cols = detect_columns(parts, origin, columns, library=library, expected=counts, s=s,
+                              executor=executor, scratch=scratch,
                               parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
                               part_executor=part_executor)
         out.walls.update(cols.walls)
@@ -359,7 +366,8 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, levels
 
 
 def _storey_points(executor: Executor, parts: Sequence, sample_meta: list[tuple[int, bool]], origin: np.ndarray,
-                   sources: Sequence[str], points: int, s: DetectionSettings, *, scratch: Path, in_flight: int,
+                   *, sources: Sequence[str], points: int, s: DetectionSettings, scratch: Path,
+                   in_flight: int,
                    log: Callable[[str], None]) -> StoreyPoints:
     """The ``storey_points`` of :func:`segment_storeys` for a scan of ``points`` points read out
     of core: one more pass over the parts (:func:`~sbsc_core.scene.storey_samples.storey_part`)
@@ -370,8 +378,8 @@ def _storey_points(executor: Executor, parts: Sequence, sample_meta: list[tuple[
     def read(bounds: list[tuple[float, float]], shares: list[float]) -> Iterator[PointCloud]:
         t = time.perf_counter()
         steps = storey_steps(shares, points, limit)
-        jobs = [(part, origin, bounds, steps, str(scratch), n, spilled)
-                for part, (n, spilled) in zip(parts, sample_meta, strict=True)]
+        jobs = [dict(part=part, origin=origin, bounds=bounds, steps=steps, scratch=str(scratch), points=n,
+                     spilled=spilled) for part, (n, spilled) in zip(parts, sample_meta, strict=True)]
         written = np.zeros(len(bounds), np.int64)
         for _, got in _as_done(executor, jobs, storey_part, in_flight):
             written += np.asarray(got, np.int64)
@@ -379,7 +387,7 @@ def _storey_points(executor: Executor, parts: Sequence, sample_meta: list[tuple[
             + ", ".join(f"S{k + 1} {int(n):,} points (every {st})"
                         for k, (n, st) in enumerate(zip(written, steps, strict=True))))
         for k in range(len(bounds)):
-            yield storey_cloud(scratch, parts, k, origin, sources, limit)
+            yield storey_cloud(scratch, parts, k, origin, sources=sources, limit=limit)
 
     return read
 
@@ -494,7 +502,7 @@ def detect_scans(
         # scanned alone (the sample is let go first unless the ceilings or columns need it)
         if not (s.columns.enabled or s.ceilings.enabled):
             del cloud
-        seg = segment_storeys(found, _storey_points(executor, parts, sample_meta, found.origin, sources, points, s,
+        seg = segment_storeys(found, _storey_points(executor, parts, sample_meta, found.origin, sources=sources, points=points, s=s,
                                                     scratch=Path(scratch), in_flight=2 * workers, log=log),
                               s.segmentation, point_index=False)
     else:
@@ -523,8 +531,8 @@ def detect_scans(
     t = time.perf_counter()
     progress(Stage.PARTITION, 0.0)
     index = WallIndex.build(seg.walls, origin, s.segmentation)
-    part_jobs = [(part, origin, index, str(scratch), n, spilled, s.orthoimage)
-                 for part, (n, spilled) in zip(parts, sample_meta, strict=True)]
+    part_jobs = [dict(part=part, origin=origin, index=index, scratch=str(scratch), points=n, spilled=spilled,
+                      ortho=s.orthoimage) for part, (n, spilled) in zip(parts, sample_meta, strict=True)]
     kept = np.zeros(len(seg.walls), np.int64)
     for i, (_, written) in enumerate(_as_done(executor, part_jobs, partition_part, 2 * workers)):
         kept += np.asarray(written, np.int64)
@@ -542,8 +550,8 @@ def detect_scans(
     parked = Path(scratch) / "images"
     parked.mkdir(exist_ok=True)
     # each task writes its wall's images itself: this process only receives the small results
-    wall_jobs = [(str(scratch), w, seg.walls[w].id, seg.walls[w].frame, templates, prototypes, s, str(parked))
-                 for w in order]
+    wall_jobs = [dict(scratch=str(scratch), w=w, wall_id=seg.walls[w].id, frame=seg.walls[w].frame,
+                      templates=templates, prototypes=prototypes, s=s, images=str(parked)) for w in order]
     with ThreadPoolExecutor(max_workers=1) as cleaner:  # frees the disk while the walls run, not at the end
 
         def results() -> Iterator[tuple[str, WallResult, dict[str, float]]]:
@@ -553,7 +561,8 @@ def detect_scans(
 
         done = _collect_walls(results(), len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
-    beyond = _beyond_walls(parts, origin, seg, levels, found_columns, library, expected, s, executor=executor,
+    beyond = _beyond_walls(parts, origin, seg, levels=levels, columns=found_columns,
+                           library=library, expected=expected, s=s, executor=executor,
                            scratch=Path(scratch), parked=parked, in_flight=2 * workers, progress=progress,
                            timings=timings, log=log)
     walls.update(beyond.walls)

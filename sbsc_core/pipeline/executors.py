@@ -4,10 +4,11 @@ order with a bounded number in flight."""
 from __future__ import annotations
 
 import contextlib
+import functools
 import itertools
 import multiprocessing
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import (
     FIRST_COMPLETED,
     Executor,
@@ -66,7 +67,7 @@ def wall_pool(settings: DetectionSettings, n_walls: int | None = None) -> Proces
 
 def _walls_results(cloud: PointCloud, seg: Segmentation, templates: dict[str, ModelTemplate],
                    prototypes: ColourPrototypes, s: DetectionSettings,
-                   pool: ProcessPoolExecutor | None = None) -> Iterator[tuple[str, WallResult, dict[str, float]]]:
+                   *, pool: ProcessPoolExecutor | None = None) -> Iterator[tuple[str, WallResult, dict[str, float]]]:
     """Process every wall, in worker processes (``pool``, or one of ``s.workers`` made here)
     when there are several walls.
 
@@ -141,8 +142,17 @@ def wall_executor(settings: DetectionSettings, scheduler: str | None = None) -> 
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _as_done(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int) -> Iterator[tuple[int, object]]:
-    """``(k, fn(*job))`` for the k-th job, as the tasks finish, with at most ``in_flight`` submitted at once.
+Job = tuple | Mapping[str, object]
+"""One task's arguments: positional (a tuple) or by name (a mapping, for keyword-only options)."""
+
+
+def _submit(ex: Executor, fn: Callable, job: Job) -> Future:
+    return ex.submit(fn, **job) if isinstance(job, Mapping) else ex.submit(fn, *job)
+
+
+def _as_done(ex: Executor, jobs: Iterable[Job], fn: Callable, in_flight: int) -> Iterator[tuple[int, object]]:
+    """``(k, fn(*job))`` (``fn(**job)`` for a mapping) for the k-th job, as the tasks finish, with
+    at most ``in_flight`` submitted at once.
 
     A new job is submitted as soon as any task finishes (not only the oldest), so that a
     long task never leaves the other workers idle; the caller puts the results back in
@@ -152,7 +162,7 @@ def _as_done(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int) 
     todo = enumerate(jobs)
     try:
         for k, job in itertools.islice(todo, in_flight):
-            pending[ex.submit(fn, *job)] = k
+            pending[_submit(ex, fn, job)] = k
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in sorted(done, key=pending.__getitem__):
@@ -160,15 +170,15 @@ def _as_done(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int) 
                 res = fut.result()
                 nxt = next(todo, None)
                 if nxt is not None:
-                    pending[ex.submit(fn, *nxt[1])] = nxt[0]
+                    pending[_submit(ex, fn, nxt[1])] = nxt[0]
                 yield k, res
     finally:
         for f in pending:
             f.cancel()
 
 
-def _in_order(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int) -> Iterator:
-    """Results of ``fn(*job)`` in job order, computed as by :func:`_as_done` (a result that is
+def _in_order(ex: Executor, jobs: Iterable[Job], fn: Callable, in_flight: int) -> Iterator:
+    """Results of ``fn(*job)`` (or ``fn(**job)``) in job order, computed as by :func:`_as_done` (a result that is
     ready early waits for the ones before it)."""
     ready: dict[int, object] = {}
     nxt = 0
@@ -179,16 +189,17 @@ def _in_order(ex: Executor, jobs: Iterable[tuple], fn: Callable, in_flight: int)
             nxt += 1
 
 
-def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_jobs: list[tuple], job_fn: Callable,
+def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_jobs: list[Job],
+                  job_fn: Callable,
                   surfaces: Sequence, library: ModelLibrary, classes: list[str], s: DetectionSettings,
                   scratch: Path, parked: Path | None, in_flight: int, progress: Progress,
                   part_executor: Executor | None = None,
                   ) -> tuple[np.ndarray, dict[str, WallResult], dict[str, ModelTemplate]]:
     """A stage on surfaces beyond the walls (ceiling tiles, column faces), run as the walls' is.
 
-    ``part_fn(*job)`` bins one scan part's points into the surfaces' partitions and returns
-    the points written per surface; then ``job_fn(scratch, k, surface, templates, prototypes,
-    s)`` runs the walls' stages on surface number ``k`` and returns ``(id, result, timings)``.
+    ``part_fn(*job)`` (``part_fn(**job)`` for a mapping) bins one scan part's points into the
+    surfaces' partitions and returns the points written per surface; then ``job_fn(scratch, k,
+    surface, templates=, prototypes=, s=)`` runs the walls' stages on surface number ``k`` and returns ``(id, result, timings)``.
     Surfaces that got no point are left out (no work, no result). Returns the points binned
     per surface, the results by surface id (their images parked in ``parked``,
     :func:`park_wall`, unless it is None) and the templates of ``classes``. ``part_executor`` (default:
@@ -198,9 +209,10 @@ def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_job
     for _, written in _as_done(part_executor or executor, part_jobs, part_fn, in_flight):
         kept += np.asarray(written, np.int64)
     templates, prototypes = _templates_job(library, s, classes)
-    jobs = [(str(scratch), k, sf, templates, prototypes, s) for k, sf in enumerate(surfaces) if kept[k] > 0]
+    jobs = [(str(scratch), k, sf) for k, sf in enumerate(surfaces) if kept[k] > 0]
+    job = functools.partial(job_fn, templates=templates, prototypes=prototypes, s=s)
     results: dict[str, WallResult] = {}
-    for i, (sid, res, _) in enumerate(_in_order(executor, jobs, job_fn, in_flight)):
+    for i, (sid, res, _) in enumerate(_in_order(executor, jobs, job, in_flight)):
         results[sid] = res if parked is None else park_wall(res, parked)
         progress(stage, (i + 1) / len(jobs))
     return kept, results, templates

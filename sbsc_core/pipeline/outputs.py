@@ -25,6 +25,26 @@ from .walls import WallResult, _box_uv, _write_wall_images, overlay_image
 
 @dataclass
 class DetectionResult:
+    """What :func:`~sbsc_core.pipeline.detect.detect` found, before it is written out.
+
+    Attributes
+    ----------
+    segmentation
+        The storeys, floors, ceilings and walls found in the cloud.
+    walls
+        Each surface's orthoimages, RoIs and candidates, by wall (or ceiling tile, column face) id.
+    detections
+        The recognized objects (the consensus of depth and colour, placed and scored).
+    timings
+        Seconds per stage.
+    classes
+        The classes searched for.
+    surfaces
+        The surfaces beyond walls (ceiling tiles, column faces) as in contract 4.
+    registration
+        Per scan file, how its registration was refined.
+    """
+
     segmentation: Segmentation
     walls: dict[str, WallResult]
     detections: list[Detection]
@@ -48,7 +68,7 @@ def _parked_overlay_job(parked: str, w: WallResult, detections: list[Detection])
     return wid
 
 
-def write_outputs(result: DetectionResult, out: Path, pixel_m: float, extra: dict | None = None,
+def write_outputs(result: DetectionResult, out: Path, pixel_m: float, *, extra: dict | None = None,
                   parked: Path | None = None, executor: Executor | None = None) -> None:
     """Write detections.json, rois.json and the per-wall images into ``out``.
 

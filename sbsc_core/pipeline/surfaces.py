@@ -35,7 +35,7 @@ from ..stages import Stage
 from ..types import Segmentation
 
 
-def ceiling_tile_job(scratch: str, k: int, tile: CeilingTile, templates: dict, prototypes, s) -> tuple:
+def ceiling_tile_job(scratch: str, k: int, tile: CeilingTile, *, templates: dict, prototypes, s) -> tuple:
     """One tile's work (what a worker runs): orthoimage, the walls' stages, candidates in its core."""
     from .walls import WallResult, process_orthoimage
 
@@ -48,8 +48,8 @@ def ceiling_tile_job(scratch: str, k: int, tile: CeilingTile, templates: dict, p
     return tile.id, res, t_stage
 
 
-def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg: Segmentation, library,
-                    expected: dict | None, s, *, executor, scratch: Path, parked: Path, in_flight: int, progress,
+def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg: Segmentation, *, library,
+                    expected: dict | None, s, executor, scratch: Path, parked: Path, in_flight: int, progress,
                     timings: dict, log, levels: list[CeilingLevels] | None = None,
                     part_executor=None) -> CeilingResults:
     """Bin the ceilings' points into tiles, then run the walls' stages on every tile (see the module).
@@ -67,7 +67,8 @@ def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg:
         return CeilingResults({}, {}, classes, [])
     progress(Stage.CEILINGS, 0.0)
     walls = [w.frame for w in seg.walls]
-    jobs = [(part, origin, tiles, walls, str(scratch), s.orthoimage, s.ceilings.wall_clear_m) for part in parts]
+    jobs = [dict(part=part, origin=origin, tiles=tiles, walls=walls, scratch=str(scratch), ortho=s.orthoimage,
+                 wall_clear_m=s.ceilings.wall_clear_m) for part in parts]
     kept, results, templates = surface_stage(
         executor, stage=Stage.CEILINGS, part_fn=ceiling_part, part_jobs=jobs, job_fn=ceiling_tile_job, surfaces=tiles,
         library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress,
@@ -79,7 +80,7 @@ def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg:
     return CeilingResults(results, templates, classes, [t for t in tiles if t.id in results])
 
 
-def column_face_job(scratch: str, k: int, face: ColumnFace, templates: dict, prototypes, s) -> tuple:
+def column_face_job(scratch: str, k: int, face: ColumnFace, *, templates: dict, prototypes, s) -> tuple:
     """One face's work (what a worker runs): orthoimage and the walls' stages."""
     from .walls import WallResult, process_orthoimage
 
@@ -94,8 +95,9 @@ def column_face_job(scratch: str, k: int, face: ColumnFace, templates: dict, pro
     return face.id, res, t_stage
 
 
-def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray, columns: list[FoundColumn], library,
-                   expected: dict | None, s, *, executor, scratch: Path, parked: Path, in_flight: int, progress,
+def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray,
+                   columns: list[FoundColumn], *, library,
+                   expected: dict | None, s, executor, scratch: Path, parked: Path, in_flight: int, progress,
                    timings: dict, log, part_executor=None) -> ColumnResults:
     """Bin the columns' points into their faces, then run the walls' stages on every face."""
     from .executors import surface_stage
@@ -109,7 +111,9 @@ def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray, colum
     progress(Stage.COLUMNS, 0.0)
     by_id = {c.id: c for c in columns}
     reach = [max(by_id[f.column].size_m) / 2 * math.sqrt(2) + s.orthoimage.depth_range_m[1] + 0.05 for f in faces]
-    jobs = [(part, origin, faces, reach, str(scratch), s.orthoimage) for part in parts]
+    jobs = [dict(part=part, origin=origin, faces=faces, reach_m=reach, scratch=str(scratch),
+                 ortho=s.orthoimage)
+            for part in parts]
     kept, results, templates = surface_stage(
         executor, stage=Stage.COLUMNS, part_fn=column_part, part_jobs=jobs, job_fn=column_face_job, surfaces=faces,
         library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress,

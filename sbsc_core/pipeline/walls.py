@@ -103,7 +103,8 @@ def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], p
     return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
 
 
-def _partition_wall_job(scratch: str, w: int, wall_id: str, frame: WallFrame, templates: dict[str, ModelTemplate],
+def _partition_wall_job(scratch: str, w: int, wall_id: str, frame: WallFrame, *,
+                        templates: dict[str, ModelTemplate],
                         prototypes: ColourPrototypes, s: DetectionSettings, images: str | None = None
                         ) -> tuple[str, WallResult, dict[str, float]]:
     """One wall's work from its partition file (what a worker, local or on a cluster, runs).

@@ -98,8 +98,9 @@ def _kmeans_1d(values: np.ndarray, k: int, merge_tol: float, bins: int = 256,
     cum_w = [0.0] + cw.tolist()
     cum_s = [0.0] + np.cumsum(hist * mids).tolist()
     width, tol = (hi - lo) / bins, 1e-9 * (hi - lo)
-    c = _lloyd3(centres.tolist(), cum_w, cum_s, lo, width, tol, bins, iterations) if k == 3 else \
-        _lloyd(centres.tolist(), cum_w, cum_s, lo, width, tol, bins, iterations)
+    c = _lloyd3(centres.tolist(), cum_w, cum_s, lo=lo, width=width, tol=tol, bins=bins,
+                iterations=iterations) if k == 3 else \
+        _lloyd(centres.tolist(), cum_w, cum_s, lo=lo, width=width, tol=tol, bins=bins, iterations=iterations)
     # the classes that hold any bin (a bin goes to the nearest centre, ties to the lower)
     bounds = [0.5 * (q + p) for p, q in zip(c, c[1:], strict=False)]
     ends = [0] + np.searchsorted(mids, bounds, side="right").tolist() + [bins]
@@ -126,7 +127,7 @@ def _kmeans_1d(values: np.ndarray, k: int, merge_tol: float, bins: int = 256,
     return centres, labels, counts
 
 
-def _lloyd(c: list[float], cum_w: list[float], cum_s: list[float], lo: float, width: float, tol: float,
+def _lloyd(c: list[float], cum_w: list[float], cum_s: list[float], *, lo: float, width: float, tol: float,
            bins: int, iterations: int) -> list[float]:
     """Lloyd's iterations on a histogram given by its cumulative weights and weighted sums."""
     for _ in range(iterations):
@@ -141,7 +142,7 @@ def _lloyd(c: list[float], cum_w: list[float], cum_s: list[float], lo: float, wi
     return c
 
 
-def _lloyd3(c: list[float], cum_w: list[float], cum_s: list[float], lo: float, width: float, tol: float,
+def _lloyd3(c: list[float], cum_w: list[float], cum_s: list[float], *, lo: float, width: float, tol: float,
             bins: int, iterations: int) -> list[float]:
     """:func:`_lloyd` for three classes, written out (the same arithmetic, the same result)."""
     a, b, d = c

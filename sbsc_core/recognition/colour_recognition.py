@@ -458,7 +458,7 @@ def _best_placement(roi: Box, proto: WallPrototype, settings: ColourRecognitionS
 
 
 def _place(img: ColourImage, roi: Box, proto: WallPrototype, settings: ColourRecognitionSettings,
-           diff: np.ndarray, turn: float | None = None) -> tuple[tuple[float, float], float, Box]:
+           diff: np.ndarray, *, turn: float | None = None) -> tuple[tuple[float, float], float, Box]:
     """Footprint centre, rotation and box of a class in a RoI (cross-correlation, else centroid).
 
     The footprint centre is searched around the RoI centre minus the prototype's offset of
@@ -568,7 +568,7 @@ def match_colour(
         for rho, cid in scored:
             if rho > settings.mu_c:
                 break
-            centre, deg, box = _place(img, roi, protos[cid], settings, diff, None if turned is None else turned[0])
+            centre, deg, box = _place(img, roi, protos[cid], settings, diff, turn=None if turned is None else turned[0])
             if not depth_agrees(relief, prototypes.templates[cid], box, deg, settings):
                 continue  # a protruding class where the wall is flat: not this class
             out.append(Candidate(cid, ortho.wall_id, "colour", box, centre, rho, roi, deg))

@@ -247,8 +247,9 @@ def screen_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[C
 
 
 def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected: dict[str, int] | None,
-                       classes: list[str], consensus_settings: ConsensusSettings, settings: ConfidenceSettings,
-                       *, reliefs: dict[str, float] | None = None, max_rounds: int = 50,
+                       classes: list[str], *, consensus_settings: ConsensusSettings,
+                       settings: ConfidenceSettings,
+                       reliefs: dict[str, float] | None = None, max_rounds: int = 50,
                        frames: Mapping[str, tuple[WallFrame, float]] | None = None) -> list[ConsensusHit]:
     """The consensus of every class (:func:`~sbsc_core.recognition.consensus.consensus_all`) with the
     "none of these" rule inside it, in class order.

@@ -407,7 +407,7 @@ def _rois_from_jd(jd: np.ndarray, wall: np.ndarray, settings: DepthRecognitionSe
 
 
 def isolation(jd: np.ndarray, box: Box, threshold_m: float, gap_px: int, width_px: int,
-              known: np.ndarray | None = None, min_known: float = 0.5, *, trails: bool = False) -> float:
+              *, known: np.ndarray | None = None, min_known: float = 0.5, trails: bool = False) -> float:
     """The largest share, over the four sides of ``box``, of a strip of relief above ``threshold_m``.
 
     Each strip runs along one side at ``gap_px`` .. ``gap_px + width_px`` pixels outside the
@@ -475,7 +475,7 @@ def is_trail(profile: np.ndarray, threshold_m: float) -> bool:
 
 
 def relief_overlap(jd: np.ndarray, model: np.ndarray, box: Box, pad_px: int, threshold_m: float,
-                   gain: float, known: np.ndarray | None = None) -> float:
+                   *, gain: float, known: np.ndarray | None = None) -> float:
     """Intersection over union of where the model and the scene stand out by ``threshold_m``.
 
     ``model`` is the padded (and smoothed) depth model over ``box`` grown by ``pad_px``; the
@@ -702,7 +702,7 @@ def match_depth(
             views[key] = model_view(jm, known, found, area_px)
         return views[key]
 
-    def search(cid: str, deg: float, rot: np.ndarray, where: list[Box], peak_m: float, area_px: int
+    def search(cid: str, deg: float, rot: np.ndarray, where: list[Box], *, peak_m: float, area_px: int
                ) -> list[Candidate]:
         h, w = rot.shape
         v = view_of(peak_m, area_px)
@@ -713,7 +713,7 @@ def match_depth(
 
         def overlap(r: float, c: float, gain: float) -> float:
             return relief_overlap(jml, smooth_model, box_at((r, c), h, w), settings.template_pad_px,
-                                  settings.isolation_relief_fraction * relief, gain, v.known)
+                                  settings.isolation_relief_fraction * relief, gain=gain, known=v.known)
 
         def plausible(r: float, c: float, gain: float) -> bool:
             box = box_at((r, c), h, w)
@@ -722,7 +722,7 @@ def match_depth(
                 return False  # partly behind another object: not told apart from a smaller class
             thr = max(settings.isolation_relief_fraction * relief * gain, noise_relief)
             if isolation(jml, box, thr, settings.isolation_gap_px, settings.isolation_width_px,
-                         v.known, settings.min_known_share,
+                         known=v.known, min_known=settings.min_known_share,
                          trails=settings.isolation_trails) > settings.isolation_max_occupancy:
                 return False
             return overlap(r, c, gain) >= settings.min_relief_iou
@@ -768,11 +768,12 @@ def match_depth(
                                     gap_px=int(round(settings.part_gap_fraction * min(rot.shape))),
                                     slack_px=settings.template_pad_px) \
                     if settings.part_gap_fraction > 0 else []
-                found.extend(search(cid, deg, rot, rois + [b for b in parts if b not in rois], peak, area))
+                found.extend(search(cid, deg, rot, rois + [b for b in parts if b not in rois],
+                                    peak_m=peak, area_px=area))
 
-            def turned(a: float, where: list[Box], cid: str = cid, model: np.ndarray = model,
+            def turned(a: float, where: list[Box], *, cid: str = cid, model: np.ndarray = model,
                        peak: float = peak, area: int = area) -> list[Candidate]:
-                return search(cid, a, rotate_template(model, a), where, peak, area)
+                return search(cid, a, rotate_template(model, a), where, peak_m=peak, area_px=area)
 
             turners.append(turned)
             for roi, turn in turns:

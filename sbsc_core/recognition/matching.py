@@ -437,7 +437,7 @@ def match_in_rois(
     opts = _Search(pad_px, margin_px, min_energy, min_known, full_known, masked_pre)
     out: list[Match] = []
     for roi in rois:
-        c = _correlate_around(image, tp, (h, w), roi, known if image.ndim == 2 else None, opts)
+        c = _correlate_around(image, tp, (h, w), roi, known=known if image.ndim == 2 else None, o=opts)
 
         def judge(y: int, x: int, c: _RoiCorrelation = c) -> str:
             if c.share is not None and c.share[y, x] < min_known:  # seen too little: no object here
@@ -490,7 +490,7 @@ class _RoiCorrelation:
 
 
 def _correlate_around(image: np.ndarray, tp: np.ndarray, size: tuple[int, int], roi: Box,
-                      known: np.ndarray | None, o: _Search) -> _RoiCorrelation:
+                      *, known: np.ndarray | None, o: _Search) -> _RoiCorrelation:
     """NCC map of the padded template ``tp`` (unpadded ``size``) whose centre lies in ``roi``."""
     h, w = size
     ph, pw = tp.shape[:2]

@@ -220,7 +220,7 @@ def ceiling_levels(cloud: PointCloud, seg: Segmentation, s: CeilingSettings) -> 
     return out
 
 
-def _cut(x0: float, x1: float, y0: float, y1: float, z: float, s: CeilingSettings
+def _cut(x0: float, x1: float, y0: float, y1: float, z: float, *, s: CeilingSettings
          ) -> list[tuple[WallFrame, tuple[float, float, float, float]]]:
     """The plan box cut into tiles of at most ``s.tile_m``, each grown by ``s.overlap_m``:
     (frame at height ``z``, core), row by row from the top (max y; v runs along -y)."""
@@ -269,7 +269,7 @@ def ceiling_tiles(seg: Segmentation, s: CeilingSettings, levels: list[CeilingLev
                     boxes.append((k, z, box))
         k = 0
         for level, z, (bx0, bx1, by0, by1) in boxes:
-            for frame, core in _cut(bx0, bx1, by0, by1, z, s):
+            for frame, core in _cut(bx0, bx1, by0, by1, z, s=s):
                 k += 1
                 tid = (f"{sid}-" if several else "") + f"C{k:02d}"
                 tiles.append(CeilingTile(tid, sid, frame, core, level, lv))
@@ -281,7 +281,7 @@ def _tile_dir(scratch: Path, k: int) -> Path:
 
 
 def ceiling_part(part: ScanPart | MemoryPart, origin: np.ndarray, tiles: list[CeilingTile], walls: list[WallFrame],
-                 scratch: str, ortho: OrthoimageSettings, wall_clear_m: float) -> list[int]:
+                 scratch: str, *, ortho: OrthoimageSettings, wall_clear_m: float) -> list[int]:
     """Stream one part of a scan and append each tile's binned points to its partition.
 
     A point goes to every tile of its ceiling level whose image it falls in (tiles overlap),
@@ -319,8 +319,8 @@ def ceiling_part(part: ScanPart | MemoryPart, origin: np.ndarray, tiles: list[Ce
                 t = tiles[k]
                 x0, y1 = float(t.frame.origin[0]), float(t.frame.origin[1])  # axis_u +x, axis_v -y
                 x1, y0 = x0 + t.frame.width_m, y1 - t.frame.height_m
-                inside = np.flatnonzero(_in_span(xyz, 0, x0, x1, origin, margin, spans)
-                                        & _in_span(xyz, 1, y0, y1, origin, margin, spans))
+                inside = np.flatnonzero(_in_span(xyz, 0, x0, x1, origin=origin, margin=margin, cache=spans)
+                                        & _in_span(xyz, 1, y0, y1, origin=origin, margin=margin, cache=spans))
                 uvd = wall_coordinates(xyz[inside], t.frame, origin)
                 keep, pixel = ortho_pixels(uvd, t.frame, ortho)
                 if not len(pixel):
@@ -330,7 +330,7 @@ def ceiling_part(part: ScanPart | MemoryPart, origin: np.ndarray, tiles: list[Ce
     return written
 
 
-def _in_span(xyz: np.ndarray, axis: int, lo: float, hi: float, origin: np.ndarray, margin: float,
+def _in_span(xyz: np.ndarray, axis: int, lo: float, hi: float, *, origin: np.ndarray, margin: float,
              cache: dict[tuple[int, float, float], np.ndarray]) -> np.ndarray:
     """Which points lie within [``lo``, ``hi``] grown by ``margin`` along plan ``axis`` (0: x,
     1: y); kept in ``cache`` for the next tile of the same span."""

@@ -400,7 +400,7 @@ def _face_dir(scratch: Path, k: int) -> Path:
 
 
 def column_part(part: ScanPart | MemoryPart, origin: np.ndarray, faces: list[ColumnFace], reach_m: list[float], scratch: str,
-                ortho: OrthoimageSettings) -> list[int]:
+                *, ortho: OrthoimageSettings) -> list[int]:
     """Stream one part and append each face's binned points to its partition (records per face)."""
     root = Path(scratch)
     written = [0] * len(faces)

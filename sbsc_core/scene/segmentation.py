@@ -168,7 +168,7 @@ def segment_floor_ceiling_walls(cloud: PointCloud, settings: SegmentationSetting
     floor, ceiling = found.levels[0]
     sample = found.sample if found.sample is not None else _dense_sample(cloud, s, found.box)[2]
     found.sample = None  # not kept beyond the walls' fit
-    walls = _storey_walls(cloud.xyz, sample, found.box, floor, ceiling, cloud.origin, s)
+    walls = _storey_walls(cloud.xyz, sample, found.box, floor, ceiling, origin=cloud.origin, s=s)
     return Segmentation(floor_z=floor + z0, ceiling_z=ceiling + z0, storeys=[Storey("S1", floor + z0, ceiling + z0)],
                         walls=[Wall(id=f"W{i + 1:02d}", frame=f, point_index=idx, storey="S1")
                                for i, (f, idx) in enumerate(walls)], stray_points=found.stray)
@@ -245,7 +245,7 @@ def segment_storey(cloud: PointCloud, sid: str, levels: tuple[float, float],
     else:  # not one storey on its own: the levels and the dense part found in the whole scan
         sample = _dense_sample(cloud, s, box)[2]
     try:
-        found = _storey_walls(cloud.xyz, sample, box, floor, ceiling, cloud.origin, s)
+        found = _storey_walls(cloud.xyz, sample, box, floor, ceiling, origin=cloud.origin, s=s)
     except NoWallsError as exc:
         raise NoWallsError(f"storey {sid} (z = {floor + z0:.2f} to {ceiling + z0:.2f} m): {exc}") from None
     return Segmentation(floor_z=floor + z0, ceiling_z=ceiling + z0, storeys=[Storey(sid, floor + z0, ceiling + z0)],
@@ -316,7 +316,7 @@ def _z_index(xyz: np.ndarray, lo: float, hi: float) -> np.ndarray:
 
 
 def _storey_walls(xyz: np.ndarray, sample: np.ndarray, box: DenseBox, floor: float, ceiling: float,
-                  origin: np.ndarray, s: SegmentationSettings) -> list[tuple[WallFrame, np.ndarray]]:
+                  *, origin: np.ndarray, s: SegmentationSettings) -> list[tuple[WallFrame, np.ndarray]]:
     """Section 3.1 on one storey: its walls (frame, point indices into ``xyz``) in id order."""
     height = ceiling - floor
     zs = sample[:, 2]
@@ -338,11 +338,12 @@ def _storey_walls(xyz: np.ndarray, sample: np.ndarray, box: DenseBox, floor: flo
         raise NoWallsError("no walls found: no wall face is long and high enough")
     del band, slab
 
-    index = _assign_points(xyz, segs, floor + s.slab_tolerance_m, ceiling - s.slab_tolerance_m, s, box)
+    index = _assign_points(xyz, segs, floor + s.slab_tolerance_m, ceiling - s.slab_tolerance_m, s=s, box=box)
     walls: list[tuple[WallFrame, np.ndarray]] = []
     threads = min(_ASSIGN_THREADS, os.cpu_count() or 1) if len(xyz) >= _THREAD_MIN_POINTS else 1
     with ThreadPoolExecutor(max_workers=threads) as pool:  # each wall on its own (numpy releases the GIL)
-        for done in pool.map(lambda job: _final_frame(xyz, job[1], job[0], floor, ceiling, origin, s),
+        for done in pool.map(lambda job: _final_frame(xyz, job[1], job[0], floor, ceiling,
+                                                      origin=origin, s=s),
                              zip(segs, index, strict=True)):
             if done is not None and done[0].width_m >= s.min_wall_length_m:
                 walls.append(done)
@@ -628,7 +629,7 @@ def _wall_planes(cells: dict[str, np.ndarray], floor: float, height: float, s: S
         return []
     ns = np.array([p[0] for p in refined])
     ss = np.array([p[1] for p in refined])
-    best, ok = _nearest_planes(c[:, :2], nrm[:, :2], ns, ss, math.cos(3 * tol), s.wall_plane_tolerance_m)
+    best, ok = _nearest_planes(c[:, :2], nrm[:, :2], ns, ss, min_cos=math.cos(3 * tol), tolerance=s.wall_plane_tolerance_m)
     segs: list[_Segment] = []
     for k in range(len(refined)):
         mine = c[ok & (best == k)]
@@ -659,7 +660,7 @@ def _distinct_planes(planes: list[tuple[np.ndarray, float, np.ndarray]], min_cos
     return kept
 
 
-def _nearest_planes(xy: np.ndarray, nxy: np.ndarray, ns: np.ndarray, ss: np.ndarray, min_cos: float,
+def _nearest_planes(xy: np.ndarray, nxy: np.ndarray, ns: np.ndarray, ss: np.ndarray, *, min_cos: float,
                     tolerance: float) -> tuple[np.ndarray, np.ndarray]:
     """For each cell (plan centroid ``xy``, normal ``nxy``) the nearest plane ``ns . p = ss`` among
     those whose normal is aligned with its own (``|cos| >= min_cos``): (plane index, within
@@ -951,7 +952,7 @@ def _bucket(a: np.ndarray, lo: float, cell: float, n: int) -> np.ndarray:
 
 
 def _assign_points(xyz: np.ndarray, segs: list[_Segment], z_lo: float, z_hi: float,
-                   s: SegmentationSettings, box: DenseBox | None = None) -> list[np.ndarray]:
+                   *, s: SegmentationSettings, box: DenseBox | None = None) -> list[np.ndarray]:
     """Indices of the points of each wall: in its slab and nearer to its plane than to any other's.
 
     Every point is decided on its own, so a large cloud is cut into consecutive parts that
@@ -960,16 +961,16 @@ def _assign_points(xyz: np.ndarray, segs: list[_Segment], z_lo: float, z_hi: flo
     n = len(xyz)
     parts = min(_ASSIGN_THREADS, os.cpu_count() or 1) if n >= _THREAD_MIN_POINTS else 1
     if parts <= 1:
-        return _assign_part(xyz, segs, z_lo, z_hi, s, box)
+        return _assign_part(xyz, segs, z_lo, z_hi, s=s, box=box)
     cuts = [n * k // parts for k in range(parts + 1)]
     with ThreadPoolExecutor(max_workers=parts) as pool:
-        done = list(pool.map(lambda k: _assign_part(xyz[cuts[k]:cuts[k + 1]], segs, z_lo, z_hi, s, box),
+        done = list(pool.map(lambda k: _assign_part(xyz[cuts[k]:cuts[k + 1]], segs, z_lo, z_hi, s=s, box=box),
                              range(parts)))
     return [np.concatenate([idx[w] + cuts[k] for k, idx in enumerate(done)]) for w in range(len(segs))]
 
 
 def _assign_part(xyz: np.ndarray, segs: list[_Segment], z_lo: float, z_hi: float,
-                 s: SegmentationSettings, box: DenseBox | None = None) -> list[np.ndarray]:
+                 *, s: SegmentationSettings, box: DenseBox | None = None) -> list[np.ndarray]:
     """:func:`_assign_points` on one part of the cloud (indices relative to the part)."""
     band = _band_index(xyz, z_lo, z_hi, box)
     if len(band) == 0:
@@ -1020,7 +1021,7 @@ def _assign_part(xyz: np.ndarray, segs: list[_Segment], z_lo: float, z_hi: float
 
 
 def _final_frame(xyz: np.ndarray, idx: np.ndarray, g: _Segment, floor: float, ceiling: float,
-                 origin: np.ndarray, s: SegmentationSettings) -> tuple[WallFrame, np.ndarray] | None:
+                 *, origin: np.ndarray, s: SegmentationSettings) -> tuple[WallFrame, np.ndarray] | None:
     """Trimmed least-squares plane on the wall's own points, extents and contract-4 frame.
 
     The wall's height is its own: the top of the points on its plane (its room's ceiling,

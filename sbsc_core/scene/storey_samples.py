@@ -37,7 +37,7 @@ def _paths(scratch: Path, k: int, part: ScanPart) -> tuple[Path, Path]:
 
 
 def storey_part(part: ScanPart, origin: np.ndarray, bounds: Sequence[tuple[float, float]], steps: Sequence[int],
-                scratch: str, points: int, spilled: bool) -> list[int]:
+                scratch: str, *, points: int, spilled: bool) -> list[int]:
     """Stream one part again (or its spill) and append to each storey's files its points in
     the storey's Z range ``bounds[k]`` (relative to ``origin``) whose index over all files is a
     multiple of ``steps[k]``. Returns the number of points written per storey."""
@@ -65,7 +65,7 @@ def storey_part(part: ScanPart, origin: np.ndarray, bounds: Sequence[tuple[float
 
 
 def storey_cloud(scratch: Path | str, parts: Sequence[ScanPart], k: int, origin: np.ndarray,
-                 sources: Sequence[str], limit: int) -> PointCloud:
+                 *, sources: Sequence[str], limit: int) -> PointCloud:
     """Storey ``k``'s points written by :func:`storey_part`, in the parts' order, as one cloud
     (thinned regularly to at most ``limit`` points); its files are deleted."""
     paths = [_paths(Path(scratch), k, part) for part in parts]

@@ -144,7 +144,7 @@ def build_building(scene: SceneDescription, object_builder: ObjectBuilder | None
         objects.append(PlacedObject(p.index, p.class_id, p.wall, p.u, p.v, wall.frame.to_world(p.u, p.v),
                                     wall.frame.normal.copy(), spec.width_m, spec.height_m, p.rotation_deg))
     stations = station_positions(scene)
-    surfaces, columns = add_surface_objects(scene, layout, stations, object_builder, parts, objects)
+    surfaces, columns = add_surface_objects(scene, layout, stations, object_builder, parts=parts, objects=objects)
     distractors = add_distractors(scene, layout, stations, seed, parts)
     return Building(scene, layout, M.merge(parts), objects, stations, distractors, surfaces, columns)
 
@@ -181,14 +181,15 @@ def add_distractors(scene: SceneDescription, layout: Layout, stations: np.ndarra
     if scene.clutter_per_metre:
         distractors += place_clutter(scene, layout, seed, scene.clutter_per_metre)
     if scene.furniture_per_metre:
-        distractors += place_furniture(scene, layout, stations, seed, scene.furniture_per_metre,
+        distractors += place_furniture(scene, layout, stations, seed, per_metre=scene.furniture_per_metre,
                                        existing=distractors)
     parts += [distractor_mesh(d, layout) for d in distractors]
     return distractors
 
 
 def add_surface_objects(scene: SceneDescription, layout: Layout, stations: np.ndarray,
-                        object_builder: ObjectBuilder, parts: list[ColouredMesh], objects: list[PlacedObject],
+                        object_builder: ObjectBuilder, *, parts: list[ColouredMesh],
+                        objects: list[PlacedObject],
                         ceilings: dict[str, float] | None = None) -> tuple[list, list]:
     """Columns and objects on ceilings and columns (the scene's options; :mod:`surfaces`).
 
@@ -276,7 +277,7 @@ def _rotation(fr: WallFrame) -> np.ndarray:
     return np.column_stack([fr.axis_u, fr.axis_v, fr.normal])
 
 
-def _local_box(fr: WallFrame, u0: float, u1: float, v0: float, v1: float, d0: float, d1: float,
+def _local_box(fr: WallFrame, u0: float, u1: float, v0: float, v1: float, *, d0: float, d1: float,
                colour) -> ColouredMesh:
     """A box given in the wall's (u, v, d) coordinates."""
     b = M.box((u1 - u0, v1 - v0, d1 - d0), colour, ((u0 + u1) / 2, (v0 + v1) / 2, (d0 + d1) / 2))
@@ -291,9 +292,9 @@ def _casing(fr: WallFrame, o: OpeningPlacement, scene: SceneDescription) -> Colo
     c = scene.colours["door_frame"]
     top = o.v_max + fw
     return M.merge([
-        _local_box(fr, o.u_min - fw, o.u_min, 0.0, top, 0.0, CASING_DEPTH_M, c),
-        _local_box(fr, o.u_max, o.u_max + fw, 0.0, top, 0.0, CASING_DEPTH_M, c),
-        _local_box(fr, o.u_min, o.u_max, o.v_max, top, 0.0, CASING_DEPTH_M, c),
+        _local_box(fr, o.u_min - fw, o.u_min, 0.0, top, d0=0.0, d1=CASING_DEPTH_M, colour=c),
+        _local_box(fr, o.u_max, o.u_max + fw, 0.0, top, d0=0.0, d1=CASING_DEPTH_M, colour=c),
+        _local_box(fr, o.u_min, o.u_max, o.v_max, top, d0=0.0, d1=CASING_DEPTH_M, colour=c),
     ])
 
 
@@ -314,11 +315,11 @@ def _reveal(fr: WallFrame, o: OpeningPlacement, scene: SceneDescription) -> Colo
         p = min(WINDOW_PROFILE_M, (u1 - u0) / 4, (v1 - v0) / 4)
         dm0, dm1 = -d / 2 - p / 2, -d / 2 + p / 2
         parts += [
-            _local_box(fr, u0, u0 + p, v0, v1, dm0, dm1, c),
-            _local_box(fr, u1 - p, u1, v0, v1, dm0, dm1, c),
-            _local_box(fr, u0 + p, u1 - p, v0, v0 + p, dm0, dm1, c),
-            _local_box(fr, u0 + p, u1 - p, v1 - p, v1, dm0, dm1, c),
-            _local_box(fr, (u0 + u1 - p) / 2, (u0 + u1 + p) / 2, v0 + p, v1 - p, dm0, dm1, c),
+            _local_box(fr, u0, u0 + p, v0, v1, d0=dm0, d1=dm1, colour=c),
+            _local_box(fr, u1 - p, u1, v0, v1, d0=dm0, d1=dm1, colour=c),
+            _local_box(fr, u0 + p, u1 - p, v0, v0 + p, d0=dm0, d1=dm1, colour=c),
+            _local_box(fr, u0 + p, u1 - p, v1 - p, v1, d0=dm0, d1=dm1, colour=c),
+            _local_box(fr, (u0 + u1 - p) / 2, (u0 + u1 + p) / 2, v0 + p, v1 - p, d0=dm0, d1=dm1, colour=c),
         ]
     return M.merge(parts)
 

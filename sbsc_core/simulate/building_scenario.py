@@ -189,7 +189,7 @@ def build_storey(plan: StoreyPlan, object_builder: ObjectBuilder | None = None, 
         objects.append(PlacedObject(p.index, p.class_id, p.wall, p.u, p.v, wall.frame.to_world(p.u, p.v),
                                     wall.frame.normal.copy(), spec.width_m, spec.height_m))
     stations = station_positions(scene)
-    surfaces, columns = add_surface_objects(scene, layout, stations, object_builder, parts, objects,
+    surfaces, columns = add_surface_objects(scene, layout, stations, object_builder, parts=parts, objects=objects,
                                             ceilings=plan.room_ceilings)
     distractors = add_distractors(scene, layout, stations, (seed, plan.number), parts)
     lift = np.array([0.0, 0.0, plan.floor_z])
@@ -228,7 +228,7 @@ def _slabs(scene: SceneDescription, room_ceilings: dict[str, float]) -> Coloured
 # --------------------------------------------------------------------------- writing
 
 
-def write_station(path: Path, xyz: np.ndarray, rgb: np.ndarray, origin: np.ndarray, fmt: str,
+def write_station(path: Path, xyz: np.ndarray, rgb: np.ndarray, origin: np.ndarray, *, fmt: str,
                   frame: SurveyFrame | None = None) -> None:
     """One station's points (world coordinates) as PLY, E57 (scanner frame + pose) or LAS 1.2.
 
@@ -328,7 +328,7 @@ def simulate_building(out: Path, storeys: int = 2, *, scene: str = "scenario", f
             for k, origin in enumerate(b.stations):
                 xyz, rgb, _, _ = scan_station(rc, origin, settings, seed, n_station, effects=effects)
                 path = tmp / "stations" / f"{plan.id}_{k + 1:03d}{ext}"
-                write_station(path, xyz, rgb, origin, fmt, frame)
+                write_station(path, xyz, rgb, origin, fmt=fmt, frame=frame)
                 if effects is not None:
                     registration.append(_registration_error(seed, n_station, effects, plan.id, path.name))
                 files.append(out / "stations" / path.name)

@@ -97,7 +97,7 @@ def _overlap(a, b, margin: float = 0.0) -> bool:
 
 
 def _blocked(scene: SceneDescription, layout: Layout, wall: str, box, placed: list[Distractor],
-             fw: float, margin: float = MARGIN_M, objects: bool = True) -> bool:
+             *, fw: float, margin: float = MARGIN_M, objects: bool = True) -> bool:
     w = layout.walls[wall].frame
     if box[0] < 0.02 or box[1] > w.width_m - 0.02 or box[2] < 0.0 or box[3] > w.height_m - 0.05:
         return True
@@ -136,7 +136,7 @@ def place_clutter(scene: SceneDescription, layout: Layout, seed: int | tuple[int
                 u = float(rng.uniform(w / 2 + 0.02, max(w / 2 + 0.03, wall.frame.width_m - w / 2 - 0.02)))
                 v = float(rng.uniform(*vr))
                 d = Distractor(kind, wid, u, v, w, h, depth, 0.0, int(rng.integers(1 << 30)))
-                if not _blocked(scene, layout, wid, d.box(), placed, fw):
+                if not _blocked(scene, layout, wid, d.box(), placed, fw=fw):
                     placed.append(d)
                     out.append(d)
                     break
@@ -144,7 +144,7 @@ def place_clutter(scene: SceneDescription, layout: Layout, seed: int | tuple[int
 
 
 def place_furniture(scene: SceneDescription, layout: Layout, stations: np.ndarray, seed: int | tuple[int, ...],
-                    per_metre: float = 0.15, existing: list[Distractor] | None = None) -> list[Distractor]:
+                    *, per_metre: float = 0.15, existing: list[Distractor] | None = None) -> list[Distractor]:
     """Furniture against the walls: about ``per_metre`` pieces per metre of wall.
 
     A piece stands in front of any object or wall clutter (its back clears what stands
@@ -169,7 +169,7 @@ def place_furniture(scene: SceneDescription, layout: Layout, stations: np.ndarra
             for _try in range(25):
                 u = float(rng.uniform(w / 2 + 0.03, max(w / 2 + 0.04, fr.width_m - w / 2 - 0.03)))
                 box = (u - w / 2, u + w / 2, 0.0, h)
-                if _furniture_blocked(layout, wid, box, h, scene, kind):
+                if _furniture_blocked(layout, wid, box, h, scene=scene, kind=kind):
                     continue
                 behind = [scene.specs[p.class_id].depth_m for p in scene.objects
                           if p.wall == wid and _overlap(box, footprint(p, scene.specs))]
@@ -191,7 +191,8 @@ def place_furniture(scene: SceneDescription, layout: Layout, stations: np.ndarra
     return placed
 
 
-def _furniture_blocked(layout: Layout, wall: str, box, h: float, scene: SceneDescription, kind: str) -> bool:
+def _furniture_blocked(layout: Layout, wall: str, box, h: float, *, scene: SceneDescription,
+                       kind: str) -> bool:
     fr = layout.walls[wall].frame
     if box[0] < 0.02 or box[1] > fr.width_m - 0.02:
         return True
@@ -220,7 +221,7 @@ def distractor_mesh(d: Distractor, layout: Layout) -> ColouredMesh:
     return local.transformed(rot, fr.to_world(d.u, d.v, d.gap_m)).labelled(DISTRACTOR_LABEL)
 
 
-def _span(x0, x1, y0, y1, z0, z1, colour) -> ColouredMesh:
+def _span(x0, x1, y0, y1, *, z0, z1, colour) -> ColouredMesh:
     return M.box((x1 - x0, y1 - y0, z1 - z0), colour, ((x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2))
 
 
@@ -240,7 +241,8 @@ def _print(w: float, h: float, rng: np.random.Generator, background=None) -> np.
         else:
             p.circle((x0, y0), rng.uniform(0.02, min(w, h) / 4), col)
     if rng.random() < 0.6:
-        p.text_lines(w * 0.1, h * 0.75, w * 0.9, int(rng.integers(2, 5)), 0.02, 0.01, (20, 20, 20),
+        p.text_lines(w * 0.1, h * 0.75, w * 0.9, int(rng.integers(2, 5)), pitch_m=0.02,
+                     height_m=0.01, colour=(20, 20, 20),
                      seed=int(rng.integers(1 << 30)))
     return p.img
 
@@ -249,9 +251,11 @@ def _picture(d: Distractor, rng) -> ColouredMesh:
     w, h, t = d.width_m, d.height_m, d.depth_m
     b = float(rng.uniform(0.02, 0.04))
     frame_col = [(30, 30, 30), (150, 110, 70), (190, 190, 195), (235, 235, 230)][int(rng.integers(4))]
-    parts = [_span(-w / 2, w / 2, -h / 2, -h / 2 + b, 0, t, frame_col), _span(-w / 2, w / 2, h / 2 - b, h / 2, 0, t, frame_col),
-             _span(-w / 2, -w / 2 + b, -h / 2, h / 2, 0, t, frame_col), _span(w / 2 - b, w / 2, -h / 2, h / 2, 0, t, frame_col),
-             _span(-w / 2 + b, w / 2 - b, -h / 2 + b, h / 2 - b, 0, t - 0.008, (240, 240, 240))]
+    parts = [_span(-w / 2, w / 2, -h / 2, -h / 2 + b, z0=0, z1=t, colour=frame_col),
+             _span(-w / 2, w / 2, h / 2 - b, h / 2, z0=0, z1=t, colour=frame_col),
+             _span(-w / 2, -w / 2 + b, -h / 2, h / 2, z0=0, z1=t, colour=frame_col),
+             _span(w / 2 - b, w / 2, -h / 2, h / 2, z0=0, z1=t, colour=frame_col),
+             _span(-w / 2 + b, w / 2 - b, -h / 2 + b, h / 2 - b, z0=0, z1=t - 0.008, colour=(240, 240, 240))]
     parts.append(_front(_print(w - 2 * b, h - 2 * b, rng), w - 2 * b, h - 2 * b, t - 0.008 + 1e-4))
     return M.merge(parts)
 
@@ -271,9 +275,10 @@ def _notice_board(d: Distractor, rng) -> ColouredMesh:
         x0, y0 = rng.uniform(0.03, w - 0.25), rng.uniform(0.03, h - 0.3)
         col = [(245, 245, 240), (250, 240, 150), (200, 230, 250), (250, 200, 210)][int(rng.integers(4))]
         p.rect(x0, y0, x0 + 0.21, y0 + 0.297 * rng.uniform(0.5, 1.0), col)
-        p.text_lines(x0 + 0.02, y0 + 0.03, x0 + 0.19, 4, 0.02, 0.008, (40, 40, 40),
+        p.text_lines(x0 + 0.02, y0 + 0.03, x0 + 0.19, 4, pitch_m=0.02, height_m=0.008, colour=(40, 40, 40),
                      seed=int(rng.integers(1 << 30)))
-    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, 0, t - 0.0005, (176, 134, 92)), _front(p.img, w, h, t)])
+    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t - 0.0005, colour=(176, 134, 92)),
+                    _front(p.img, w, h, t)])
 
 
 def _whiteboard(d: Distractor, rng) -> ColouredMesh:
@@ -282,10 +287,12 @@ def _whiteboard(d: Distractor, rng) -> ColouredMesh:
     for edge in ((0, 0, w, 0.02), (0, h - 0.02, w, h), (0, 0, 0.02, h), (w - 0.02, 0, w, h)):
         p.rect(*edge, (190, 192, 196))
     if rng.random() < 0.7:  # some writing left on it
-        p.text_lines(0.1, 0.1, w * 0.6, int(rng.integers(2, 6)), 0.06, 0.03,
-                     [(30, 60, 160), (20, 20, 20), (180, 30, 30)][int(rng.integers(3))], seed=int(rng.integers(1 << 30)))
-    tray = _span(-w / 2 + 0.1, w / 2 - 0.1, -h / 2 - 0.03, -h / 2, 0, 0.06, (190, 192, 196))
-    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, 0, t - 0.0005, (246, 247, 247)), _front(p.img, w, h, t), tray])
+        p.text_lines(0.1, 0.1, w * 0.6, int(rng.integers(2, 6)), pitch_m=0.06, height_m=0.03,
+                     colour=[(30, 60, 160), (20, 20, 20), (180, 30, 30)][int(rng.integers(3))],
+                     seed=int(rng.integers(1 << 30)))
+    tray = _span(-w / 2 + 0.1, w / 2 - 0.1, -h / 2 - 0.03, -h / 2, z0=0, z1=0.06, colour=(190, 192, 196))
+    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t - 0.0005,
+                          colour=(246, 247, 247)), _front(p.img, w, h, t), tray])
 
 
 def _clock(d: Distractor, rng) -> ColouredMesh:
@@ -310,10 +317,11 @@ def _thermostat(d: Distractor, rng) -> ColouredMesh:
     w, h, t = d.width_m, d.height_m, d.depth_m
     col = (238, 238, 234)
     p = pic.Painter.new(w, h, col)
-    p.round_rect(w * 0.2, h * 0.2, w * 0.8, h * 0.45, 0.003, (60, 70, 75))  # display
+    p.round_rect(w * 0.2, h * 0.2, w * 0.8, h * 0.45, 0.003, colour=(60, 70, 75))  # display
     p.text(f"{rng.integers(18, 24)}.{rng.integers(0, 10)}", w * 0.25, h * 0.4, h * 0.12, (170, 220, 200))
     p.circle((w * 0.5, h * 0.72), min(w, h) * 0.12, (205, 205, 200))
-    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, 0, t - 0.0005, col), _front(p.img, w, h, t)])
+    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t - 0.0005, colour=col),
+                    _front(p.img, w, h, t)])
 
 
 def _room_controller(d: Distractor, rng) -> ColouredMesh:
@@ -323,30 +331,34 @@ def _room_controller(d: Distractor, rng) -> ColouredMesh:
     p.circle((w / 2, h / 2), w * 0.32, (215, 215, 210), width_m=0.004)  # a dial ring
     p.circle((w / 2, h * 0.2), 0.002, (40, 160, 60))  # status LED
     dial = M.cylinder(w * 0.3, 0.008, (232, 232, 228), segments=24, centre=(0, 0, t + 0.004), axis=2)
-    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, 0, t - 0.0005, col), _front(p.img, w, h, t), dial])
+    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t - 0.0005, colour=col),
+                    _front(p.img, w, h, t), dial])
 
 
 def _trunking(d: Distractor, rng) -> ColouredMesh:
     w, h, t = d.width_m, d.height_m, d.depth_m
     col = (236, 236, 232)
-    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, 0, t, col),
-                    _span(-w / 2, w / 2, -0.001, 0.001, t, t + 0.001, (215, 215, 210))])  # cover seam
+    return M.merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=t, colour=col),
+                    _span(-w / 2, w / 2, -0.001, 0.001, z0=t, z1=t + 0.001,
+                          colour=(215, 215, 210))])  # cover seam
 
 
 def _coat_hooks(d: Distractor, rng) -> ColouredMesh:
     w, h = d.width_m, d.height_m
     wood = [(150, 110, 70), (210, 190, 150), (40, 40, 40)][int(rng.integers(3))]
-    parts = [_span(-w / 2, w / 2, -h / 2, h / 2, 0, 0.02, wood)]
+    parts = [_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=0.02, colour=wood)]
     n = int(rng.integers(3, 6))
     for k in range(n):
         x = -w / 2 + (k + 0.5) * w / n
-        parts.append(_span(x - 0.008, x + 0.008, -0.01, 0.02, 0.02, d.depth_m, (170, 170, 175)))
+        parts.append(_span(x - 0.008, x + 0.008, -0.01, 0.02, z0=0.02, z1=d.depth_m, colour=(170, 170, 175)))
     return M.merge(parts)
 
 
 def _door_stop(d: Distractor, rng) -> ColouredMesh:
-    return M.merge([M.cylinder(0.02, d.depth_m - 0.015, (120, 120, 125), 16, (0, 0, (d.depth_m - 0.015) / 2), 2),
-                    M.cylinder(0.018, 0.015, (35, 35, 35), 16, (0, 0, d.depth_m - 0.0075), 2)])
+    return M.merge([M.cylinder(0.02, d.depth_m - 0.015, (120, 120, 125), segments=16,
+                               centre=(0, 0, (d.depth_m - 0.015) / 2), axis=2),
+                    M.cylinder(0.018, 0.015, (35, 35, 35), segments=16,
+                               centre=(0, 0, d.depth_m - 0.0075), axis=2)])
 
 
 def _furniture_colour(rng) -> tuple[int, int, int]:
@@ -357,24 +369,27 @@ def _desk(d: Distractor, rng) -> ColouredMesh:
     w, h, dd = d.width_m, d.height_m, d.depth_m
     top, leg = _furniture_colour(rng), (90, 92, 96)
     y0 = -h / 2
-    parts = [_span(-w / 2, w / 2, h / 2 - 0.03, h / 2, 0, dd, top)]
+    parts = [_span(-w / 2, w / 2, h / 2 - 0.03, h / 2, z0=0, z1=dd, colour=top)]
     for x in (-w / 2 + 0.03, w / 2 - 0.03):
         for z in (0.03, dd - 0.03):
-            parts.append(_span(x - 0.025, x + 0.025, y0, h / 2 - 0.03, z - 0.025, z + 0.025, leg))
-    parts.append(_span(-w / 2 + 0.06, w / 2 - 0.06, h / 2 - 0.35, h / 2 - 0.03, 0.02, 0.035, top))  # modesty panel
+            parts.append(_span(x - 0.025, x + 0.025, y0, h / 2 - 0.03, z0=z - 0.025, z1=z + 0.025,
+                               colour=leg))
+    parts.append(_span(-w / 2 + 0.06, w / 2 - 0.06, h / 2 - 0.35, h / 2 - 0.03, z0=0.02, z1=0.035,
+                       colour=top))  # modesty panel
     if rng.random() < 0.5:  # a drawer unit under one side
         x = w / 2 - 0.26 if rng.random() < 0.5 else -w / 2 + 0.26
-        parts.append(_span(x - 0.2, x + 0.2, y0, y0 + 0.6, 0.05, dd - 0.05, top))
+        parts.append(_span(x - 0.2, x + 0.2, y0, y0 + 0.6, z0=0.05, z1=dd - 0.05, colour=top))
     return M.merge(parts)
 
 
 def _cabinet(d: Distractor, rng) -> ColouredMesh:
     w, h, dd = d.width_m, d.height_m, d.depth_m
     col = _furniture_colour(rng)
-    parts = [_span(-w / 2, w / 2, -h / 2, h / 2, 0, dd, col),
-             _span(-0.002, 0.002, -h / 2 + 0.05, h / 2 - 0.02, dd, dd + 0.002, (70, 70, 70))]
+    parts = [_span(-w / 2, w / 2, -h / 2, h / 2, z0=0, z1=dd, colour=col),
+             _span(-0.002, 0.002, -h / 2 + 0.05, h / 2 - 0.02, z0=dd, z1=dd + 0.002, colour=(70, 70, 70))]
     for x in (-0.04, 0.04):
-        parts.append(_span(x - 0.006, x + 0.006, h / 2 - 0.25, h / 2 - 0.1, dd, dd + 0.025, (180, 180, 185)))
+        parts.append(_span(x - 0.006, x + 0.006, h / 2 - 0.25, h / 2 - 0.1, z0=dd, z1=dd + 0.025,
+                           colour=(180, 180, 185)))
     return M.merge(parts)
 
 
@@ -382,18 +397,19 @@ def _shelf(d: Distractor, rng) -> ColouredMesh:
     w, h, dd = d.width_m, d.height_m, d.depth_m
     col = _furniture_colour(rng)
     t = 0.018
-    parts = [_span(-w / 2, -w / 2 + t, -h / 2, h / 2, 0, dd, col), _span(w / 2 - t, w / 2, -h / 2, h / 2, 0, dd, col)]
+    parts = [_span(-w / 2, -w / 2 + t, -h / 2, h / 2, z0=0, z1=dd, colour=col),
+             _span(w / 2 - t, w / 2, -h / 2, h / 2, z0=0, z1=dd, colour=col)]
     n = 5
     for k in range(n):
         y = -h / 2 + k * (h - t) / (n - 1)
-        parts.append(_span(-w / 2 + t, w / 2 - t, y, y + t, 0, dd, col))
+        parts.append(_span(-w / 2 + t, w / 2 - t, y, y + t, z0=0, z1=dd, colour=col))
         if k < n - 1 and rng.random() < 0.7:  # books / folders
             x = -w / 2 + t
             while x < w / 2 - t - 0.05:
                 bw = float(rng.uniform(0.02, 0.06))
                 bh = float(rng.uniform(0.18, min(0.32, (h - t) / (n - 1) - 0.03)))
-                parts.append(_span(x, x + bw, y + t, y + t + bh, 0.02, dd - 0.03,
-                                   tuple(int(c) for c in rng.integers(20, 240, 3))))
+                parts.append(_span(x, x + bw, y + t, y + t + bh, z0=0.02, z1=dd - 0.03,
+                                   colour=tuple(int(c) for c in rng.integers(20, 240, 3))))
                 x += bw + (0.0 if rng.random() < 0.8 else float(rng.uniform(0.05, 0.2)))
     return M.merge(parts)
 
@@ -403,19 +419,21 @@ def _chair(d: Distractor, rng) -> ColouredMesh:
     col, metal = _furniture_colour(rng), (60, 60, 64)
     y0 = -h / 2
     seat = y0 + 0.45
-    parts = [_span(-w / 2, w / 2, seat - 0.03, seat, 0.0, dd, col),
-             _span(-w / 2, w / 2, seat + 0.15, h / 2, 0.0, 0.03, col)]  # back rest towards the wall
+    parts = [_span(-w / 2, w / 2, seat - 0.03, seat, z0=0.0, z1=dd, colour=col),
+             _span(-w / 2, w / 2, seat + 0.15, h / 2, z0=0.0, z1=0.03,
+                   colour=col)]  # back rest towards the wall
     for x in (-w / 2 + 0.02, w / 2 - 0.02):
         for z in (0.02, dd - 0.02):
-            parts.append(_span(x - 0.012, x + 0.012, y0, seat - 0.03, z - 0.012, z + 0.012, metal))
-        parts.append(_span(x - 0.012, x + 0.012, seat, seat + 0.15, 0.005, 0.029, metal))
+            parts.append(_span(x - 0.012, x + 0.012, y0, seat - 0.03, z0=z - 0.012, z1=z + 0.012,
+                               colour=metal))
+        parts.append(_span(x - 0.012, x + 0.012, seat, seat + 0.15, z0=0.005, z1=0.029, colour=metal))
     return M.merge(parts)
 
 
 def _bin(d: Distractor, rng) -> ColouredMesh:
     r = d.width_m / 2
     col = [(40, 40, 40), (200, 200, 200), (30, 90, 160), (180, 40, 40)][int(rng.integers(4))]
-    return M.cylinder(r, d.height_m, col, 24, (0, 0, r), axis=1, capped=True)
+    return M.cylinder(r, d.height_m, col, segments=24, centre=(0, 0, r), axis=1, capped=True)
 
 
 _BUILD = {"picture": _picture, "poster": _poster, "notice_board": _notice_board, "whiteboard": _whiteboard,

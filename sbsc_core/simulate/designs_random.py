@@ -169,7 +169,7 @@ def _sign_format(rng: np.random.Generator) -> tuple[float, float]:
     return (a, b) if shape == 1 else (b, a)
 
 
-def _tilted(x0: float, x1: float, y0: float, y1: float, z0: float, z_bottom: float, z_top: float,
+def _tilted(x0: float, x1: float, y0: float, y1: float, *, z0: float, z_bottom: float, z_top: float,
             colour: Colour) -> ColouredMesh:
     """A block on z0 whose front is tilted from z_bottom (at y0) to z_top (at y1): a rocker."""
     back = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0]])
@@ -177,12 +177,14 @@ def _tilted(x0: float, x1: float, y0: float, y1: float, z0: float, z_bottom: flo
     return _loft([back, front], colour, cap_start=True, cap_end=True)
 
 
-def _ring(x0: float, x1: float, y0: float, y1: float, hole: float, z0: float, z1: float,
+def _ring(x0: float, x1: float, y0: float, y1: float, *, hole: float, z0: float, z1: float,
           colour: Colour) -> list[ColouredMesh]:
     """A rectangle z0..z1 with a centred square hole of side ``hole``: four blocks."""
     cx, cy, a = (x0 + x1) / 2, (y0 + y1) / 2, hole / 2
-    return [_span(x0, x1, cy + a, y1, z0, z1, colour), _span(x0, x1, y0, cy - a, z0, z1, colour),
-            _span(x0, cx - a, cy - a, cy + a, z0, z1, colour), _span(cx + a, x1, cy - a, cy + a, z0, z1, colour)]
+    return [_span(x0, x1, cy + a, y1, z0=z0, z1=z1, colour=colour),
+            _span(x0, x1, y0, cy - a, z0=z0, z1=z1, colour=colour),
+            _span(x0, cx - a, cy - a, cy + a, z0=z0, z1=z1, colour=colour),
+            _span(cx + a, x1, cy - a, cy + a, z0=z0, z1=z1, colour=colour)]
 
 
 def _face(w: float, h: float, colour: Colour, dots: Sequence[tuple[float, float, float]],
@@ -210,7 +212,8 @@ def _draw_socket(n: int) -> Callable[[np.random.Generator, _Series], Design]:
         spec = _spec(cls, w, h, d)
 
         def build() -> ColouredMesh:
-            parts = [_plate(w / 2, h / 2, s.corner_m, 0.0, frame_z, min(0.0015, frame_z / 2), s.plate)]
+            parts = [_plate(w / 2, h / 2, s.corner_m, 0.0, frame_z, bevel=min(0.0015, frame_z / 2),
+                            colour=s.plate)]
             half = s.gang_m / 2 - 0.001
             for i in range(n):
                 x = -w / 2 + s.frame_m + (i + 0.5) * s.gang_m
@@ -220,12 +223,13 @@ def _draw_socket(n: int) -> Callable[[np.random.Generator, _Series], Design]:
                                                 corner_r=min(s.corner_m, half / 3), bevel=0.001))
                 elif kind == "square well":
                     a = 2 * min(cup_r, half - 0.004)
-                    parts += _ring(x - half, x + half, -half, half, a, frame_z, d, s.plate)
-                    parts.append(_span(x - a / 2, x + a / 2, -a / 2, a / 2, frame_z, floor_z, insert))
+                    parts += _ring(x - half, x + half, -half, half, hole=a, z0=frame_z, z1=d, colour=s.plate)
+                    parts.append(_span(x - a / 2, x + a / 2, -a / 2, a / 2, z0=frame_z, z1=floor_z,
+                                       colour=insert))
                     parts.append(_front(a, a, floor_z + EPS, _face(a, a, insert, ((0.33, 0.5, 0.07), (0.67, 0.5, 0.07))),
                                         (x, 0.0)))
                 else:
-                    parts.append(_span(x - half, x + half, -half, half, frame_z, d, insert))
+                    parts.append(_span(x - half, x + half, -half, half, z0=frame_z, z1=d, colour=insert))
                     parts.append(_front(2 * half, 2 * half, d + EPS,
                                         _face(2 * half, 2 * half, insert,
                                               ((0.38, 0.45, 0.05), (0.62, 0.45, 0.05), (0.5, 0.7, 0.06))), (x, 0.0)))
@@ -246,16 +250,18 @@ def _draw_switch(rng: np.random.Generator, s: _Series) -> Design:
     led = bool(rng.random() < 0.4)
 
     def build() -> ColouredMesh:
-        parts = [_plate(side / 2, side / 2, s.corner_m, 0.0, plate_z, min(0.0015, plate_z / 2), s.plate)]
+        parts = [_plate(side / 2, side / 2, s.corner_m, 0.0, plate_z,
+                        bevel=min(0.0015, plate_z / 2), colour=s.plate)]
         if kind == "tilted rocker":
             lo, hi = (low, d) if top_out else (d, low)
-            parts.append(_tilted(-a / 2, a / 2, -a / 2, a / 2, plate_z, lo, hi, key))
+            parts.append(_tilted(-a / 2, a / 2, -a / 2, a / 2, z0=plate_z, z_bottom=lo, z_top=hi, colour=key))
         elif kind == "two tilted rockers":
             for k, x0 in enumerate((-a / 2, 0.0005)):
                 lo, hi = (low, d) if (k == 0) == top_out else (d, low)
-                parts.append(_tilted(x0, x0 + a / 2 - 0.0005, -a / 2, a / 2, plate_z, lo, hi, key))
+                parts.append(_tilted(x0, x0 + a / 2 - 0.0005, -a / 2, a / 2, z0=plate_z,
+                                     z_bottom=lo, z_top=hi, colour=key))
         else:
-            parts.append(_span(-a / 2, a / 2, -a / 2, a / 2, plate_z, d, key))
+            parts.append(_span(-a / 2, a / 2, -a / 2, a / 2, z0=plate_z, z1=d, colour=key))
             dots = ((0.5, 0.15, 0.04),) if led else ()
             parts.append(_front(a, a, d + EPS, _face(a, a, key, dots, (235, 125, 35)), (0.0, 0.0)))
         return merge(parts)
@@ -271,8 +277,8 @@ def _draw_builtin_socket(rng: np.random.Generator, s: _Series) -> Design:
     lid_colour = _pick(rng, ((colour, 2.0), ((236, 234, 225), 1.0)), jitter=3)
 
     def build() -> ColouredMesh:
-        parts = [_plate(side / 2, side / 2, s.corner_m, 0.0, d / 2, d / 4, colour),
-                 _span(-lid / 2, lid / 2, -lid / 2, lid / 2, d / 2, d, lid_colour)]
+        parts = [_plate(side / 2, side / 2, s.corner_m, 0.0, d / 2, bevel=d / 4, colour=colour),
+                 _span(-lid / 2, lid / 2, -lid / 2, lid / 2, z0=d / 2, z1=d, colour=lid_colour)]
         if kind == "flat lid":
             img = _face(lid, lid, lid_colour, ((0.5, 0.1, 0.04),), (90, 90, 92))  # finger notch
         else:
@@ -299,10 +305,11 @@ def _draw_panel(rng: np.random.Generator, s: _Series) -> Design:
     def build() -> ColouredMesh:
         dw, dh = w - 2 * inset, h - 2 * inset
         hx = (-1 if handle_left else 1) * (dw / 2 - 0.02)
-        return merge([_plate(w / 2, h / 2, 0.006, 0.0, d - 0.006, 0.003, body),
-                      _span(-dw / 2, dw / 2, -dh / 2, dh / 2, d - 0.006, d - 0.003, door),
-                      _front(dw, dh, d - 0.003 + EPS, pr.panel_front(dw, dh, door, rows, window, seed)),
-                      _span(hx - 0.007, hx + 0.007, -0.04, 0.04, d - 0.003, d, (60, 60, 62))])
+        return merge([_plate(w / 2, h / 2, 0.006, 0.0, d - 0.006, bevel=0.003, colour=body),
+                      _span(-dw / 2, dw / 2, -dh / 2, dh / 2, z0=d - 0.006, z1=d - 0.003, colour=door),
+                      _front(dw, dh, d - 0.003 + EPS,
+                             pr.panel_front(dw, dh, door=door, rows=rows, window=window, label_seed=seed)),
+                      _span(hx - 0.007, hx + 0.007, -0.04, 0.04, z0=d - 0.003, z1=d, colour=(60, 60, 62))])
     return Design(_spec("electrical_panel", w, h, d), "door with windows" if window else "plain door", build)
 
 
@@ -324,24 +331,32 @@ def _draw_extinguisher(rng: np.random.Generator, s: _Series) -> Design:
         body_h = body_frac * h
         top = y0 + body_h
         xh = side * (w / 2 - 0.012)
-        band = cylinder(r, frac * body_h, colour, 32, (xb, y0 + 0.45 * body_h, zc), axis=1, capped=False)
+        band = cylinder(r, frac * body_h, colour, segments=32, centre=(xb, y0 + 0.45 * body_h, zc),
+                        axis=1, capped=False)
         p = Painter.new(1.6 * r, frac * body_h, colour)
         p.rect(0, 0, 1.6 * r, 0.15 * frac * body_h, red)
-        p.text_lines(0.15 * r, 0.3 * frac * body_h, 1.45 * r, 4, 0.03 * body_h, 0.012 * body_h, DARK, seed=seed)
-        band = _texture_front(band, p.img, xb - 0.8 * r, xb + 0.8 * r, y0 + 0.45 * body_h - frac * body_h / 2,
-                              y0 + 0.45 * body_h + frac * body_h / 2, min_nz=0.6)
+        p.text_lines(0.15 * r, 0.3 * frac * body_h, 1.45 * r, 4, pitch_m=0.03 * body_h,
+                     height_m=0.012 * body_h, colour=DARK, seed=seed)
+        band = _texture_front(band, p.img, x0=xb - 0.8 * r, x1=xb + 0.8 * r,
+                              y0=y0 + 0.45 * body_h - frac * body_h / 2,
+                              y1=y0 + 0.45 * body_h + frac * body_h / 2, min_nz=0.6)
         lo, hi = y0 + 0.45 * body_h - frac * body_h / 2, y0 + 0.45 * body_h + frac * body_h / 2
-        parts = [cylinder(r, lo - y0, red, 32, (xb, (y0 + lo) / 2, zc), axis=1),
+        parts = [cylinder(r, lo - y0, red, segments=32, centre=(xb, (y0 + lo) / 2, zc), axis=1),
                  band,
-                 cylinder(r, top - hi, red, 32, (xb, (hi + top) / 2, zc), axis=1),
-                 cylinder(0.6 * r, 0.03, red, 24, (xb, top + 0.015, zc), axis=1),
-                 _span(xb - 0.03, xb + 0.03, top + 0.03, top + 0.07, zc - 0.02, zc + 0.02, (60, 60, 62)),
-                 _span(min(xb, xh), max(xb, xh), h / 2 - 0.015, h / 2, zc - 0.01, zc + 0.01, DARK),  # lever
-                 _span(xb - 0.03, xb + 0.03, y0 + 0.5 * body_h, y0 + 0.8 * body_h, 0.0, zc - r + 0.002, (70, 70, 72))]
+                 cylinder(r, top - hi, red, segments=32, centre=(xb, (hi + top) / 2, zc), axis=1),
+                 cylinder(0.6 * r, 0.03, red, segments=24, centre=(xb, top + 0.015, zc), axis=1),
+                 _span(xb - 0.03, xb + 0.03, top + 0.03, top + 0.07, z0=zc - 0.02, z1=zc + 0.02,
+                       colour=(60, 60, 62)),
+                 _span(min(xb, xh), max(xb, xh), h / 2 - 0.015, h / 2, z0=zc - 0.01, z1=zc + 0.01,
+                       colour=DARK),  # lever
+                 _span(xb - 0.03, xb + 0.03, y0 + 0.5 * body_h, y0 + 0.8 * body_h, z0=0.0,
+                       z1=zc - r + 0.002, colour=(70, 70, 72))]
         if horn:
-            parts.append(_span(xh - 0.012, xh + 0.012, y0 + 0.1 * h, y0 + 0.55 * h, zc - 0.02, zc + 0.02, DARK))
+            parts.append(_span(xh - 0.012, xh + 0.012, y0 + 0.1 * h, y0 + 0.55 * h, z0=zc - 0.02,
+                               z1=zc + 0.02, colour=DARK))
         else:
-            parts.append(cylinder(0.008, 0.6 * h, DARK, 12, (xh + side * 0.004, y0 + 0.45 * h, zc), axis=1))
+            parts.append(cylinder(0.008, 0.6 * h, DARK, segments=12,
+                                  centre=(xh + side * 0.004, y0 + 0.45 * h, zc), axis=1))
         return merge(parts)
     return Design(_spec("fire_extinguisher", w, h, d), "cylinder with " + ("horn" if horn else "hose"), build)
 
@@ -355,32 +370,34 @@ def _draw_radiator(rng: np.random.Generator, s: _Series) -> Design:
 
     def build() -> ColouredMesh:
         back = 0.015
-        parts = [_span(x - 0.02, x + 0.02, 0.1 * h, 0.1 * h + 0.08, 0.0, back, (120, 120, 118))
+        parts = [_span(x - 0.02, x + 0.02, 0.1 * h, 0.1 * h + 0.08, z0=0.0, z1=back, colour=(120, 120, 118))
                  for x in (-0.3 * w, 0.3 * w)]
         if kind == "ribbed panel":
-            parts.append(_span(-w / 2, w / 2, -h / 2, h / 2, back, back + 0.3 * (d - back), colour))
+            parts.append(_span(-w / 2, w / 2, -h / 2, h / 2, z0=back, z1=back + 0.3 * (d - back),
+                               colour=colour))
             n = max(4, round(w / pitch))
             for i in range(n):
                 x = -w / 2 + (i + 0.5) * w / n
                 parts.append(_span(x - fill * w / n / 2, x + fill * w / n / 2, -h / 2 + 0.02, h / 2 - 0.02,
-                                   back + 0.3 * (d - back), d, colour))
+                                   z0=back + 0.3 * (d - back), z1=d, colour=colour))
         elif kind == "columns":
             n = max(3, round(w / (2 * pitch)))
             for i in range(n):
                 x = -w / 2 + (i + 0.5) * w / n
-                parts.append(_span(x - fill * w / n / 2, x + fill * w / n / 2, -h / 2, h / 2, back, d, colour))
+                parts.append(_span(x - fill * w / n / 2, x + fill * w / n / 2, -h / 2, h / 2,
+                                   z0=back, z1=d, colour=colour))
             for y in (-h / 2 + 0.04, h / 2 - 0.04):
-                parts.append(cylinder(0.015, w, colour, 16, (0.0, y, back + 0.02), axis=0))
+                parts.append(cylinder(0.015, w, colour, segments=16, centre=(0.0, y, back + 0.02), axis=0))
         elif kind == "horizontal tubes":
             for x in (-w / 2 + 0.02, w / 2 - 0.02):
-                parts.append(_span(x - 0.02, x + 0.02, -h / 2, h / 2, back, d - 0.005, colour))
+                parts.append(_span(x - 0.02, x + 0.02, -h / 2, h / 2, z0=back, z1=d - 0.005, colour=colour))
             n = max(3, round(h / pitch))
             for k in range(n):
                 y = -h / 2 + (k + 0.5) * h / n
                 parts.append(_span(-w / 2 + 0.04, w / 2 - 0.04, y - fill * h / n / 2, y + fill * h / n / 2,
-                                   back + 0.01, d, colour))
+                                   z0=back + 0.01, z1=d, colour=colour))
         else:
-            parts.append(_plate(w / 2, h / 2, 0.01, back, d, 0.004, colour))
+            parts.append(_plate(w / 2, h / 2, 0.01, back, d, bevel=0.004, colour=colour))
         return merge(parts)
     return Design(_spec("radiator", w, h, d), kind, build)
 
@@ -400,15 +417,16 @@ def _draw_call_point(rng: np.random.Generator, s: _Series) -> Design:
     def build() -> ColouredMesh:
         if kind == "raised push button":
             z = d - button_h
-            return merge([_plate(w / 2, h / 2, 0.004, 0.0, z, 0.003, red),
-                          cylinder(button_r, button_h, (236, 236, 230), 28, (0.0, 0.0, z + button_h / 2), axis=2),
+            return merge([_plate(w / 2, h / 2, 0.004, 0.0, z, bevel=0.003, colour=red),
+                          cylinder(button_r, button_h, (236, 236, 230), segments=28,
+                                   centre=(0.0, 0.0, z + button_h / 2), axis=2),
                           _front(win, win, z + EPS, pr.draw_print("call_point", win, win, style))])
         if kind == "recessed window":
             floor = d - recess
-            return merge([_span(-w / 2, w / 2, -h / 2, h / 2, 0.0, floor, red),
-                          *_ring(-w / 2, w / 2, -h / 2, h / 2, win, floor, d, red),
+            return merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=floor, colour=red),
+                          *_ring(-w / 2, w / 2, -h / 2, h / 2, hole=win, z0=floor, z1=d, colour=red),
                           _front(win, win, floor + EPS, pr.draw_print("call_point", win, win, style))])
-        return merge([_plate(w / 2, h / 2, 0.004, 0.0, d, 0.003, red),
+        return merge([_plate(w / 2, h / 2, 0.004, 0.0, d, bevel=0.003, colour=red),
                       _front(win, win, d + EPS, pr.draw_print("call_point", win, win, style))])
     return Design(_spec("fire_alarm_switch", w, h, d), kind, build)
 
@@ -440,13 +458,15 @@ def _draw_smoke_detector(rng: np.random.Generator, s: _Series) -> Design:
             profile = [(r, 0.0), (r, 0.9 * zb)] + [(r * 0.92 * np.cos(a) + 1e-4, zb + (d - zb) * np.sin(a)) for a in t]
             shell = _revolve(profile, 2, (0, 0, 0), colour, segments=48, cap_start=True, cap_end=True)
         elif kind == "stacked discs":
-            shell = merge([cylinder(r, zb, colour, 48, (0, 0, zb / 2), axis=2),
-                           cylinder(0.8 * r, d - zb, colour, 48, (0, 0, (zb + d) / 2), axis=2)])
+            shell = merge([cylinder(r, zb, colour, segments=48, centre=(0, 0, zb / 2), axis=2),
+                           cylinder(0.8 * r, d - zb, colour, segments=48,
+                                    centre=(0, 0, (zb + d) / 2), axis=2)])
         else:
             m = 0.1 * side
-            return merge([_span(-r, r, -r, r, 0.0, zb, colour), _span(-r + m, r - m, -r + m, r - m, zb, d, colour),
+            return merge([_span(-r, r, -r, r, z0=0.0, z1=zb, colour=colour),
+                          _span(-r + m, r - m, -r + m, r - m, z0=zb, z1=d, colour=colour),
                           _front(side - 2 * m, side - 2 * m, d + EPS, face(side - 2 * m))])
-        return _texture_front(shell, face(side), -r, r, -r, r, min_nz=0.3)
+        return _texture_front(shell, face(side), x0=-r, x1=r, y0=-r, y1=r, min_nz=0.3)
     return Design(_spec("smoke_detector", side, side, d), kind, build)
 
 
@@ -466,13 +486,16 @@ def _draw_exit_light(rng: np.random.Generator, s: _Series) -> Design:
         if kind == "blade":
             base_h = min(0.03, 0.3 * h)
             ph2 = h - base_h - 0.004
-            return merge([_span(-w / 2, w / 2, h / 2 - base_h, h / 2, 0.0, d, housing),
-                          _span(-pw / 2, pw / 2, -h / 2, h / 2 - base_h, d / 2 - 0.004, d / 2 + 0.004, white),
+            return merge([_span(-w / 2, w / 2, h / 2 - base_h, h / 2, z0=0.0, z1=d, colour=housing),
+                          _span(-pw / 2, pw / 2, -h / 2, h / 2 - base_h, z0=d / 2 - 0.004,
+                                z1=d / 2 + 0.004, colour=white),
                           _front(pw, ph2, d / 2 + 0.004 + EPS, pr.draw_print("exit", pw, ph2, style),
                                  (0.0, -h / 2 + ph2 / 2))])
         if kind == "rounded box":
-            return merge([_plate(w / 2, h / 2, 0.01, 0.0, d, 0.006, housing), _front(pw, ph, d + EPS, face)])
-        return merge([_span(-w / 2, w / 2, -h / 2, h / 2, 0.0, d, housing), _front(pw, ph, d + EPS, face)])
+            return merge([_plate(w / 2, h / 2, 0.01, 0.0, d, bevel=0.006, colour=housing),
+                          _front(pw, ph, d + EPS, face)])
+        return merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d, colour=housing),
+                      _front(pw, ph, d + EPS, face)])
     return Design(_spec("exit_light", w, h, d), kind, build)
 
 
@@ -485,7 +508,7 @@ def _draw_sign(class_id: str, glyph: str) -> Callable[[np.random.Generator, _Ser
         style = pr.draw_print_style(rng, _red(rng), _pick(rng, INKS, jitter=2))
 
         def build() -> ColouredMesh:
-            return merge([_span(-w / 2, w / 2, -h / 2, h / 2, 0.0, d, style.background),
+            return merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d, colour=style.background),
                           _front(w, h, d + EPS, pr.draw_print(glyph, w, h, style))])
         shape = "square" if abs(w - h) < 1e-9 else ("portrait" if h > w else "landscape")
         return Design(_spec(class_id, w, h, d), f"flat {shape} plate, {style.layout} print", build)

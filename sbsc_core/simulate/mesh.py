@@ -135,7 +135,7 @@ def quad(corner: Sequence[float], edge_u: Sequence[float], edge_v: Sequence[floa
     return m
 
 
-def cylinder(radius: float, length: float, colour: Sequence[int], segments: int = 24,
+def cylinder(radius: float, length: float, colour: Sequence[int], *, segments: int = 24,
              centre: Sequence[float] = (0, 0, 0), axis: int = 2, capped: bool = True) -> ColouredMesh:
     """A closed cylinder along coordinate ``axis`` (0 = x, 1 = y, 2 = z)."""
     ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)

@@ -47,7 +47,7 @@ def textured_disc(radius: float, z: float, image: np.ndarray, centre: Sequence[f
 
 
 def _plate_with_square_holes(w: float, h: float, z0: float, z1: float, colour: Sequence[int],
-                             hole_xs: Sequence[float], side: float) -> ColouredMesh:
+                             *, hole_xs: Sequence[float], side: float) -> ColouredMesh:
     """A plate layer between z0 and z1 with square holes of ``side`` centred at y = 0."""
     parts = []
     edges = [-w / 2]
@@ -76,7 +76,7 @@ def _socket(spec: ObjectSpec, n: int) -> ColouredMesh:
     cup_d, hole = 0.038, 0.044
     floor_z = 0.45 * d
     parts = [box((w, h, floor_z), PLATE, (0, 0, floor_z / 2)),
-             _plate_with_square_holes(w - 0.002, h - 0.002, floor_z, d, PLATE_FACE, xs, hole)]
+             _plate_with_square_holes(w - 0.002, h - 0.002, floor_z, d, PLATE_FACE, hole_xs=xs, side=hole)]
     cup = pg.socket_cup_floor(cup_d)
     for x in xs:
         parts.append(textured_disc(cup_d / 2, floor_z + EPS, cup, centre=(x, 0)))

@@ -84,14 +84,14 @@ def _outline(hw: float, hh: float, r: float, centre: Sequence[float] = (0.0, 0.0
              per_corner: int = 8) -> np.ndarray:
     """Rounded-rectangle outline (N, 2) with half sizes hw, hh and corner radius r."""
     cx, cy = centre
-    return pic.rounded_rect_outline(cx - hw, cy - hh, cx + hw, cy + hh, max(r, 1e-4), per_corner)
+    return pic.rounded_rect_outline(cx - hw, cy - hh, cx + hw, cy + hh, max(r, 1e-4), per_corner=per_corner)
 
 
 def _at_z(xy: np.ndarray, z: float | np.ndarray) -> np.ndarray:
     return np.column_stack([xy, np.broadcast_to(np.asarray(z, float), (len(xy),))])
 
 
-def _plate(hw: float, hh: float, r: float, z0: float, z1: float, bevel: float, colour: Colour,
+def _plate(hw: float, hh: float, r: float, z0: float, z1: float, *, bevel: float, colour: Colour,
            centre: Sequence[float] = (0.0, 0.0)) -> ColouredMesh:
     """A rounded-rectangle plate from z0 to z1 whose front edge is bevelled by ``bevel``."""
     outer = _outline(hw, hh, r, centre)
@@ -127,7 +127,7 @@ def _circle(radius: float, angles: np.ndarray, centre: Sequence[float] = (0.0, 0
 
 
 def _outlet_module(centre: Sequence[float], half: float, z_base: float, z_face: float,
-                   colour: Colour, cup_r: float = 0.0195, cup_floor_z: float = 0.004,
+                   colour: Colour, *, cup_r: float = 0.0195, cup_floor_z: float = 0.004,
                    corner_r: float = 0.004, bevel: float = 0.0015, n: int = 72) -> ColouredMesh:
     """A square socket module with a recessed Schuko cup (floor textured with pin holes)."""
     ang = np.linspace(0, 2 * np.pi, n, endpoint=False)
@@ -139,12 +139,12 @@ def _outlet_module(centre: Sequence[float], half: float, z_base: float, z_face: 
     wall = _loft([_at_z(rim, z_face), _at_z(rim, cup_floor_z)], CUP_WALL, cap_end=True)
     floor_tex = alt.socket_cup_floor(2 * cup_r)
     cx, cy = centre
-    wall = _texture_front(wall, floor_tex, cx - cup_r, cx + cup_r, cy - cup_r, cy + cup_r)
+    wall = _texture_front(wall, floor_tex, x0=cx - cup_r, x1=cx + cup_r, y0=cy - cup_r, y1=cy + cup_r)
     return merge([body, wall])
 
 
 def _revolve(profile: Sequence[tuple[float, float]], axis: int, centre: Sequence[float],
-             colour: Colour, segments: int = 48, angle_range: tuple[float, float] | None = None,
+             colour: Colour, *, segments: int = 48, angle_range: tuple[float, float] | None = None,
              cap_start: bool = False, cap_end: bool = False) -> ColouredMesh:
     """Surface of revolution of (radius, position-along-axis) pairs.
 
@@ -174,7 +174,7 @@ def _prism_xy(outline: np.ndarray, z0: float, z1: float, colour: Colour) -> Colo
     return _loft([_at_z(outline, z0), _at_z(outline, z1)], colour, cap_start=True, cap_end=True)
 
 
-def _texture_front(mesh: ColouredMesh, image: np.ndarray, x0: float, x1: float, y0: float,
+def _texture_front(mesh: ColouredMesh, image: np.ndarray, *, x0: float, x1: float, y0: float,
                    y1: float, min_nz: float = 0.3) -> ColouredMesh:
     """Project an RGB image straight along z onto the mesh's front-ish triangles.
 
@@ -197,7 +197,7 @@ def _texture_front(mesh: ColouredMesh, image: np.ndarray, x0: float, x1: float, 
                         mesh.tri_label)
 
 
-def _box_span(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float,
+def _box_span(x0: float, x1: float, y0: float, y1: float, *, z0: float, z1: float,
               colour: Colour) -> ColouredMesh:
     return box((x1 - x0, y1 - y0, z1 - z0), colour, ((x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2))
 
@@ -209,7 +209,7 @@ def _socket_row(n_outlets: int) -> Callable[[], ColouredMesh]:
         spec = CATALOGUE[f"socket_x{n_outlets}"]
         hw, hh = spec.width_m / 2, spec.height_m / 2
         # the frame's face lies below the cup floors so that the cups are not covered
-        frame = _plate(hw, hh, 0.006, 0.0, 0.005, 0.0015, SOCKET_WHITE)
+        frame = _plate(hw, hh, 0.006, 0.0, 0.005, bevel=0.0015, colour=SOCKET_WHITE)
         margin = 0.009
         pitch = (spec.width_m - 2 * margin) / n_outlets
         half = min(0.031, pitch / 2 - 0.002, hh - margin)
@@ -244,8 +244,8 @@ def _switch() -> ColouredMesh:
     top-out, with an orange locator light near its top."""
     spec = CATALOGUE["switch"]
     hw = spec.width_m / 2
-    frame = _plate(hw, hw, 0.006, 0.0, 0.008, 0.0015, SWITCH_FRAME)
-    gap = _plate(0.0300, 0.0300, 0.0025, 0.006, 0.0085, 0.0002, (70, 70, 68))
+    frame = _plate(hw, hw, 0.006, 0.0, 0.008, bevel=0.0015, colour=SWITCH_FRAME)
+    gap = _plate(0.0300, 0.0300, 0.0025, 0.006, 0.0085, bevel=0.0002, colour=(70, 70, 68))
     half = 0.0275
     ring = _outline(half, half, 0.002)
     tilt_z = 0.0105 + 0.0015 * ring[:, 1] / half  # 9 mm at the bottom, 12 mm at the top
@@ -254,9 +254,9 @@ def _switch() -> ColouredMesh:
     rocker = _loft([_at_z(ring, 0.0085), _at_z(ring, tilt_z - 0.0005), _at_z(inner, inner_z)],
                    ROCKER_CREAM, cap_end=True)
     p = pic.Painter.new(2 * half, 2 * half, ROCKER_CREAM)
-    p.round_rect(half - 0.005, 0.008, half + 0.005, 0.012, 0.0015, (235, 125, 35))  # locator light
+    p.round_rect(half - 0.005, 0.008, half + 0.005, 0.012, 0.0015, colour=(235, 125, 35))  # locator light
     p.rect(0.004, half - 0.0004, 2 * half - 0.004, half + 0.0004, (205, 200, 186))  # parting line
-    rocker = _texture_front(rocker, p.img, -half, half, -half, half, min_nz=0.9)
+    rocker = _texture_front(rocker, p.img, x0=-half, x1=half, y0=-half, y1=half, min_nz=0.9)
     return merge([frame, gap, rocker])
 
 
@@ -278,29 +278,29 @@ def _fire_extinguisher() -> ColouredMesh:
     label = _revolve([(label_r, -0.165), (label_r, 0.070)], 1, (cx, 0, cz), (238, 232, 212),
                      segments=40, angle_range=(a0, np.pi - a0))
     lw = label_r * np.cos(a0)
-    label = _texture_front(label, alt.extinguisher_label(2 * lw, 0.235), cx - lw, cx + lw,
-                           -0.165, 0.070, min_nz=0.0)
-    neck = cylinder(0.018, 0.035, (150, 120, 60), 24, (cx, 0.205, cz), axis=1)  # brass
-    valve = _box_span(cx - 0.026, cx + 0.026, 0.218, 0.250, cz - 0.02, cz + 0.02, BLACK_PLASTIC)
-    gauge = cylinder(0.014, 0.007, (235, 235, 228), 24, (cx, 0.234, cz + 0.0235), axis=2)
+    label = _texture_front(label, alt.extinguisher_label(2 * lw, 0.235), x0=cx - lw, x1=cx + lw,
+                           y0=-0.165, y1=0.070, min_nz=0.0)
+    neck = cylinder(0.018, 0.035, (150, 120, 60), segments=24, centre=(cx, 0.205, cz), axis=1)  # brass
+    valve = _box_span(cx - 0.026, cx + 0.026, 0.218, 0.250, z0=cz - 0.02, z1=cz + 0.02, colour=BLACK_PLASTIC)
+    gauge = cylinder(0.014, 0.007, (235, 235, 228), segments=24, centre=(cx, 0.234, cz + 0.0235), axis=2)
     lever = _prism_xy(np.array([[cx - 0.055, 0.256], [cx + 0.060, 0.286], [cx + 0.057, top],
                                 [cx - 0.058, 0.268]]), cz - 0.012, cz + 0.012, BLACK_PLASTIC)
-    handle = _box_span(cx - 0.060, cx + 0.020, 0.250, 0.256, cz - 0.011, cz + 0.011,
-                       BLACK_PLASTIC)
-    pin = _box_span(cx + 0.026, cx + 0.034, 0.238, 0.246, cz - 0.004, cz + 0.004, (230, 190, 0))
+    handle = _box_span(cx - 0.060, cx + 0.020, 0.250, 0.256, z0=cz - 0.011, z1=cz + 0.011,
+                       colour=BLACK_PLASTIC)
+    pin = _box_span(cx + 0.026, cx + 0.034, 0.238, 0.246, z0=cz - 0.004, z1=cz + 0.004, colour=(230, 190, 0))
     hose_x, hose_r = spec.width_m / 2 - 0.0095, 0.0085
     hose_top = 0.232
-    hose_h = cylinder(hose_r, hose_x - cx - 0.02, BLACK_PLASTIC, 16,
-                      ((hose_x + cx + 0.02) / 2, hose_top, cz), axis=0)
-    hose_v = cylinder(hose_r, hose_top + 0.125, BLACK_PLASTIC, 16,
-                      (hose_x, (hose_top - 0.125) / 2, cz), axis=1)
-    nozzle = cylinder(0.0095, 0.05, (25, 25, 25), 16, (hose_x, -0.150, cz), axis=1)
-    clip = _box_span(cx + r_body - 0.004, hose_x, -0.005, 0.005, cz - 0.006, cz + 0.006,
-                     STEEL_DARK)
+    hose_h = cylinder(hose_r, hose_x - cx - 0.02, BLACK_PLASTIC, segments=16,
+                      centre=((hose_x + cx + 0.02) / 2, hose_top, cz), axis=0)
+    hose_v = cylinder(hose_r, hose_top + 0.125, BLACK_PLASTIC, segments=16,
+                      centre=(hose_x, (hose_top - 0.125) / 2, cz), axis=1)
+    nozzle = cylinder(0.0095, 0.05, (25, 25, 25), segments=16, centre=(hose_x, -0.150, cz), axis=1)
+    clip = _box_span(cx + r_body - 0.004, hose_x, -0.005, 0.005, z0=cz - 0.006, z1=cz + 0.006,
+                     colour=STEEL_DARK)
     bracket = merge([
-        _box_span(cx - 0.025, cx + 0.025, -0.05, 0.13, 0.0, 0.004, STEEL_DARK),
-        _box_span(cx - 0.020, cx + 0.020, 0.10, 0.13, 0.0, 0.026, STEEL_DARK),
-        _box_span(cx - 0.035, cx + 0.035, -0.02, 0.00, 0.0, 0.022, STEEL_DARK),
+        _box_span(cx - 0.025, cx + 0.025, -0.05, 0.13, z0=0.0, z1=0.004, colour=STEEL_DARK),
+        _box_span(cx - 0.020, cx + 0.020, 0.10, 0.13, z0=0.0, z1=0.026, colour=STEEL_DARK),
+        _box_span(cx - 0.035, cx + 0.035, -0.02, 0.00, z0=0.0, z1=0.022, colour=STEEL_DARK),
     ])
     return merge([body, foot, label, neck, valve, gauge, lever, handle, pin, hose_h, hose_v,
                   nozzle, clip, bracket])
@@ -332,9 +332,11 @@ def _radiator() -> ColouredMesh:
         parts.append(element)
     for y in (-hh + 0.05, hh - 0.05):
         # headers run through all elements; their end plugs reach the footprint's sides
-        parts.append(cylinder(0.020, spec.width_m, (228, 228, 222), 20, (0, y, 0.052), axis=0))
+        parts.append(cylinder(0.020, spec.width_m, (228, 228, 222), segments=20,
+                              centre=(0, y, 0.052), axis=0))
     for x in (-0.6 * hw, 0.6 * hw):
-        parts.append(_box_span(x - 0.015, x + 0.015, hh - 0.09, hh - 0.04, 0.0, 0.034, (120, 120, 118)))
+        parts.append(_box_span(x - 0.015, x + 0.015, hh - 0.09, hh - 0.04, z0=0.0, z1=0.034,
+                               colour=(120, 120, 118)))
     return merge(parts)
 
 
@@ -342,9 +344,9 @@ def _fire_alarm_switch() -> ColouredMesh:
     """Manual call point: red housing with a white element window (front texture)."""
     spec = CATALOGUE["fire_alarm_switch"]
     hw, hh = spec.width_m / 2, spec.height_m / 2
-    housing = _plate(hw, hh, 0.006, 0.0, spec.depth_m, 0.004, alt.HOUSING_RED)
+    housing = _plate(hw, hh, 0.006, 0.0, spec.depth_m, bevel=0.004, colour=alt.HOUSING_RED)
     return _texture_front(housing, alt.call_point_front(spec.width_m, spec.height_m),
-                          -hw, hw, -hh, hh, min_nz=0.5)
+                          x0=-hw, x1=hw, y0=-hh, y1=hh, min_nz=0.5)
 
 
 def _smoke_detector() -> ColouredMesh:
@@ -355,24 +357,24 @@ def _smoke_detector() -> ColouredMesh:
                (0.040, 0.036), (0.038, 0.037), (0.038, d - 0.005), (0.035, d - 0.001),
                (0.028, d), (0.0, d)]
     shell = _revolve(profile, 2, (0, 0, 0), (240, 240, 235), segments=64, cap_start=True)
-    return _texture_front(shell, alt.smoke_detector_face(spec.width_m), -r, r, -r, r, min_nz=0.3)
+    return _texture_front(shell, alt.smoke_detector_face(spec.width_m), x0=-r, x1=r, y0=-r, y1=r, min_nz=0.3)
 
 
 def _exit_light() -> ColouredMesh:
     """Emergency exit luminaire: white housing, diffuser with a green exit pictogram."""
     spec = CATALOGUE["exit_light"]
     hw, hh = spec.width_m / 2, spec.height_m / 2
-    housing = _plate(hw, hh, 0.010, 0.0, spec.depth_m, 0.008, WHITE_9016)
+    housing = _plate(hw, hh, 0.010, 0.0, spec.depth_m, bevel=0.008, colour=WHITE_9016)
     return _texture_front(housing, alt.exit_light_front(spec.width_m, spec.height_m),
-                          -hw, hw, -hh, hh, min_nz=0.5)
+                          x0=-hw, x1=hw, y0=-hh, y1=hh, min_nz=0.5)
 
 
 def _sign(class_id: str, draw: Callable[[float, float], np.ndarray]) -> Callable[[], ColouredMesh]:
     def build() -> ColouredMesh:
         spec = CATALOGUE[class_id]
         hw, hh = spec.width_m / 2, spec.height_m / 2
-        plate = _box_span(-hw, hw, -hh, hh, 0.0, spec.depth_m, alt.SIGN_RED)
-        return _texture_front(plate, draw(spec.width_m, spec.height_m), -hw, hw, -hh, hh,
+        plate = _box_span(-hw, hw, -hh, hh, z0=0.0, z1=spec.depth_m, colour=alt.SIGN_RED)
+        return _texture_front(plate, draw(spec.width_m, spec.height_m), x0=-hw, x1=hw, y0=-hh, y1=hh,
                               min_nz=0.5)
     return build
 
@@ -381,15 +383,16 @@ def _electrical_panel() -> ColouredMesh:
     """Surface-mounted distribution board: white enclosure, door with smoked window."""
     spec = CATALOGUE["electrical_panel"]
     hw, hh, d = spec.width_m / 2, spec.height_m / 2, spec.depth_m
-    body = _plate(hw, hh, 0.012, 0.0, d - 0.010, 0.006, WHITE_9016)
+    body = _plate(hw, hh, 0.012, 0.0, d - 0.010, bevel=0.006, colour=WHITE_9016)
     dw, dh = hw - 0.005, hh - 0.005
-    door = _plate(dw, dh, 0.010, d - 0.012, d - 0.003, 0.002, WHITE_9016)
-    door = _texture_front(door, alt.electrical_panel_front(2 * dw, 2 * dh), -dw, dw, -dh, dh,
+    door = _plate(dw, dh, 0.010, d - 0.012, d - 0.003, bevel=0.002, colour=WHITE_9016)
+    door = _texture_front(door, alt.electrical_panel_front(2 * dw, 2 * dh), x0=-dw, x1=dw, y0=-dh, y1=dh,
                           min_nz=0.5)
     # lock / handle on the door's right edge (matches the texture's lock plate)
     lx = -dw + 0.95 * 2 * dw
     ly = dh - 0.50 * 2 * dh
-    handle = _box_span(lx - 0.008, lx + 0.008, ly - 0.045, ly + 0.045, d - 0.003, d, (90, 92, 94))
+    handle = _box_span(lx - 0.008, lx + 0.008, ly - 0.045, ly + 0.045, z0=d - 0.003, z1=d,
+                       colour=(90, 92, 94))
     return merge([body, door, handle])
 
 

@@ -44,7 +44,8 @@ EPS = 0.0004
 SIGN_SIDE_M = 0.20
 
 
-def _span(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float, colour: Colour) -> ColouredMesh:
+def _span(x0: float, x1: float, y0: float, y1: float, *, z0: float, z1: float,
+          colour: Colour) -> ColouredMesh:
     return box((x1 - x0, y1 - y0, z1 - z0), colour, ((x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2))
 
 
@@ -60,7 +61,7 @@ def _gang_face(side: float) -> np.ndarray:
     """One socket gang seen straight on: rounded-square recess, two round pin holes, earth clips."""
     p = pic.Painter.new(side, side, IVORY)
     m = side * 0.16
-    p.round_rect(m, m, side - m, side - m, side * 0.12, (190, 182, 164))
+    p.round_rect(m, m, side - m, side - m, side * 0.12, colour=(190, 182, 164))
     for x in (0.36, 0.64):
         p.circle((side * x, side * 0.5), side * 0.045, BLACK)
     p.rect(side * 0.46, m + side * 0.02, side * 0.54, m + side * 0.07, (150, 150, 150))
@@ -72,15 +73,17 @@ def _sockets(n: int) -> Callable[[], ColouredMesh]:
     def build() -> ColouredMesh:
         spec = CATALOGUE[f"socket_x{n}"]
         w, h, d = spec.width_m, spec.height_m, spec.depth_m
-        parts = [_span(-w / 2, w / 2, -h / 2, h / 2, 0.0, d * 0.35, (214, 206, 186))]  # mounting frame
+        parts = [_span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d * 0.35,
+                       colour=(214, 206, 186))]  # mounting frame
         pitch = w / n
         side = min(pitch - 0.006, h - 0.006)
         for k in range(n):
             x = -w / 2 + (k + 0.5) * pitch
-            parts.append(_span(x - side / 2, x + side / 2, -side / 2, side / 2, d * 0.35, d, IVORY))
+            parts.append(_span(x - side / 2, x + side / 2, -side / 2, side / 2, z0=d * 0.35, z1=d,
+                               colour=IVORY))
             # rounded-square recess as a sunken inner block (darker floor)
             r = side * 0.34
-            parts.append(_span(x - r, x + r, -r, r, d * 0.35, d - 0.004, (190, 182, 164)))
+            parts.append(_span(x - r, x + r, -r, r, z0=d * 0.35, z1=d - 0.004, colour=(190, 182, 164)))
             parts.append(_front(side, side, d + EPS, _gang_face(side), (x, 0.0)))
         return merge(parts)
     return build
@@ -92,17 +95,19 @@ def _builtin_socket() -> ColouredMesh:
     p = pic.Painter.new(w, h, STAINLESS)
     for k in range(0, int(w * 1000), 2):  # brushed lines
         p.rect(k / 1000, 0, k / 1000 + 0.0004, h, (158, 160, 162))
-    p.round_rect(w * 0.15, h * 0.15, w * 0.85, h * 0.85, 0.01, (120, 122, 126))  # flip lid seam
+    p.round_rect(w * 0.15, h * 0.15, w * 0.85, h * 0.85, 0.01, colour=(120, 122, 126))  # flip lid seam
     p.rect(w * 0.4, h * 0.78, w * 0.6, h * 0.83, (70, 70, 72))  # finger slot
-    return merge([_span(-w / 2, w / 2, -h / 2, h / 2, 0.0, d, STAINLESS), _front(w, h, d + EPS, p.img)])
+    return merge([_span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d, colour=STAINLESS),
+                  _front(w, h, d + EPS, p.img)])
 
 
 def _switch() -> ColouredMesh:
     spec = CATALOGUE["switch"]
     w, h, d = spec.width_m, spec.height_m, spec.depth_m
-    plate = _span(-w / 2, w / 2, -h / 2, h / 2, 0.0, d * 0.6, ANTHRACITE)
+    plate = _span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d * 0.6, colour=ANTHRACITE)
     b = 0.026
-    buttons = [_span(x - b / 2, x + b / 2, -b, b, d * 0.6, d, (86, 88, 92)) for x in (-0.016, 0.016)]
+    buttons = [_span(x - b / 2, x + b / 2, -b, b, z0=d * 0.6, z1=d,
+                     colour=(86, 88, 92)) for x in (-0.016, 0.016)]
     p = pic.Painter.new(b, 2 * b, (86, 88, 92))
     p.circle((b / 2, 0.3 * b), 0.0015, (230, 160, 40))  # orientation LED
     leds = [_front(b, 2 * b, d + EPS, p.img, (x, 0.0)) for x in (-0.016, 0.016)]
@@ -128,9 +133,10 @@ def _panel_front(w: float, h: float) -> np.ndarray:
 def _electrical_panel() -> ColouredMesh:
     spec = CATALOGUE["electrical_panel"]
     w, h, d = spec.width_m, spec.height_m, spec.depth_m
-    body = _span(-w / 2, w / 2, -h / 2, h / 2, 0.0, d - 0.006, RAL_7035)
-    door = _span(-w / 2 + 0.004, w / 2 - 0.004, -h / 2 + 0.004, h / 2 - 0.004, d - 0.006, d - 0.002, RAL_7035)
-    handle = _span(-w / 2 + 0.016, -w / 2 + 0.028, -0.04, 0.04, d - 0.002, d, (40, 40, 42))
+    body = _span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d - 0.006, colour=RAL_7035)
+    door = _span(-w / 2 + 0.004, w / 2 - 0.004, -h / 2 + 0.004, h / 2 - 0.004, z0=d - 0.006,
+                 z1=d - 0.002, colour=RAL_7035)
+    handle = _span(-w / 2 + 0.016, -w / 2 + 0.028, -0.04, 0.04, z0=d - 0.002, z1=d, colour=(40, 40, 42))
     return merge([body, door, handle, _front(w - 0.008, h - 0.008, d - 0.002 + EPS, _panel_front(w - 0.008, h - 0.008))])
 
 
@@ -142,16 +148,21 @@ def _fire_extinguisher() -> ColouredMesh:
     zc = d - r
     body_h = h * 0.72
     y0 = -h / 2
-    parts = [cylinder(r, body_h, CO2_RED, 28, (0.02, y0 + body_h / 2, zc), axis=1),
-             cylinder(r * 0.55, 0.04, CO2_RED, 20, (0.02, y0 + body_h + 0.02, zc), axis=1),
-             _span(0.0, 0.04, y0 + body_h + 0.04, y0 + body_h + 0.1, zc - 0.02, zc + 0.02, (150, 150, 152)),
-             _span(0.04, 0.09, y0 + body_h + 0.085, y0 + body_h + 0.1, zc - 0.01, zc + 0.01, BLACK),  # lever
-             _span(-w / 2, -w / 2 + 0.035, y0 + 0.12, y0 + body_h * 0.7, zc - 0.02, zc + 0.02, BLACK),  # horn
-             _span(-0.06, 0.1, y0 + body_h * 0.75, y0 + body_h * 0.78, 0.0, zc + 0.002, (40, 40, 40)),  # strap
-             _span(-0.03, 0.07, y0 + body_h * 0.55, y0 + body_h * 0.8, 0.0, 0.03, (60, 60, 62))]  # bracket
+    parts = [cylinder(r, body_h, CO2_RED, segments=28, centre=(0.02, y0 + body_h / 2, zc), axis=1),
+             cylinder(r * 0.55, 0.04, CO2_RED, segments=20, centre=(0.02, y0 + body_h + 0.02, zc), axis=1),
+             _span(0.0, 0.04, y0 + body_h + 0.04, y0 + body_h + 0.1, z0=zc - 0.02, z1=zc + 0.02,
+                   colour=(150, 150, 152)),
+             _span(0.04, 0.09, y0 + body_h + 0.085, y0 + body_h + 0.1, z0=zc - 0.01, z1=zc + 0.01,
+                   colour=BLACK),  # lever
+             _span(-w / 2, -w / 2 + 0.035, y0 + 0.12, y0 + body_h * 0.7, z0=zc - 0.02, z1=zc + 0.02,
+                   colour=BLACK),  # horn
+             _span(-0.06, 0.1, y0 + body_h * 0.75, y0 + body_h * 0.78, z0=0.0, z1=zc + 0.002,
+                   colour=(40, 40, 40)),  # strap
+             _span(-0.03, 0.07, y0 + body_h * 0.55, y0 + body_h * 0.8, z0=0.0, z1=0.03,
+                   colour=(60, 60, 62))]  # bracket
     p = pic.Painter.new(0.09, body_h * 0.3, WHITE)
     p.text("CO2", 0.045, body_h * 0.08, 0.02, BLACK)
-    p.text_lines(0.01, body_h * 0.14, 0.08, 5, 0.012, 0.005, BLACK, seed=3)
+    p.text_lines(0.01, body_h * 0.14, 0.08, 5, pitch_m=0.012, height_m=0.005, colour=BLACK, seed=3)
     parts.append(_front(0.09, body_h * 0.3, zc + r + EPS, p.img, (0.02, y0 + body_h * 0.4)))
     return merge(parts)
 
@@ -160,21 +171,24 @@ def _radiator() -> ColouredMesh:
     """A designer radiator of horizontal flat tubes on two vertical collectors, anthracite."""
     spec = CATALOGUE["radiator"]
     w, h, d = spec.width_m, spec.height_m, spec.depth_m
-    parts = [_span(x - 0.025, x + 0.025, -h / 2, h / 2, 0.02, d - 0.01, ANTHRACITE) for x in (-w / 2 + 0.025, w / 2 - 0.025)]
+    parts = [_span(x - 0.025, x + 0.025, -h / 2, h / 2, z0=0.02, z1=d - 0.01,
+                   colour=ANTHRACITE) for x in (-w / 2 + 0.025, w / 2 - 0.025)]
     n = 12
     pitch = h / n
     for k in range(n):
         y = -h / 2 + (k + 0.5) * pitch
-        parts.append(_span(-w / 2 + 0.05, w / 2 - 0.05, y - pitch * 0.3, y + pitch * 0.3, 0.04, d, ANTHRACITE))
-    parts += [_span(x - 0.01, x + 0.01, -0.02, 0.02, 0.0, 0.02, (50, 50, 52)) for x in (-w / 3, w / 3)]
+        parts.append(_span(-w / 2 + 0.05, w / 2 - 0.05, y - pitch * 0.3, y + pitch * 0.3, z0=0.04,
+                           z1=d, colour=ANTHRACITE))
+    parts += [_span(x - 0.01, x + 0.01, -0.02, 0.02, z0=0.0, z1=0.02,
+                    colour=(50, 50, 52)) for x in (-w / 3, w / 3)]
     return merge(parts)
 
 
 def _fire_alarm_switch() -> ColouredMesh:
     spec = CATALOGUE["fire_alarm_switch"]
     w, h, d = spec.width_m, spec.height_m, spec.depth_m
-    housing = _span(-w / 2, w / 2, -h / 2, h / 2, 0.0, d - 0.012, SIGN_RED)
-    button = cylinder(0.026, 0.012, (236, 236, 230), 28, (0.0, 0.0, d - 0.006), axis=2)
+    housing = _span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d - 0.012, colour=SIGN_RED)
+    button = cylinder(0.026, 0.012, (236, 236, 230), segments=28, centre=(0.0, 0.0, d - 0.006), axis=2)
     p = pic.Painter.new(w, h, SIGN_RED)
     p.text("PUSH", w / 2, h * 0.88, h * 0.07, WHITE)
     ring = pic.Painter.new(0.052, 0.052, (236, 236, 230))
@@ -186,8 +200,9 @@ def _fire_alarm_switch() -> ColouredMesh:
 def _smoke_detector() -> ColouredMesh:
     spec = CATALOGUE["smoke_detector"]
     w, h, d = spec.width_m, spec.height_m, spec.depth_m
-    base = _span(-w / 2, w / 2, -h / 2, h / 2, 0.0, d * 0.5, (236, 236, 232))
-    top = _span(-w / 2 + 0.012, w / 2 - 0.012, -h / 2 + 0.012, h / 2 - 0.012, d * 0.5, d, (236, 236, 232))
+    base = _span(-w / 2, w / 2, -h / 2, h / 2, z0=0.0, z1=d * 0.5, colour=(236, 236, 232))
+    top = _span(-w / 2 + 0.012, w / 2 - 0.012, -h / 2 + 0.012, h / 2 - 0.012, z0=d * 0.5, z1=d,
+                colour=(236, 236, 232))
     p = pic.Painter.new(w - 0.024, h - 0.024, (236, 236, 232))
     for k in range(5):  # slot vents
         y = 0.012 + k * 0.016
@@ -200,12 +215,13 @@ def _exit_light() -> ColouredMesh:
     """An exit blade: a slim base on the wall and an edge-lit acrylic panel under it."""
     spec = CATALOGUE["exit_light"]
     w, h, d = spec.width_m, spec.height_m, spec.depth_m
-    base = _span(-w / 2, w / 2, h / 2 - 0.03, h / 2, 0.0, d, (200, 202, 206))
+    base = _span(-w / 2, w / 2, h / 2 - 0.03, h / 2, z0=0.0, z1=d, colour=(200, 202, 206))
     pw, ph = w * 0.9, h - 0.035
-    panel = _span(-pw / 2, pw / 2, -h / 2, h / 2 - 0.03, d / 2 - 0.004, d / 2 + 0.004, (236, 242, 238))
+    panel = _span(-pw / 2, pw / 2, -h / 2, h / 2 - 0.03, z0=d / 2 - 0.004, z1=d / 2 + 0.004,
+                  colour=(236, 242, 238))
     p = pic.Painter.new(pw, ph, (236, 242, 238))
     p.rect(0.01, 0.01, pw - 0.01, ph - 0.01, pic.SAFETY_GREEN)
-    pic.running_man(p, pw * 0.58, 0.015, ph - 0.03, WHITE)
+    pic.running_man(p, pw * 0.58, 0.015, ph - 0.03, colour=WHITE)
     p.poly(np.array([[0.03, ph / 2], [0.09, ph * 0.2], [0.09, ph * 0.8]]), WHITE)  # arrow to the left
     p.rect(0.085, ph * 0.42, 0.16, ph * 0.58, WHITE)
     return merge([base, panel, _front(pw, ph, d / 2 + 0.004 + EPS, p.img, (0.0, -0.015))])
@@ -219,7 +235,7 @@ def _extinguisher_pictogram(side: float) -> np.ndarray:
     m = 0.012
     p.rect(m, m, side - m, side - m, WHITE, width_m=0.004)  # white border line
     cx = side * 0.42
-    p.round_rect(cx - 0.024, side * 0.33, cx + 0.024, side * 0.82, 0.012, WHITE)  # cylinder
+    p.round_rect(cx - 0.024, side * 0.33, cx + 0.024, side * 0.82, 0.012, colour=WHITE)  # cylinder
     p.rect(cx - 0.008, side * 0.25, cx + 0.008, side * 0.33, WHITE)  # valve
     p.line(np.array([[cx + 0.006, side * 0.27], [cx + 0.05, side * 0.24], [cx + 0.07, side * 0.3],
                      [cx + 0.07, side * 0.6]]), WHITE, 0.006)  # hose
@@ -244,7 +260,8 @@ def _sign(class_id: str, draw: Callable[[float], np.ndarray]) -> Callable[[], Co
     def build() -> ColouredMesh:
         d = CATALOGUE[class_id].depth_m
         s = SIGN_SIDE_M
-        return merge([_span(-s / 2, s / 2, -s / 2, s / 2, 0.0, d, SIGN_RED), _front(s, s, d + EPS, draw(s))])
+        return merge([_span(-s / 2, s / 2, -s / 2, s / 2, z0=0.0, z1=d, colour=SIGN_RED),
+                      _front(s, s, d + EPS, draw(s))])
     return build
 
 

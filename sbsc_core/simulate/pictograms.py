@@ -78,7 +78,7 @@ class Painter:
                    cv2.LINE_AA, _SHIFT)
 
     def ellipse(self, centre: Sequence[float], axes_m: Sequence[float], colour: Sequence[int],
-                angle_deg: float = 0.0, arc_deg: tuple[float, float] = (0.0, 360.0),
+                *, angle_deg: float = 0.0, arc_deg: tuple[float, float] = (0.0, 360.0),
                 width_m: float | None = None) -> None:
         c = self._fix(np.asarray(centre, float))
         axes = (self._len(axes_m[0]), self._len(axes_m[1]))
@@ -87,7 +87,7 @@ class Painter:
                     _c(colour), th, cv2.LINE_AA, _SHIFT)
 
     def rect(self, x0: float, y0: float, x1: float, y1: float, colour: Sequence[int],
-             width_m: float | None = None) -> None:
+             *, width_m: float | None = None) -> None:
         pts = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
         if width_m is None:
             self.poly(pts, colour)
@@ -95,11 +95,11 @@ class Painter:
             self.line(pts, colour, width_m, closed=True)
 
     def round_rect(self, x0: float, y0: float, x1: float, y1: float, radius_m: float,
-                   colour: Sequence[int]) -> None:
+                   *, colour: Sequence[int]) -> None:
         self.poly(rounded_rect_outline(x0, y0, x1, y1, radius_m), colour)
 
     def text(self, text: str, x: float, y: float, height_m: float, colour: Sequence[int],
-             thickness_m: float | None = None, centred: bool = True) -> None:
+             *, thickness_m: float | None = None, centred: bool = True) -> None:
         """Text with OpenCV's built-in Hershey font; (x, y) is the centre (or baseline start)."""
         font = cv2.FONT_HERSHEY_SIMPLEX
         base_h = cv2.getTextSize("H", font, 1.0, 1)[0][1]
@@ -110,7 +110,7 @@ class Painter:
         org = (round(px - tw / 2), round(py + tht / 2)) if centred else (round(px), round(py))
         cv2.putText(self.img, text, org, font, scale, _c(colour), th, cv2.LINE_AA)
 
-    def text_lines(self, x0: float, y0: float, x1: float, n: int, pitch_m: float,
+    def text_lines(self, x0: float, y0: float, x1: float, n: int, *, pitch_m: float,
                    height_m: float, colour: Sequence[int], seed: int = 0) -> None:
         """Rows of word-like bars standing in for small print."""
         rng = np.random.default_rng(seed)
@@ -129,7 +129,7 @@ def _c(colour: Sequence[int]) -> tuple[int, int, int]:
 
 
 def rounded_rect_outline(x0: float, y0: float, x1: float, y1: float, radius_m: float,
-                         per_corner: int = 8) -> np.ndarray:
+                         *, per_corner: int = 8) -> np.ndarray:
     """Outline points of a rounded rectangle (any consistent orientation)."""
     r = min(radius_m, (x1 - x0) / 2, (y1 - y0) / 2)
     pts = []
@@ -170,7 +170,7 @@ def _flames(p: Painter, x0: float, y0: float, size: float, colour: Sequence[int]
         p.poly(_map(flame_outline(cx, by, w, h, lean), x0, y0, size), colour)
 
 
-def _extinguisher_glyph(p: Painter, x0: float, y0: float, size: float, colour: Sequence[int],
+def _extinguisher_glyph(p: Painter, x0: float, y0: float, size: float, *, colour: Sequence[int],
                         bg: Sequence[int]) -> None:
     """A fire extinguisher with hose, in the unit square (x0, y0, size), y down."""
     m = lambda pts: _map(np.asarray(pts, float), x0, y0, size)  # noqa: E731
@@ -203,7 +203,7 @@ def extinguisher_sign(width_m: float = 0.21, height_m: float = 0.30,
     b = 0.015 * s
     p.rect(b, b, s - b, height_m - b, PHOTOLUM_WHITE, width_m=0.008 * s)  # inner border line
     # pictogram square (upper part)
-    _extinguisher_glyph(p, 0.22 * s, 0.14 * s, 0.70 * s, PHOTOLUM_WHITE, SAFETY_RED)
+    _extinguisher_glyph(p, 0.22 * s, 0.14 * s, 0.70 * s, colour=PHOTOLUM_WHITE, bg=SAFETY_RED)
     _flames(p, 0.07 * s, 0.10 * s, 0.28 * s, PHOTOLUM_WHITE)
     # lower band: arrow and text
     y_band = min(height_m - 0.02 * s, s * 1.0)
@@ -249,7 +249,7 @@ def fire_alarm_sign(width_m: float = 0.21, height_m: float = 0.21,
     return p.img
 
 
-def running_man(p: Painter, x0: float, y0: float, size: float, colour: Sequence[int],
+def running_man(p: Painter, x0: float, y0: float, size: float, *, colour: Sequence[int],
                 facing_left: bool = True) -> None:
     """ISO 7010 E001/E002-like running figure in the unit square (x0, y0, size)."""
     def m(pts: Sequence[Sequence[float]]) -> np.ndarray:
@@ -283,7 +283,7 @@ def exit_light_front(width_m: float = 0.36, height_m: float = 0.14,
     d0 = gx0 + 0.08 * gh
     p.rect(d0, gy0 + 0.08 * gh, d0 + 0.62 * gh, gy1 - 0.08 * gh, white)
     p.rect(d0 + 0.10 * gh, gy0 + 0.18 * gh, d0 + 0.52 * gh, gy1 - 0.08 * gh, SAFETY_GREEN)
-    running_man(p, d0 + 0.35 * gh, gy0 + 0.10 * gh, 0.82 * gh, white, facing_left=True)
+    running_man(p, d0 + 0.35 * gh, gy0 + 0.10 * gh, 0.82 * gh, colour=white, facing_left=True)
     # arrow to the left
     ax0, ax1, ay = gx1 - 1.25 * gh, gx1 - 0.15 * gh, (gy0 + gy1) / 2
     p.poly(np.array([[ax0, ay], [ax0 + 0.40 * gh, ay - 0.38 * gh], [ax0 + 0.40 * gh, ay - 0.14 * gh],
@@ -315,8 +315,8 @@ def extinguisher_label(width_m: float, height_m: float, px_per_m: float = PX_PER
         p.line(np.array([[x + 0.075 * w, y + 0.07 * w], [x + 0.06 * w, y + 0.13 * w]]),
                (60, 60, 60), 0.02 * w)
     y += 0.19 * w
-    p.text_lines(0.08 * w, y, 0.92 * w, max(1, int((0.95 * h - y) / (0.035 * h))), 0.035 * h,
-                 0.016 * h, (70, 70, 70), seed=3)
+    p.text_lines(0.08 * w, y, 0.92 * w, max(1, int((0.95 * h - y) / (0.035 * h))), pitch_m=0.035 * h,
+                 height_m=0.016 * h, colour=(70, 70, 70), seed=3)
     return p.img
 
 
@@ -336,8 +336,9 @@ def call_point_front(width_m: float = 0.10, height_m: float = 0.10,
                      [cx + 0.14 * win, cy - 0.02 * win], [cx + 0.14 * win, cy + 0.16 * win],
                      [cx - 0.14 * win, cy + 0.16 * win]]), BLACK)
     p.poly(flame_outline(cx, cy + 0.13 * win, 0.13 * win, 0.20 * win), (238, 240, 238))
-    p.text_lines(x0 + 0.12 * win, y0 + 0.78 * win, x0 + 0.88 * win, 2, 0.08 * win, 0.035 * win,
-                 (40, 40, 40), seed=5)
+    p.text_lines(x0 + 0.12 * win, y0 + 0.78 * win, x0 + 0.88 * win, 2, pitch_m=0.08 * win,
+                 height_m=0.035 * win,
+                 colour=(40, 40, 40), seed=5)
     # key slot and test hole under the window
     p.rect(w / 2 - 0.05 * w, 0.86 * h, w / 2 + 0.05 * w, 0.89 * h, BLACK)
     p.circle((0.83 * w, 0.875 * h), 0.015 * w, BLACK)
@@ -351,8 +352,8 @@ def electrical_panel_front(width_m: float, height_m: float, px_per_m: float = PX
     p = Painter.new(width_m, height_m, body, px_per_m)
     w, h = width_m, height_m
     wx0, wy0, wx1, wy1 = 0.10 * w, 0.08 * h, 0.90 * w, 0.62 * h
-    p.round_rect(wx0 - 0.008, wy0 - 0.008, wx1 + 0.008, wy1 + 0.008, 0.01, (200, 200, 196))
-    p.round_rect(wx0, wy0, wx1, wy1, 0.006, (78, 86, 92))  # smoked window
+    p.round_rect(wx0 - 0.008, wy0 - 0.008, wx1 + 0.008, wy1 + 0.008, 0.01, colour=(200, 200, 196))
+    p.round_rect(wx0, wy0, wx1, wy1, 0.006, colour=(78, 86, 92))  # smoked window
     rows = 2
     row_h = (wy1 - wy0) / rows
     rng = np.random.default_rng(11)
@@ -381,7 +382,7 @@ def electrical_panel_front(width_m: float, height_m: float, px_per_m: float = PX
                      [0.0, -0.05], [0.06, -0.30]]) * ts * 0.9 + [tc, ty + 0.55 * ts]
     p.poly(bolt, BLACK)
     # lock on the right edge, maker plate at the bottom
-    p.round_rect(0.90 * w, 0.40 * h, 0.96 * w, 0.56 * h, 0.006, (150, 152, 150))
+    p.round_rect(0.90 * w, 0.40 * h, 0.96 * w, 0.56 * h, 0.006, colour=(150, 152, 150))
     p.circle((0.93 * w, 0.48 * h), 0.006, (50, 50, 50))
     p.rect(0.40 * w, 0.90 * h, 0.60 * w, 0.92 * h, (170, 172, 170))
     return p.img

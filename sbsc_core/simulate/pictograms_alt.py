@@ -36,7 +36,7 @@ HOUSING_RED = (190, 38, 34)  # red of the call point and extinguisher print
 PANEL_WHITE = (236, 237, 233)
 
 
-def _extinguisher_glyph_alt(p: Painter, x0: float, y0: float, size: float, colour: Sequence[int],
+def _extinguisher_glyph_alt(p: Painter, x0: float, y0: float, size: float, *, colour: Sequence[int],
                             bg: Sequence[int]) -> None:
     """A slimmer extinguisher with a flat shoulder and the hose looping to the left."""
     m = lambda pts: _map(np.asarray(pts, float), x0, y0, size)  # noqa: E731
@@ -65,7 +65,7 @@ def extinguisher_sign(width_m: float = 0.21, height_m: float = 0.30,
     band at the bottom with the arrow on the RIGHT and the word on the left."""
     p = Painter.new(width_m, height_m, SIGN_RED, px_per_m)
     s = width_m
-    _extinguisher_glyph_alt(p, 0.04 * s, 0.08 * s, 0.74 * s, PHOTOLUM, SIGN_RED)
+    _extinguisher_glyph_alt(p, 0.04 * s, 0.08 * s, 0.74 * s, colour=PHOTOLUM, bg=SIGN_RED)
     _flames(p, 0.68 * s, 0.08 * s, 0.26 * s, PHOTOLUM)
     y_band = min(height_m - 0.02 * s, 1.02 * s)
     if height_m > 1.2 * s:
@@ -89,9 +89,9 @@ def fire_alarm_sign(width_m: float = 0.21, height_m: float = 0.21,
     x0, y0 = (width_m - s) / 2, (height_m - s) / 2
     m = lambda pts: _map(np.asarray(pts, float), x0, y0, s)  # noqa: E731
     w = PHOTOLUM
-    p.round_rect(0.03 * s, 0.03 * s, width_m - 0.03 * s, height_m - 0.03 * s, 0.04 * s, w)
+    p.round_rect(0.03 * s, 0.03 * s, width_m - 0.03 * s, height_m - 0.03 * s, 0.04 * s, colour=w)
     p.round_rect(0.045 * s, 0.045 * s, width_m - 0.045 * s, height_m - 0.045 * s, 0.03 * s,
-                 SIGN_RED)
+                 colour=SIGN_RED)
     # filled call-point box with a red push button ring
     p.rect(*m([0.42, 0.26]), *m([0.86, 0.70]), w)
     p.circle(m([[0.64, 0.48]])[0], 0.11 * s, SIGN_RED)
@@ -117,7 +117,7 @@ def exit_light_front(width_m: float = 0.36, height_m: float = 0.14,
     p = Painter.new(width_m, height_m, (240, 242, 240), px_per_m)
     mx, my = 0.012, 0.06 * height_m
     gx0, gy0, gx1, gy1 = mx, my, width_m - mx, height_m - my
-    p.round_rect(gx0, gy0, gx1, gy1, 0.006, SIGN_GREEN)
+    p.round_rect(gx0, gy0, gx1, gy1, 0.006, colour=SIGN_GREEN)
     gh = gy1 - gy0
     white = (248, 250, 246)
     # arrow to the right, at the left end
@@ -130,7 +130,7 @@ def exit_light_front(width_m: float = 0.36, height_m: float = 0.14,
     d0 = d1 - 0.58 * gh
     p.rect(d0, gy0 + 0.10 * gh, d1, gy1 - 0.06 * gh, white)
     p.rect(d0 + 0.08 * gh, gy0 + 0.20 * gh, d1 - 0.08 * gh, gy1 - 0.06 * gh, SIGN_GREEN)
-    running_man(p, d0 - 0.62 * gh, gy0 + 0.12 * gh, 0.80 * gh, white, facing_left=False)
+    running_man(p, d0 - 0.62 * gh, gy0 + 0.12 * gh, 0.80 * gh, colour=white, facing_left=False)
     return p.img
 
 
@@ -146,11 +146,11 @@ def extinguisher_label(width_m: float, height_m: float, px_per_m: float = PX_PER
     bw = 0.20 * w
     for i, col in enumerate(((40, 120, 60), (200, 60, 40), (40, 70, 160))):
         x = 0.12 * w + i * 0.27 * w
-        p.round_rect(x, 0.24 * h, x + bw, 0.24 * h + bw, 0.004, col)
+        p.round_rect(x, 0.24 * h, x + bw, 0.24 * h + bw, 0.004, colour=col)
         p.text("ABC"[i], x + bw / 2, 0.24 * h + bw / 2, 0.5 * bw, bg)
     y = 0.27 * h + bw
-    p.text_lines(0.08 * w, y, 0.92 * w, max(1, int((0.95 * h - y) / (0.03 * h))), 0.03 * h,
-                 0.009 * h, (110, 108, 100), seed=7)
+    p.text_lines(0.08 * w, y, 0.92 * w, max(1, int((0.95 * h - y) / (0.03 * h))), pitch_m=0.03 * h,
+                 height_m=0.009 * h, colour=(110, 108, 100), seed=7)
     return p.img
 
 
@@ -171,8 +171,9 @@ def call_point_front(width_m: float = 0.10, height_m: float = 0.10,
     p.poly(np.array([[cx - 0.11 * win, cy], [cx, cy - 0.11 * win], [cx + 0.11 * win, cy],
                      [cx + 0.11 * win, cy + 0.12 * win], [cx - 0.11 * win, cy + 0.12 * win]]), BLACK)
     p.poly(flame_outline(cx, cy + 0.10 * win, 0.10 * win, 0.15 * win), (244, 244, 240))
-    p.text_lines(x0 + 0.50 * win, y0 + 0.70 * win, x0 + 0.92 * win, 3, 0.07 * win, 0.03 * win,
-                 (50, 50, 50), seed=9)
+    p.text_lines(x0 + 0.50 * win, y0 + 0.70 * win, x0 + 0.92 * win, 3, pitch_m=0.07 * win,
+                 height_m=0.03 * win,
+                 colour=(50, 50, 50), seed=9)
     p.circle((0.06 * w, 0.50 * h), 0.012 * w, BLACK)  # test key hole in the side border
     return p.img
 
@@ -183,8 +184,8 @@ def electrical_panel_front(width_m: float, height_m: float, px_per_m: float = PX
     p = Painter.new(width_m, height_m, PANEL_WHITE, px_per_m)
     w, h = width_m, height_m
     wx0, wy0, wx1, wy1 = 0.08 * w, 0.18 * h, 0.86 * w, 0.86 * h
-    p.round_rect(wx0 - 0.005, wy0 - 0.005, wx1 + 0.005, wy1 + 0.005, 0.008, (180, 182, 180))
-    p.round_rect(wx0, wy0, wx1, wy1, 0.004, (120, 132, 140))  # lighter smoked window
+    p.round_rect(wx0 - 0.005, wy0 - 0.005, wx1 + 0.005, wy1 + 0.005, 0.008, colour=(180, 182, 180))
+    p.round_rect(wx0, wy0, wx1, wy1, 0.004, colour=(120, 132, 140))  # lighter smoked window
     rows = 3
     row_h = (wy1 - wy0) / rows
     rng = np.random.default_rng(23)
@@ -213,7 +214,7 @@ def electrical_panel_front(width_m: float, height_m: float, px_per_m: float = PX
     p.poly(bolt, BLACK)
     p.rect(0.55 * w, 0.07 * h, 0.85 * w, 0.09 * h, (150, 152, 150))
     # slim handle on the right edge
-    p.round_rect(0.925 * w, 0.40 * h, 0.975 * w, 0.60 * h, 0.006, (90, 92, 94))
+    p.round_rect(0.925 * w, 0.40 * h, 0.975 * w, 0.60 * h, 0.006, colour=(90, 92, 94))
     p.circle((0.95 * w, 0.45 * h), 0.005, (30, 30, 30))
     return p.img
 

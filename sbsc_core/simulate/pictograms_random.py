@@ -64,7 +64,7 @@ def draw_print(glyph: str, width_m: float, height_m: float, style: PrintStyle) -
     m = 0.12 * fs
     _GLYPH[glyph](p, fx + m, fy + m, fs - 2 * m, style)
     if style.flames and glyph != "exit":
-        _flames(p, fx + 0.04 * fs, fy + 0.5 * fs, 0.34 * fs, style.ink, style.mirrored)
+        _flames(p, fx + 0.04 * fs, fy + 0.5 * fs, 0.34 * fs, ink=style.ink, mirrored=style.mirrored)
     if rest is not None:
         _extras(p, rest, style)
     return p.img
@@ -87,17 +87,18 @@ def _extras(p: Painter, rect: tuple[float, float, float, float], style: PrintSty
     s = min(w, h)
     tx0 = x0 + 0.08 * w
     if style.arrow:
-        _arrow(p, x0 + 0.08 * w + 0.35 * s, (y0 + y1) / 2, 0.6 * s, style.arrow, style.ink)
+        _arrow(p, x0 + 0.08 * w + 0.35 * s, (y0 + y1) / 2, 0.6 * s, direction=style.arrow, ink=style.ink)
         tx0 = x0 + 0.16 * w + 0.7 * s
     rows = style.text_rows
     bar = min(0.16 * h, 0.5 * h / rows)
     pitch = 1.8 * bar
     top = (y0 + y1) / 2 - (rows * pitch - 0.8 * bar) / 2
     if x1 - 0.06 * w - tx0 > 2 * bar:
-        p.text_lines(tx0, top, x1 - 0.06 * w, rows, pitch, bar, style.ink, seed=style.bars_seed)
+        p.text_lines(tx0, top, x1 - 0.06 * w, rows, pitch_m=pitch, height_m=bar, colour=style.ink,
+                     seed=style.bars_seed)
 
 
-def _arrow(p: Painter, cx: float, cy: float, size: float, direction: int, ink: RGB) -> None:
+def _arrow(p: Painter, cx: float, cy: float, size: float, *, direction: int, ink: RGB) -> None:
     """A block arrow of ``size`` centred at (cx, cy): 1 down, 2 left, 3 right."""
     unit = np.array([[-0.18, -0.5], [0.18, -0.5], [0.18, 0.05], [0.42, 0.05], [0.0, 0.5],
                      [-0.42, 0.05], [-0.18, 0.05]])  # pointing down (y down)
@@ -113,7 +114,7 @@ def _map(pts: Sequence[Sequence[float]], x0: float, y0: float, size: float, mirr
     return a * size + (x0, y0)
 
 
-def _flames(p: Painter, x0: float, y0: float, size: float, ink: RGB, mirrored: bool) -> None:
+def _flames(p: Painter, x0: float, y0: float, size: float, *, ink: RGB, mirrored: bool) -> None:
     """Two tongues of fire in the unit square (x0, y0, size)."""
     for cx, w, h, lean in ((0.35, 0.5, 0.9, 0.1), (0.72, 0.36, 0.6, 0.25)):
         outline = flame_outline(cx, 1.0, w, h, lean)
@@ -163,13 +164,14 @@ def _exit(p: Painter, x0: float, y0: float, size: float, style: PrintStyle) -> N
     if style.variant:
         door = _map([[0.05, 0.02], [0.55, 0.02], [0.55, 0.98], [0.05, 0.98]], x0, y0, size, style.mirrored)
         p.line(door, style.ink, 0.05 * size, closed=True)
-    running_man(p, x0 + 0.1 * size, y0, 0.9 * size, style.ink, facing_left=not style.mirrored)
+    running_man(p, x0 + 0.1 * size, y0, 0.9 * size, colour=style.ink, facing_left=not style.mirrored)
 
 
 _GLYPH = {"extinguisher": _extinguisher, "call_point": _call_point, "exit": _exit}
 
 
-def panel_front(width_m: float, height_m: float, door: RGB, rows: int, window: bool, label_seed: int) -> np.ndarray:
+def panel_front(width_m: float, height_m: float, *, door: RGB, rows: int, window: bool,
+                label_seed: int) -> np.ndarray:
     """A distribution board's door: smoked windows onto ``rows`` breaker rows (or a plain
     door with a label) and a small label."""
     p = Painter.new(width_m, height_m, door)
@@ -185,5 +187,6 @@ def panel_front(width_m: float, height_m: float, door: RGB, rows: int, window: b
                 colour = (40, 90, 170) if (i + k) % 6 == 0 else (232, 232, 226)
                 p.rect(x, y + 0.15 * pitch, x + 0.6 * 0.78 * w / n, y + 0.6 * pitch, colour)
     p.rect(0.35 * w, 0.88 * h, 0.65 * w, 0.94 * h, (250, 250, 246))
-    p.text_lines(0.37 * w, 0.895 * h, 0.63 * w, 1, 0.02, 0.025 * h, pg.BLACK, seed=label_seed)
+    p.text_lines(0.37 * w, 0.895 * h, 0.63 * w, 1, pitch_m=0.02, height_m=0.025 * h,
+                 colour=pg.BLACK, seed=label_seed)
     return p.img

@@ -116,7 +116,7 @@ def return_probability(r: np.ndarray, cos_inc: np.ndarray, rho: np.ndarray, glos
 
 
 def mix_edges(t: np.ndarray, rgb: np.ndarray, dirs: np.ndarray, normals: np.ndarray, step_rad: float,
-              e: ScanEffects, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              *, e: ScanEffects, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mixed pixels on a sweep grid: ``t`` (n_az, n_el) ranges (inf = miss), ``rgb``, ``dirs``
     (unit ray directions) and ``normals`` (of the hit surfaces) (n_az, n_el, 3).
 

@@ -186,7 +186,8 @@ def scan_station(rc: MeshRaycaster, origin: np.ndarray, settings: ScannerSetting
             g_eff = np.random.default_rng([int(seed), int(station), a0, 0xE1])
             grid = (len(a), len(el))
             mt, mrgb, _ = mix_edges(t.reshape(grid), surface.reshape(*grid, 3), dirs.reshape(*grid, 3),
-                                    hits.normal.reshape(*grid, 3), math.radians(s.angular_step_deg), e, g_eff)
+                                    hits.normal.reshape(*grid, 3), math.radians(s.angular_step_deg),
+                                    e=e, rng=g_eff)
             t, surface = mt.ravel(), mrgb.reshape(-1, 3)
         keep = np.isfinite(t) & (t >= s.min_range_m) & (t <= s.max_range_m)
         keep &= np.abs(cos_inc) >= s.grazing_cos
@@ -266,7 +267,7 @@ class WallView:
         return int(h - 1 - math.floor(v / self.pixel_m)), int(math.floor(u / self.pixel_m))
 
 
-def wall_view(xyz: np.ndarray, rgb: np.ndarray, frame, pixel_m: float = 0.005,
+def wall_view(xyz: np.ndarray, rgb: np.ndarray, frame, *, pixel_m: float = 0.005,
               depth_range_m: tuple[float, float] = (-0.05, 0.3), chunk: int = 5_000_000) -> WallView:
     """Bin the points within ``depth_range_m`` of a wall's plane into an orthographic view.
 

@@ -514,7 +514,7 @@ def save_wall_images(sim_dir: Path, wall_ids: list[str], out_dir: Path, pixel_m:
             raise InputError(sim_dir / "ground_truth.json", f"no wall {wid!r}")
         f = frames[wid]
         local = WallFrame(f.origin - cloud.origin, f.axis_u, f.axis_v, f.normal, f.width_m, f.height_m)
-        for kind, img in zip(("colour", "depth"), wall_images(wall_view(cloud.xyz, cloud.rgb, local, pixel_m)),
+        for kind, img in zip(("colour", "depth"), wall_images(wall_view(cloud.xyz, cloud.rgb, local, pixel_m=pixel_m)),
                              strict=True):
             path = out_dir / f"wall_{wid}_{kind}.png"
             cv2.imwrite(str(path), img[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 9])

@@ -391,7 +391,7 @@ def build_layout(scene: SceneDescription) -> Layout:
         wall = walls[op.wall]
         u0, u1 = op.u - op.width_m / 2, op.u + op.width_m / 2
         v0, v1 = op.sill_m, op.sill_m + op.height_m
-        partner, depth, pu = _partner_face(wall, u0, u1, walls, scene, where)
+        partner, depth, pu = _partner_face(wall, u0, u1, walls=walls, scene=scene, where=where)
         openings.append(OpeningPlacement(op.wall, op.kind, u0, u1, v0, v1, depth, op.index,
                                          partner.id if partner else None))
         if partner is not None:
@@ -415,7 +415,7 @@ def footprint(p: ObjectPlacement, specs: Mapping[str, ObjectSpec] = CATALOGUE) -
 # --------------------------------------------------------------------------- checks
 
 
-def _partner_face(wall: WallFace, u0: float, u1: float, walls: dict[str, WallFace],
+def _partner_face(wall: WallFace, u0: float, u1: float, *, walls: dict[str, WallFace],
                   scene: SceneDescription, where: str) -> tuple[WallFace | None, float, tuple[float, float]]:
     """The face behind ``wall`` across the hole u0..u1 (a partition), its depth and hole range."""
     fr = wall.frame
@@ -541,7 +541,7 @@ class _Reader:
             raise self.fail(key, "expected a list")
         return d[key]
 
-    def number(self, d: Mapping, key: str, where: str, default: float | None = None,
+    def number(self, d: Mapping, key: str, where: str, *, default: float | None = None,
                lo: float = -math.inf, hi: float = math.inf) -> float:
         name = f"{where}.{key}" if where else key
         if key not in d:

@@ -175,7 +175,8 @@ def _plan_ceilings(scene: SceneDescription, layout: Layout, stations: np.ndarray
                 for y in axis_positions(y0, y1, SMOKE_SPACING_M, CEILING_MARGIN_M + 0.5):
                     xy = _away_from_stations(np.array([x, y]), stations, room, (x0, y0, x1, y1), plan.columns)
                     if xy is not None:
-                        _try_ceiling(plan, taken, room, frame, "smoke_detector", xy, 0.0, scene.specs)
+                        _try_ceiling(plan, taken, room, frame, class_id="smoke_detector", xy=xy,
+                                     rotation_deg=0.0, specs=scene.specs)
     doors = [o for o in layout.openings if o.kind == "door"]
     n_doors: dict[str, int] = {}
     for o in doors:
@@ -194,8 +195,9 @@ def _plan_ceilings(scene: SceneDescription, layout: Layout, stations: np.ndarray
         fr = wall.frame
         centre = fr.to_world((o.u_min + o.u_max) / 2, 0.0, EXIT_OFFSET_M)[:2]
         turn = math.degrees(math.atan2(-fr.axis_u[1], fr.axis_u[0]))  # wall's u in the ceiling's (u, v)
-        _try_ceiling(plan, taken, rooms[wall.room], frames[wall.room], "exit_light", centre, round(turn, 6),
-                     scene.specs)
+        _try_ceiling(plan, taken, rooms[wall.room], frames[wall.room], class_id="exit_light",
+                     xy=centre, rotation_deg=round(turn, 6),
+                     specs=scene.specs)
 
 
 def _away_from_stations(xy: np.ndarray, stations: np.ndarray, room: RoomSpec,
@@ -221,7 +223,7 @@ def _away_from_stations(xy: np.ndarray, stations: np.ndarray, room: RoomSpec,
     return np.round(cand[best], 3)
 
 
-def _try_ceiling(plan: SurfacePlan, taken: list, room: RoomSpec, frame: WallFrame, class_id: str,
+def _try_ceiling(plan: SurfacePlan, taken: list, room: RoomSpec, frame: WallFrame, *, class_id: str,
                  xy: np.ndarray, rotation_deg: float, specs: Mapping[str, ObjectSpec]) -> bool:
     """Add a ceiling object at plan position ``xy`` if its footprint (``specs``' size) fits the room and is free."""
     spec = specs[class_id]
@@ -274,9 +276,9 @@ def _plan_columns(scene: SceneDescription, stations: np.ndarray, heights: dict[s
         col_id = f"{room.id}-COL{k}"
         h = heights[room.id]
         if rect:
-            _rect_column(plan, col_id, room, centre, h, stations)
+            _rect_column(plan, col_id, room, centre, h=h, stations=stations)
         else:
-            _round_column(plan, col_id, room, centre, h, stations)
+            _round_column(plan, col_id, room, centre, h=h, stations=stations)
 
 
 def _object_directions(rect: bool) -> list[tuple[np.ndarray, float]]:
@@ -307,7 +309,7 @@ def _face_frame(centre: np.ndarray, normal_xy: tuple[float, float], half_depth: 
                      width_m=float(width), height_m=float(height))
 
 
-def _rect_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[float, float], h: float,
+def _rect_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[float, float], *, h: float,
                  stations: np.ndarray) -> None:
     """A rectangular column and its objects (none on a face that no station sees)."""
     s = COLUMN_RECT_M
@@ -324,7 +326,7 @@ def _rect_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[f
     plan.columns.append(Column(col_id, room.id, "rect", centre, (s, s), h, room.paint, tuple(faces)))
 
 
-def _round_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[float, float], h: float,
+def _round_column(plan: SurfacePlan, col_id: str, room: RoomSpec, centre: tuple[float, float], *, h: float,
                   stations: np.ndarray) -> None:
     """A round column and its objects (none where no station sees it)."""
     r = COLUMN_ROUND_M / 2

@@ -24,7 +24,7 @@ OBJECT_MIN_SHARE = 0.25  # an object box smaller than this share of the footprin
 Window = tuple[int, int, int, int]
 
 
-def footprint(shape: tuple[int, ...], surface_height_m: float, pixel_m: float, u: float, v: float,
+def footprint(shape: tuple[int, ...], surface_height_m: float, pixel_m: float, *, u: float, v: float,
               width_m: float, height_m: float) -> Window | None:
     """(r0, c0, r1, c1) of an object's footprint in an orthoimage; None when it leaves the image."""
     c0 = int(round((u - width_m / 2) / pixel_m))

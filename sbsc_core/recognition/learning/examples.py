@@ -250,13 +250,13 @@ def snap_known(s: Surface, models: list[np.ndarray], u: float, v: float) -> tupl
     pixels) within :data:`SNAP_RADIUS_M`; the click and None when none matches."""
     best = (u, v, None)
     for t in models:
-        snap = snap_to_relief(s.depth(), s.pixel_m, s.frame.height_m, t, u, v, radius_m=SNAP_RADIUS_M)
+        snap = snap_to_relief(s.depth(), s.pixel_m, s.frame.height_m, t, u=u, v=v, radius_m=SNAP_RADIUS_M)
         if snap.snapped and (best[2] is None or snap.rho > best[2]):
             best = (snap.u, snap.v, snap.rho)
     return best
 
 
-def trust_snap(s: Surface, u: float, v: float, su: float, sv: float, rho: float | None, width_m: float,
+def trust_snap(s: Surface, u: float, v: float, *, su: float, sv: float, rho: float | None, width_m: float,
                height_m: float, min_rho: float) -> bool:
     """Whether a library class's example moves from its click (u, v) to its snap (su, sv): the
     match correlates ``min_rho`` or more, and it agrees (within :data:`SNAP_AGREE_M`) with the
@@ -272,11 +272,12 @@ def trust_snap(s: Surface, u: float, v: float, su: float, sv: float, rho: float 
     return math.hypot(su - blob[0], sv - blob[1]) <= SNAP_AGREE_M
 
 
-def cut(label: str, class_id: str, s: Surface, u: float, v: float, width_m: float, height_m: float,
+def cut(label: str, class_id: str, s: Surface, *, u: float, v: float, width_m: float, height_m: float,
         rho: float | None = None) -> Example:
     """The example's crops over its footprint; InputError when it leaves the surface or is not scanned."""
     depth = s.depth()
-    win: Window | None = footprint(depth.shape, s.frame.height_m, s.pixel_m, u, v, width_m, height_m)
+    win: Window | None = footprint(depth.shape, s.frame.height_m, s.pixel_m, u=u, v=v,
+                                   width_m=width_m, height_m=height_m)
     if win is None:
         raise InputError(label, f"off the surface: its {width_m:.2f} x {height_m:.2f} m footprint at "
                                 f"u={u:.2f}, v={v:.2f} leaves {s.kind} {s.id}")

@@ -285,9 +285,10 @@ def learn_library(detect_out: Path, reviewed: Path, models: Path, out: Path, *,
                 rho = None
                 if tmodels:
                     su, sv, rho = snap_known(s, tmodels, u, v)
-                    if not given and trust_snap(s, u, v, su, sv, rho, m.width_m, m.height_m, min_rho):
+                    if not given and trust_snap(s, u, v, su=su, sv=sv, rho=rho, width_m=m.width_m,
+                                                height_m=m.height_m, min_rho=min_rho):
                         u, v = su, sv
-                examples.append(cut(lab, cid, s, u, v, m.width_m, m.height_m, rho))
+                examples.append(cut(lab, cid, s, u=u, v=v, width_m=m.width_m, height_m=m.height_m, rho=rho))
             rho = _median([e.rho if e.rho is not None else 0.0 for e in examples]) if tmodels else None
             delta = _median([colour_delta(learnt_view([e.colour]), m.colour_views) for e in examples])
             missed = sum(not found(e, detections) for e in examples)
@@ -304,7 +305,7 @@ def learn_library(detect_out: Path, reviewed: Path, models: Path, out: Path, *,
                     blob = relief_blob(s.depth(), s.frame.height_m, s.pixel_m, u, v)
                     if blob is not None:
                         u, v = blob[0], blob[1]
-                examples.append(cut(lab, cid, s, u, v, w, h))
+                examples.append(cut(lab, cid, s, u=u, v=v, width_m=w, height_m=h))
             spec = specs.get(cid, {})
             kinds = {e.surface.kind for e in examples}
             meta = {"name": spec.get("name") or cid.replace("_", " ").capitalize(),

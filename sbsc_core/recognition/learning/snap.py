@@ -51,7 +51,7 @@ def depth_template(class_dir: Path, pixel_m: float) -> np.ndarray | None:
 
 
 def snap_to_relief(depth: np.ndarray, pixel_m: float, wall_height_m: float, template: np.ndarray,
-                   u: float, v: float, *, radius_m: float = SEARCH_RADIUS_M,
+                   *, u: float, v: float, radius_m: float = SEARCH_RADIUS_M,
                    min_ncc: float = MIN_NCC) -> Snap:
     """The best place for ``template`` within ``radius_m`` of (u, v) on a depth orthoimage.
 
