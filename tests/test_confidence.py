@@ -291,13 +291,15 @@ def test_expected_counts_are_filled_with_the_most_probable_hits(tmp_path) -> Non
     lookalike_d = _cand("switch", "depth", 0.95, 50.0, 50.0)
     lookalike_c = _cand("switch", "colour", 0.05, 50.0, 50.0)
     real = _cand("switch", "depth", 0.995, 150.0, 150.0)
-    args = ([lookalike_d, real], [lookalike_c], {"switch": 1}, ["switch"], ConsensusSettings())
-    hits = screened_consensus(*args, ConfidenceSettings(calibration=str(path)))
+    args = ([lookalike_d, real], [lookalike_c], {"switch": 1}, ["switch"])
+    hits = screened_consensus(*args, consensus_settings=ConsensusSettings(),
+                              settings=ConfidenceSettings(calibration=str(path)))
     assert [(h.centre, h.source) for h in hits] == [((150.0, 150.0), "depth")]
-    plain = screened_consensus(*args, ConfidenceSettings(calibration=str(path), fill_by_confidence=False))
+    plain = screened_consensus(*args, consensus_settings=ConsensusSettings(),
+                               settings=ConfidenceSettings(calibration=str(path), fill_by_confidence=False))
     assert [(h.centre, h.source) for h in plain] == [((50.0, 50.0), "both")]
-    both = screened_consensus([lookalike_d, real], [lookalike_c], {"switch": 2}, ["switch"], ConsensusSettings(),
-                              ConfidenceSettings(calibration=str(path)))
+    both = screened_consensus([lookalike_d, real], [lookalike_c], {"switch": 2}, ["switch"],
+                              consensus_settings=ConsensusSettings(), settings=ConfidenceSettings(calibration=str(path)))
     assert sorted(h.centre for h in both) == [(50.0, 50.0), (150.0, 150.0)]
     # a more probable hit whose place is taken by a kept hit of another class does not come in
     kept = make_hit(_cand("socket", "depth", 0.9, 150.0, 150.0), None, 0.5)

@@ -319,8 +319,8 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
                 left[h.class_id] -= 1
         refused = [h for h in refused if not any(h is k for k in hits)]
         if settings.fill_by_confidence:
-            free = screened_consensus(all_depth, all_colour, None, classes, consensus_settings,
-                                      replace(settings, report_unknown=False, fill_by_confidence=False),
+            free = screened_consensus(all_depth, all_colour, None, classes, consensus_settings=consensus_settings,
+                                      settings=replace(settings, report_unknown=False, fill_by_confidence=False),
                                       reliefs=reliefs, max_rounds=max_rounds, frames=frames)
             hits = fill_by_confidence(hits, free, consensus_settings.suppress_overlap)
             hits = [h for cls in classes for h in hits if h.class_id == cls]
