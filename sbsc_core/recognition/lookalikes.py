@@ -260,18 +260,19 @@ _FLAT_M = 0.05  # a depth model varying by less than this share of its height in
 def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[str, np.ndarray],
               offsets: dict[str, tuple[float, float]], *, relief: np.ndarray | None,
               models: dict[str, np.ndarray | list[np.ndarray]], model_offsets: dict[str, tuple[float, float]],
-              search_px: int) -> tuple[dict[str, float] | None, bool]:
+              search_px: int, relief_mute: frozenset[str] = frozenset()) -> tuple[dict[str, float] | None, bool]:
     """Each class's evidence at a candidate: the mean of the comparisons available for every
     class of ``seen``: its print NCC (when each has a view on this wall) and its relief score
-    (:func:`relief_score`, when ``relief`` is given and each has a relief model); and whether
-    the relief was compared. None when neither is available."""
+    (:func:`relief_score`, when ``relief`` is given, each has a relief model and none is in
+    ``relief_mute``, :func:`relief_muted`); and whether the relief was compared. None when
+    neither is available."""
     parts: list[dict[str, float]] = []
     if all(c in views for c in seen):
         parts.append({c: max(print_score(diff, v, _shifted(cand.centre, offsets.get(c), cand.rotation_deg),
                                          cand.rotation_deg, search_px=search_px) for v in designs(views[c]))
                       for c in seen})
     with_relief = False
-    if relief is not None and all(c in models for c in seen):
+    if relief is not None and all(c in models and c not in relief_mute for c in seen):
         reliefs = {c: _best_design(relief, models[c], _shifted(cand.centre, model_offsets.get(c), cand.rotation_deg),
                                    cand.rotation_deg, search_px=search_px) for c in seen}
         if all(v is not None for v in reliefs.values()):
@@ -280,6 +281,18 @@ def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[st
     if not parts:
         return None, False
     return {c: float(np.mean([p[c] for p in parts])) for c in seen}, with_relief
+
+
+RELIEF_DECIDES_KEY = "relief_decides"  # model.json: false when the examples showed that the relief cannot tell
+
+
+def relief_muted(templates: dict[str, ModelTemplate]) -> frozenset[str]:
+    """The classes whose fine relief takes no part in look-alike decisions: ``model.json``
+    ``relief_decides`` false, written by ``sbsc learn`` when on the class's own examples
+    another class of its size explained the relief at least as well as the class's own
+    models did (:func:`~sbsc_core.recognition.learning.library.relief_tells`). A library
+    without it decides exactly as before."""
+    return frozenset(c for c, t in templates.items() if t.extra.get(RELIEF_DECIDES_KEY) is False)
 
 
 def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, threshold: float
@@ -328,7 +341,8 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
                        relief: np.ndarray | None = None,
                        models: dict[str, np.ndarray | list[np.ndarray]] | None = None,
                        model_offsets: dict[str, tuple[float, float]] | None = None,
-                       gain_range: tuple[float, float] | None = None) -> list[Candidate]:
+                       gain_range: tuple[float, float] | None = None,
+                       relief_mute: frozenset[str] = frozenset()) -> list[Candidate]:
     """Candidates with every look-alike class decided by its print (see the module).
 
     ``diff`` is the wall's Lab difference to the local wall colour (0 off the foreground);
@@ -344,6 +358,8 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
     With ``gain_range`` and ``relief``, a look-alike whose depth model stands out much more or
     much less than the scene does at the candidate (:func:`amplitude_compatible`) is not one
     of the classes it may be: the library's depth models and the scan decide that, not the print.
+
+    ``relief_mute``: classes whose fine relief is left out of the comparison (:func:`relief_muted`).
     """
     if not groups or not cands:
         return cands
@@ -363,7 +379,8 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
                                         cand.rotation_deg, gain_range)
             seen = [c for c in seen if c == cand.class_id or fits.get(c, True)]
         scores, both = (None, False) if g is None or len(seen) < 2 or cand.class_id not in seen else _evidence(
-            cand, seen, diff, views, offsets or {}, relief=relief, models=models or {}, model_offsets=model_offsets or {}, search_px=settings.search_px)
+            cand, seen, diff, views, offsets or {}, relief=relief, models=models or {}, model_offsets=model_offsets or {},
+            search_px=settings.search_px, relief_mute=relief_mute)
         if scores is None:
             out.append(cand)
             continue
@@ -504,6 +521,7 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
     diff = np.ascontiguousarray(image.lab - image.background, dtype=np.float32)
     np.copyto(diff, 0.0, where=~image.foreground[..., None])  # in place: most of the image
     kw = {"offsets": offsets, "relief": relief, "models": models, "model_offsets": model_offsets,
-          "gain_range": gain_range if settings.amplitude_decides else None}
+          "gain_range": gain_range if settings.amplitude_decides else None,
+          "relief_mute": relief_muted(prototypes.templates)}
     return (resolve_lookalikes(depth, diff, views, groups, settings, **kw),
             resolve_lookalikes(colour, diff, views, groups, settings, **kw))
