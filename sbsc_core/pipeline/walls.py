@@ -20,7 +20,11 @@ from ..imaging.partition import (
     wall_orthoimage,
 )
 from ..imaging.wall_area import find_wall_area
-from ..recognition.amplitude import colour_as_far_as_examples, colour_where_relief_allows, taught_amplitudes
+from ..recognition.amplitude import (
+    colour_as_far_as_examples,
+    colour_where_relief_allows,
+    taught_amplitudes,
+)
 from ..recognition.colour_recognition import (
     ColourPrototypes,
     colour_image,

@@ -110,7 +110,7 @@ def _mean_lab(t: ModelTemplate) -> np.ndarray | None:
     return lab[fg].mean(axis=0)
 
 
-def _same_size(a: ModelTemplate, b: ModelTemplate, tol: float) -> bool:
+def same_size(a: ModelTemplate, b: ModelTemplate, tol: float) -> bool:
     """Whether the two models' contents (:func:`content_box`) have the same sides within
     ``tol`` (a share of the longer), in either orientation."""
     def close(x: float, y: float) -> bool:
@@ -191,7 +191,7 @@ def lookalike_sets(templates: dict[str, ModelTemplate], settings: LookalikeSetti
         for b in ids[i + 1:]:
             for (ta, la), (tb, lb) in ((x, y) for x in zip(designs[a], labs[a], strict=True)
                                        for y in zip(designs[b], labs[b], strict=True)):
-                if la is None or lb is None or not _same_size(ta, tb, settings.size_tolerance):
+                if la is None or lb is None or not same_size(ta, tb, settings.size_tolerance):
                     continue
                 same_colour = float(np.linalg.norm(la - lb)) <= settings.max_colour_delta_e
                 if not same_colour and not settings.depth_alike_any_colour:
@@ -273,7 +273,7 @@ def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[st
                       for c in seen})
     with_relief = False
     if relief is not None and all(c in models and c not in relief_mute for c in seen):
-        reliefs = {c: _best_design(relief, models[c], _shifted(cand.centre, model_offsets.get(c), cand.rotation_deg),
+        reliefs = {c: best_design_relief(relief, models[c], _shifted(cand.centre, model_offsets.get(c), cand.rotation_deg),
                                    cand.rotation_deg, search_px=search_px) for c in seen}
         if all(v is not None for v in reliefs.values()):
             parts.append({c: float(v) for c, v in reliefs.items()})  # type: ignore[arg-type]
@@ -323,7 +323,7 @@ def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, thr
     return out
 
 
-def _best_design(relief: np.ndarray, model: np.ndarray | list[np.ndarray], centre: tuple[float, float],
+def best_design_relief(relief: np.ndarray, model: np.ndarray | list[np.ndarray], centre: tuple[float, float],
                  rotation_deg: float, *, search_px: int) -> float | None:
     """:func:`relief_score` of a class's depth model, or the best of its designs' (a list:
     the reference model and the further ones, e.g. learnt by ``sbsc learn``). None when one of
@@ -465,7 +465,7 @@ def same_size_pairs(templates: dict[str, ModelTemplate], settings: LookalikeSett
     """The pairs of classes whose contents have the same size (:func:`content_box`, ``size_tolerance``)."""
     ids = sorted(templates)
     return [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
-            if _same_size(templates[a], templates[b], settings.size_tolerance)]
+            if same_size(templates[a], templates[b], settings.size_tolerance)]
 
 
 def colour_confusable(protos: dict, templates: dict[str, ModelTemplate], settings: LookalikeSettings,

@@ -43,12 +43,17 @@ from ...io.models import (
     load_object_model,
 )
 from ...io.safe_json import load_json_file
-from ...types import SURFACE_KINDS, ObjectModel
-from ..amplitude import EXAMPLE_RELIEF_KEY, relief_amplitude
 from ...settings import LookalikeSettings
-from ..amplitude import designs
-from ..lookalikes import RELIEF_DECIDES_KEY, _best_design, _same_size, design_templates, relief_models
-from ..lookalikes import _shifted as shifted
+from ...types import SURFACE_KINDS, ObjectModel
+from ..amplitude import EXAMPLE_RELIEF_KEY, designs, relief_amplitude
+from ..amplitude import shifted_centre as shifted
+from ..lookalikes import (
+    RELIEF_DECIDES_KEY,
+    best_design_relief,
+    design_templates,
+    relief_models,
+    same_size,
+)
 from ..templates import ModelTemplate, make_template, resample_depth
 from .crops import footprint, learnt_depth, learnt_view, object_alpha
 from .examples import (
@@ -268,7 +273,7 @@ def relief_tells(cid: str, examples: list[Example], templates: dict[str, ModelTe
         return None
     own_designs = design_templates(t)
     others = [c for c in sorted(templates) if c != cid and any(
-        _same_size(a, b, settings.size_tolerance) for a in own_designs for b in design_templates(templates[c]))]
+        same_size(a, b, settings.size_tolerance) for a in own_designs for b in design_templates(templates[c]))]
     models, offsets = relief_models({c: templates[c] for c in others})
     others = [c for c in others if c in models]
     if not others:
@@ -294,7 +299,7 @@ def relief_tells(cid: str, examples: list[Example], templates: dict[str, ModelTe
         centre = ((s.frame.height_m - e.v) / s.pixel_m - 0.5, e.u / s.pixel_m - 0.5)
         for c in scores:
             mods, offs = (own_models, own_offsets) if c == cid else (models, offsets)
-            found = [x for m in designs(mods[c]) if (x := _best_design(
+            found = [x for m in designs(mods[c]) if (x := best_design_relief(
                 relief, m, shifted(centre, offs.get(c), 0.0), 0.0, search_px=settings.search_px)) is not None]
             if found:
                 scores[c].append(max(found))
