@@ -295,13 +295,16 @@ def relief_muted(templates: dict[str, ModelTemplate]) -> frozenset[str]:
     return frozenset(c for c, t in templates.items() if t.extra.get(RELIEF_DECIDES_KEY) is False)
 
 
-def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, threshold: float
-                  ) -> dict[str, list[np.ndarray]]:
+def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, threshold: float,
+                  pad_px: int = 0) -> dict[str, list[np.ndarray]]:
     """The front views of the further designs of each class that has some (the last
     ``learnt_views`` of its views, ``model.json``; written by ``sbsc learn``) as seen on a wall
     of colour ``wall_rgb``: the Lab difference to the wall where it exceeds ``threshold``,
     cropped to the model's content like :func:`print_views`. Learnt views are crops of the
-    scan, so they are compared as they are (no blur, no noise)."""
+    scan, so they are compared as they are (no blur, no noise), with a ring of ``pad_px``
+    pixels of the surface (no difference) around them: the examples showed the object alone
+    on its surface, and the NCC of a plate of one colour that fills its box is its noise
+    (a dark switch plate correlated 0.12 with itself on a light wall, 0.96 with its ring)."""
     out: dict[str, list[np.ndarray]] = {}
     wall = cv2.cvtColor(np.asarray(wall_rgb, np.float32).reshape(1, 1, 3) / 255.0, cv2.COLOR_RGB2Lab).reshape(3)
     for c, t in templates.items():
@@ -317,7 +320,7 @@ def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, thr
             diff = lab - wall[None, None, :]
             fg = (np.linalg.norm(diff, axis=2) > threshold) & (view[..., 3] > 127)
             diff = np.where(fg[..., None], diff, 0.0).astype(np.float32)
-            prints.append(np.ascontiguousarray(diff[b.r0:b.r1, b.c0:b.c1]))
+            prints.append(np.ascontiguousarray(np.pad(diff[b.r0:b.r1, b.c0:b.c1], ((pad_px, pad_px), (pad_px, pad_px), (0, 0)))))
         if prints:
             out[c] = prints
     return out
@@ -514,7 +517,8 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
     if not groups:
         return depth, colour
     views, offsets = print_views(protos, prototypes.templates)
-    for c, prints in design_prints(prototypes.templates, image.wall_rgb, image.threshold).items():
+    for c, prints in design_prints(prototypes.templates, image.wall_rgb, image.threshold,
+                                   settings.learnt_print_pad_px).items():
         if c in views:  # a class's further designs (sbsc learn): the best of its prints speaks for it
             views[c] = [views[c], *prints]  # type: ignore[list-item]
     models, model_offsets = library_relief_models(prototypes)
