@@ -304,7 +304,10 @@ def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, thr
     scan, so they are compared as they are (no blur, no noise), with a ring of ``pad_px``
     pixels of the surface (no difference) around them: the examples showed the object alone
     on its surface, and the NCC of a plate of one colour that fills its box is its noise
-    (a dark switch plate correlated 0.12 with itself on a light wall, 0.96 with its ring)."""
+    (a dark switch plate correlated 0.12 with itself on a light wall, 0.96 with its ring).
+    :func:`resolve_on_wall` then gives every class's view the same ring: a ring favours the
+    class that has it (alt / standard: the alt one-gang socket's learnt print took the library's
+    switches)."""
     out: dict[str, list[np.ndarray]] = {}
     wall = cv2.cvtColor(np.asarray(wall_rgb, np.float32).reshape(1, 1, 3) / 255.0, cv2.COLOR_RGB2Lab).reshape(3)
     for c, t in templates.items():
@@ -517,8 +520,11 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
     if not groups:
         return depth, colour
     views, offsets = print_views(protos, prototypes.templates)
-    for c, prints in design_prints(prototypes.templates, image.wall_rgb, image.threshold,
-                                   settings.learnt_print_pad_px).items():
+    learnt = design_prints(prototypes.templates, image.wall_rgb, image.threshold, settings.learnt_print_pad_px)
+    if learnt:  # every print with the same ring of surface as the learnt ones: no class favoured by it
+        pad = settings.learnt_print_pad_px
+        views = {c: np.pad(v, ((pad, pad), (pad, pad), (0, 0))) for c, v in views.items()}
+    for c, prints in learnt.items():
         if c in views:  # a class's further designs (sbsc learn): the best of its prints speaks for it
             views[c] = [views[c], *prints]  # type: ignore[list-item]
     models, model_offsets = library_relief_models(prototypes)
