@@ -45,7 +45,8 @@ from ...io.models import (
 from ...io.safe_json import load_json_file
 from ...settings import LookalikeSettings
 from ...types import SURFACE_KINDS, ObjectModel
-from ..amplitude import EXAMPLE_RELIEF_KEY, designs, relief_amplitude
+from ..amplitude import EXAMPLE_RELIEF_KEY, relief_amplitude
+from ..amplitude import designs as model_designs
 from ..amplitude import shifted_centre as shifted
 from ..lookalikes import (
     RELIEF_DECIDES_KEY,
@@ -299,7 +300,7 @@ def relief_tells(cid: str, examples: list[Example], templates: dict[str, ModelTe
         centre = ((s.frame.height_m - e.v) / s.pixel_m - 0.5, e.u / s.pixel_m - 0.5)
         for c in scores:
             mods, offs = (own_models, own_offsets) if c == cid else (models, offsets)
-            found = [x for m in designs(mods[c]) if (x := best_design_relief(
+            found = [x for m in model_designs(mods[c]) if (x := best_design_relief(
                 relief, m, shifted(centre, offs.get(c), 0.0), 0.0, search_px=settings.search_px)) is not None]
             if found:
                 scores[c].append(max(found))
@@ -434,7 +435,7 @@ def learn_library(detect_out: Path, reviewed: Path, models: Path, out: Path, *,
                 t.files = ["model.json", *_write_design(cdir, examples, None)]
             _record_amplitudes(cdir, used[t.class_id])
             load_object_model(cdir)  # read back: the library reader accepts what was written
-        learnt = [t for t in taught if t.action != "matches"]
+        learnt = [t for t in taught if any(f.startswith("depth") for f in t.files)]  # a learnt relief was written
         if learnt:  # whether each learnt relief tells the class's examples from the other classes of its size
             pixel = used[learnt[0].class_id][0].surface.pixel_m
             templates = {c: make_template(load_object_model(tmp / c), pixel) for c in sorted(p.name for p in tmp.iterdir())}
