@@ -20,6 +20,13 @@ With ``--together`` the left-out classes are removed from the design-change run'
 taught there as new classes beside the designs: one detection measures both (with
 ``--no-design``: the left-out classes are taught together, and nothing else).
 
+**An existing scene** (``--scene-dir DIR``: a folder with a scan, ``scan.ply`` or
+``scan.laz``, and ``ground_truth.json``, e.g. an outside scene of an independent generator)
+with another library (``--library PATH``, default ``DIR/models``; or ``--library-designs``
+rendered for ``--seed``): the same design-change run on that floor, its ceilings and columns
+searched when the library's classes mount there (``sbsc detect``'s default). Nothing is tuned
+to such a scene: it is a check.
+
 A floor of the same scene, designs and seed with another library reuses that floor's scan
 (hard links; the library is rendered from its family and the seed, as the simulator does).
 
@@ -29,6 +36,8 @@ class (``one_room`` has one of each) is scored on ``--next-floor`` only.
     .venv/bin/python benchmarks/bench_teach.py --run-dir /tmp/teach --scene I --designs third \\
         --library-designs standard [--seed 1] [--next-floor 2] [--leave-out radiator exit_light]
         [--together] [--no-design] [--next-floor-learnt-only] [--json out.json]
+    .venv/bin/python benchmarks/bench_teach.py --run-dir /tmp/teach \
+        --scene-dir ../shared/data/outside-scenes/rotated-clutter-realistic --library sbsc_core/data/models
 """
 
 from __future__ import annotations
@@ -100,9 +109,17 @@ def simulate(out: Path, *, scene: str, seed: int, designs: str, library_designs:
     return out
 
 
+def scan_of(scan_dir: Path) -> Path:
+    """The scan of a floor folder: ``scan.ply``, else ``scan.laz``."""
+    for name in ("scan.ply", "scan.laz", "scan.las", "scan.e57"):
+        if (scan_dir / name).is_file():
+            return scan_dir / name
+    raise SystemExit(f"{scan_dir}: no scan.ply / scan.laz")
+
+
 def detect(scan_dir: Path, models: Path, out: Path) -> Path:
     if not (out / "detections.json").is_file():
-        sbsc("detect", str(scan_dir / "scan.ply"), "--models", str(models), "--out", str(out))
+        sbsc("detect", str(scan_of(scan_dir)), "--models", str(models), "--out", str(out))
     return out
 
 
@@ -138,11 +155,16 @@ def pick_examples(truth: TruthDocument, n: int, classes: list[str] | None = None
                   missed: set[int] | None = None, seen: dict[int, float] | None = None) -> list:
     """``n`` truth objects per class, as a reviewer would mark them: upright and well seen
     (:data:`WELL_SEEN` of the footprint) first, of those the ones recognition ``missed`` (what
-    is missing), then by the share seen and by place."""
+    is missing), then by the share seen and by place. Objects that ``sbsc learn`` cannot use
+    (turned from upright, or less than its ``MIN_SEEN`` scanned) are never picked."""
+    from sbsc_core.recognition.learning.crops import MIN_SEEN, upright
+
     missed, seen = missed or set(), seen or {}
     index = {id(o): i for i, o in enumerate(truth.objects)}
     by_class: dict[str, list] = {}
     for o in truth.objects:
+        if not upright(float(o.extra.get("rotation_deg") or 0.0)) or seen.get(index[id(o)], 1.0) < MIN_SEEN:
+            continue
         if classes is None or o.class_id in classes:
             by_class.setdefault(o.class_id, []).append(o)
     out = []
@@ -221,6 +243,43 @@ def design_change(run: Path, a: argparse.Namespace) -> dict:
     return {**res, **next_floor(run, a, tag, lib)}
 
 
+def scene_dir_change(run: Path, a: argparse.Namespace) -> dict:
+    """``--scene-dir``: the design-change run on an existing floor with ``--library`` (or the
+    library of ``--library-designs`` rendered for ``--seed``)."""
+    floor = a.scene_dir.resolve()
+    if a.library is not None:
+        models = a.library.resolve()
+        label = "bundled" if models == (ROOT / "sbsc_core" / "data" / "models").resolve() else models.parent.name
+    elif a.library_designs_given:
+        from sbsc_core.simulate.designs import design_builder
+        from sbsc_core.simulate.library import write_model_library
+
+        label = f"{a.library_designs}{a.seed}"
+        models = run / f"lib_{label}"
+        if not models.is_dir():
+            tmp = run / f".lib_{label}.tmp"
+            shutil.rmtree(tmp, ignore_errors=True)
+            write_model_library(tmp, seed=a.seed, object_builder=design_builder(a.library_designs, a.seed))
+            tmp.rename(models)
+    else:
+        models, label = floor / "models", "own"
+    tag = f"{floor.name}_{label}"
+    truth = read_truth(floor / "ground_truth.json")
+    before = detect(floor, models, run / f"det_{tag}")
+    examples = pick_examples(truth, a.examples, missed=missed_by(before, truth), seen=seen_shares(before, truth))
+    rev = write_reviewed(examples, run / f"reviewed_{tag}.json")
+    lib = run / f"lib_{tag}_learnt"
+    learnt = learn(before, rev, models, lib)
+    res = {"scene_dir": str(floor), "library": str(models), "examples": len(examples),
+           "new_designs": sorted(c for c, files in learnt.items() if (models / c).is_dir()
+                                 and len(files) > len(os.listdir(models / c))),
+           "new_classes": sorted(c for c in learnt if not (models / c).is_dir()),
+           "before_all": figures(before, truth), "before_rest": figures(before, truth, examples)}
+    after = detect(floor, lib, run / f"det_{tag}_learnt")
+    res["after_rest"] = figures(after, truth, examples)
+    return res
+
+
 def next_floor(run: Path, a: argparse.Namespace, tag: str, lib: Path) -> dict:
     """``--next-floor``: that floor with its library and with the learnt one ({} without it)."""
     if a.next_floor is None:
@@ -286,10 +345,22 @@ def main() -> int:
                         "there as new classes (one detection instead of one per class)")
     p.add_argument("--next-floor-learnt-only", action="store_true",
                    help="score the next floor with the learnt library only (not with its own library too)")
+    p.add_argument("--scene-dir", type=Path, default=None,
+                   help="an existing floor (scan.ply or scan.laz, ground_truth.json) instead of a simulated one")
+    p.add_argument("--library", type=Path, default=None,
+                   help="with --scene-dir: the library to detect with and teach (default: the scene's models/, "
+                        "or --library-designs rendered for --seed when given)")
     p.add_argument("--json", type=Path)
     a = p.parse_args()
+    a.library_designs_given = any(x == "--library-designs" or x.startswith("--library-designs=") for x in sys.argv[1:])
     a.run_dir.mkdir(parents=True, exist_ok=True)
     out: dict = {}
+    if a.scene_dir is not None:
+        out["design_change"] = scene_dir_change(a.run_dir, a)
+        print(json.dumps(out["design_change"]), flush=True)
+        if a.json:
+            a.json.write_text(json.dumps(out, indent=1), encoding="utf-8")
+        return 0
     if not a.no_design:
         out["design_change"] = design_change(a.run_dir, a)
         print(json.dumps(out["design_change"]), flush=True)

@@ -258,6 +258,10 @@ class LookalikeSettings:
     max_colour_delta_e: float = 25.0  # ... and whose mean colours differ by at most this (CIE76)
     depth_alike_any_colour: bool = True  # same size and depth NCC >= min_depth_ncc: look-alikes whatever their colours
     search_px: int = 3  # the print is compared within this many pixels of the candidate's centre
+    learnt_print_pad_px: int = 4  # a learnt design's print (sbsc learn) is compared with this ring of its surface
+    # around it, as depth models are padded with wall plane (depth.template_pad_px): the examples showed the
+    # object alone on its surface, and a plate of one colour filling its box has no print but noise without it;
+    # with learnt designs in the library every class's print gets the same ring (none is favoured by it)
     min_margin: float = 0.05  # another look-alike's print must correlate this much better to relabel
     min_print_ncc: float = 0.5  # ... and at least this much
     min_margin_relief: float = 0.0  # with the fine relief compared too (mean of print and relief): this margin

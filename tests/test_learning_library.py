@@ -294,3 +294,100 @@ def test_what_was_learnt_for_a_class_can_be_removed_and_nothing_else(taught) -> 
         with pytest.raises(InputError, match=why):
             forget_learnt(tmp / "learnt", tmp / f"bad_{cid}", [cid])
         assert not (tmp / f"bad_{cid}").exists()  # nothing half-written
+
+
+def _flush_wall(tmp_path: Path) -> tuple[Path, Path, Orthoimage, tuple, tuple]:
+    """A library with a flush plate (3 mm) and a wall holding one (the example, found) and, 2 m
+    away, the same print on a 20 mm box (a room controller of the plate's size)."""
+    view, depth = socket_like(w_px=24, h_px=24, relief_m=0.003)
+    lib = ModelLibrary({"flush": make_model("flush", view, depth)}, "x")
+    library = write_library(lib, tmp_path / "lib")
+    t = make_templates(lib, PIXEL_M)["flush"]
+    tall = make_template(make_model("flush", view, np.full_like(depth, 0.020)), PIXEL_M)
+    ortho, area = make_wall(seed=21)
+    at, box = (150.0, 100.0), (150.0, 400.0)
+    paste(ortho, area, t, at, seed=21)
+    paste(ortho, area, tall, box, seed=22)
+    u, v = (float(x) for x in ortho.pixel_to_uv(*at))
+    det = write_detect_output([ortho], tmp_path / "det", [{
+        "id": "D1", "class": "flush", "wall": "W01", "position": world(ortho, *at), "u": u, "v": v,
+        "width_m": 0.12, "height_m": 0.12, "alpha": 0.9, "rho_depth": 0.9, "rho_colour": 0.1, "source": "both"}])
+    rev = reviewed(tmp_path / "r.json", [{"class": "flush", "position": world(ortho, *at)}])
+    return library, learn_and(det, rev, library, tmp_path / "new"), ortho, at, box
+
+
+def learn_and(det: Path, rev: Path, library: Path, out: Path) -> Path:
+    learn_library(det, rev, library, out)
+    return out
+
+
+def _colour_hits(ortho: Orthoimage, models: Path) -> list[tuple[float, float]]:
+    """The colour candidates' centres of a wall searched with ``models`` (the wall as given)."""
+    from dataclasses import replace
+
+    from sbsc_core.io.models import load_model_library
+    from sbsc_core.pipeline.walls import _templates_job, process_orthoimage
+    from sbsc_core.settings import DetectionSettings
+
+    lib = load_model_library(models)
+    s = DetectionSettings()
+    templates, protos = _templates_job(lib, s, lib.class_ids)
+    o = replace(ortho, colour=ortho.colour.copy(), depth=ortho.depth.copy(), mask=ortho.mask.copy())
+    res, _ = process_orthoimage(o, templates, protos, s)
+    return [c.centre for c in res.colour_candidates if c.class_id == "flush"]
+
+
+def test_a_taught_class_refuses_its_print_on_a_relief_much_taller_than_its_examples(tmp_path: Path) -> None:
+    library, learnt, ortho, at, box = _flush_wall(tmp_path)
+    meta = json.loads((learnt / "flush" / "model.json").read_text())
+    assert 0.002 < min(meta["example_relief_m"]) <= max(meta["example_relief_m"]) < 0.005
+
+    def near(hits: list, where: tuple) -> bool:
+        return any(abs(r - where[0]) < 6 and abs(c - where[1]) < 6 for r, c in hits)
+
+    before, after = _colour_hits(ortho, library), _colour_hits(ortho, learnt)
+    assert near(before, at) and near(before, box)  # the library alone takes the print on the box
+    assert near(after, at) and not near(after, box)  # the example stood out 3 mm, the box 20 mm
+
+
+def _two_designs(tmp_path: Path, lib: dict, building: dict) -> tuple[list, Path]:
+    """Learn, from two examples each, the building's designs (``building``: class -> (view,
+    depth)) of the library's classes (``lib``: class -> (view, depth)), on one noisy wall."""
+    library = write_library(ModelLibrary({c: make_model(c, v, d) for c, (v, d) in lib.items()}, "x"), tmp_path / "lib")
+    ortho, area = make_wall(w_px=900, seed=31)
+    places = {}
+    for k, (cid, (v, d)) in enumerate(sorted(building.items())):
+        t = make_template(make_model(cid, v, d), PIXEL_M)
+        places[cid] = [(100.0, 100.0 + 400 * k), (100.0, 300.0 + 400 * k)]
+        for j, at in enumerate(places[cid]):
+            paste(ortho, area, t, at, seed=40 + 2 * k + j)
+    det = write_detect_output([ortho], tmp_path / "det")
+    rev = reviewed(tmp_path / "r.json", [{"class": c, "position": world(ortho, *at)}
+                                         for c, ats in places.items() for at in ats])
+    return learn_library(det, rev, library, tmp_path / "new"), tmp_path / "new"
+
+
+def test_a_learnt_relief_that_does_not_tell_its_examples_apart_is_left_out_of_look_alikes(tmp_path: Path) -> None:
+    from sbsc_core.recognition.lookalikes import relief_muted
+    from tests.recognition_synth import arrow_like, sign_like
+
+    plate = np.full((42, 42), 0.004, np.float32)
+    red_cross, _ = sign_like(back=(200, 20, 30))
+    red_bar = red_cross.copy()
+    red_bar[..., :3] = (200, 20, 30)
+    red_bar[17:25, 6:36, :3] = 250
+    # two flat sign plates of the building, other prints than the library's: their learnt relief is
+    # the scan's noise on a plate, which the other sign's model explains as well (left one out)
+    done, new = _two_designs(tmp_path / "signs", {"a": (sign_like()[0], plate), "b": (sign_like(back=(20, 40, 160))[0], plate)},
+                             {"a": (red_cross, plate), "b": (red_bar, plate)})
+    assert [t.action for t in done] == ["new design", "new design"]
+    muted = relief_muted(make_templates(load_model_library(new), PIXEL_M))
+    assert muted and muted == {t.class_id for t in done if not t.relief_decides}
+    assert all(json.loads((new / c / "model.json").read_text())["relief_decides"] is False for c in muted)
+    # a socket's recess and a ramp of its size: each learnt relief tells its own examples
+    done, new = _two_designs(tmp_path / "reliefs", {"socket": socket_like(), "ramp": arrow_like(w_px=16, h_px=16)},
+                             {"socket": socket_like(relief_m=0.024, body=(200, 200, 190)),
+                              "ramp": arrow_like(w_px=16, h_px=16, body=(90, 90, 200), relief_m=0.02)})
+    assert [t.action for t in done] == ["new design", "new design"] and all(t.relief_decides for t in done)
+    assert relief_muted(make_templates(load_model_library(new), PIXEL_M)) == frozenset()
+    assert all("relief_decides" not in json.loads((new / c / "model.json").read_text()) for c in ("socket", "ramp"))

@@ -330,3 +330,34 @@ def test_a_lookalike_that_stands_out_otherwise_than_the_scene_is_not_taken() -> 
         (metric,) = resolve_lookalikes([cand], diff, print_of, group, s, gain_range=(0.5, 2.0), **kw)
         assert blind.class_id == target  # the print alone relabels it
         assert metric.class_id == ("switch" if target == "flush" else "proud")
+
+
+def test_a_learnt_plate_of_one_colour_is_compared_with_its_surface_around_it() -> None:
+    """A learnt design's print (``sbsc learn``: a crop of the scan over the object's box) of a dark
+    plate filling its box is, without the surface around it, one colour plus noise: its NCC with
+    the same plate on a wall is noise. With a ring of surface it is the plate standing on the wall."""
+    from dataclasses import replace
+
+    import cv2
+
+    from sbsc_core.recognition.lookalikes import design_prints, print_score
+
+    rng = np.random.default_rng(3)
+    dark = np.clip(rng.normal(70, 4, (16, 16, 3)), 0, 255).astype(np.uint8)  # a grey plate, scan noise
+    wall = np.array([225.0, 220.0, 205.0])
+    t = make_templates(ModelLibrary({"switch": make_model("switch", *socket_like())}, "x"), 0.005)["switch"]
+    t = replace(t, colour_views=[*t.colour_views, _rgba(dark)], extra={"learnt_views": 1})
+    scene = np.clip(wall + rng.normal(0, 3, (80, 80, 3)), 0, 255).astype(np.uint8)
+    scene[32:48, 32:48] = np.clip(rng.normal(70, 4, (16, 16, 3)), 0, 255).astype(np.uint8)
+
+    def lab(rgb: np.ndarray) -> np.ndarray:
+        return cv2.cvtColor(np.asarray(rgb, np.float32) / 255.0, cv2.COLOR_RGB2Lab)
+
+    diff = lab(scene) - lab(wall.reshape(1, 1, 3))
+    diff[np.linalg.norm(diff, axis=2) <= 8.0] = 0.0
+    bare = design_prints({"switch": t}, wall, 8.0)["switch"][0]
+    ringed = design_prints({"switch": t}, wall, 8.0, pad_px=4)["switch"][0]
+    assert ringed.shape == (bare.shape[0] + 8, bare.shape[1] + 8, 3)
+    assert print_score(diff, bare, (39.5, 39.5), 0.0, search_px=3) < 0.5
+    assert print_score(diff, ringed, (39.5, 39.5), 0.0, search_px=3) > 0.9
+    assert DetectionSettings().lookalikes.learnt_print_pad_px == 4

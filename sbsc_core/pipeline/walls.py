@@ -20,7 +20,11 @@ from ..imaging.partition import (
     wall_orthoimage,
 )
 from ..imaging.wall_area import find_wall_area
-from ..recognition.amplitude import colour_where_relief_allows
+from ..recognition.amplitude import (
+    colour_as_far_as_examples,
+    colour_where_relief_allows,
+    taught_amplitudes,
+)
 from ..recognition.colour_recognition import (
     ColourPrototypes,
     colour_image,
@@ -99,6 +103,9 @@ def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], p
     if s.colour.relief_must_allow:  # a print without its object's relief is not the object
         c_cands, _ = colour_where_relief_allows(c_cands, d_img.levelled, *library_relief_models(prototypes),
                                                 s.depth.gain_range)
+        # ... nor a print on a relief much taller than the building's own examples of it (sbsc learn)
+        c_cands, _ = colour_as_far_as_examples(c_cands, d_img.levelled, taught_amplitudes(prototypes.templates),
+                                               s.depth.gain_range)
     t_stage["colour"] = time.perf_counter() - t
     return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
 

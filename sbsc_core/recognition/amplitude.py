@@ -127,6 +127,73 @@ def colour_where_relief_allows(colour: list[Candidate], relief: np.ndarray | Non
     return kept, refused
 
 
+EXAMPLE_RELIEF_KEY = "example_relief_m"  # model.json: how far each example stands out (sbsc learn)
+
+
+def example_amplitudes(extra: dict) -> list[float]:
+    """How far the examples of a class stood out in the scan they were taught from
+    (``model.json`` :data:`EXAMPLE_RELIEF_KEY`, written by ``sbsc learn``); [] when the class
+    was not taught or the entry is not a list of positive numbers."""
+    vals = extra.get(EXAMPLE_RELIEF_KEY)
+    if not isinstance(vals, list) or not vals:
+        return []
+    ok = [float(v) for v in vals if isinstance(v, int | float) and not isinstance(v, bool) and float(v) > 0]
+    return ok if len(ok) == len(vals) else []
+
+
+def taught_amplitudes(templates: dict) -> dict[str, tuple[tuple[int, int], list[float]]]:
+    """class -> (footprint (h, w) pixels, its examples' amplitudes) of the classes of
+    ``templates`` (:class:`~sbsc_core.recognition.templates.ModelTemplate`) taught from
+    examples (:func:`example_amplitudes`); {} for a library that was not taught."""
+    out = {}
+    for c, t in templates.items():
+        amps = example_amplitudes(t.extra)
+        if amps:
+            out[c] = ((int(t.height_px), int(t.width_px)), amps)
+    return out
+
+
+@dataclass(frozen=True)
+class TallRefusal:
+    """A colour candidate refused because the relief there stands out much further than
+    every example of its class did."""
+
+    candidate: Candidate
+    examples_m: float  # how far the class's examples stood out (the furthest)
+    scene_m: float  # how far the scene does in its footprint
+
+
+def colour_as_far_as_examples(colour: list[Candidate], relief: np.ndarray | None,
+                              taught: dict[str, tuple[tuple[int, int], list[float]]],
+                              gain_range: tuple[float, float]) -> tuple[list[Candidate], list[TallRefusal]]:
+    """The colour candidates whose footprint stands out no further than ``gain_range[1]``
+    times the furthest example of their class, and the refused ones.
+
+    ``taught``: class -> (footprint (h, w) pixels, the amplitudes of its examples,
+    :func:`example_amplitudes`). Only classes taught from examples of this building take
+    part: their examples measured, in a scan of this building with its noise, how far its
+    instances stand out. A colour match where the scene stands out several times as far is
+    a print on another object of that size (a flush built-in socket's print on a 20 mm
+    room controller). Without examples the check is one-sided
+    (:func:`colour_where_relief_allows`): a library's model of another product says nothing
+    certain about how far this building's stands out, and noise raises a scene's amplitude.
+    The amplitude is measured over the class's footprint, as the examples' was.
+    """
+    if relief is None or not colour or not taught:
+        return colour, []
+    kept: list[Candidate] = []
+    refused: list[TallRefusal] = []
+    for cand in colour:
+        if cand.class_id in taught:
+            shape, amps = taught[cand.class_id]
+            seen = scene_amplitude(relief, shape, cand.centre, cand.rotation_deg)
+            if seen is not None and seen > gain_range[1] * max(amps):
+                refused.append(TallRefusal(cand, max(amps), seen))
+                continue
+        kept.append(cand)
+    return kept, refused
+
+
 def shifted_centre(centre: tuple[float, float], offset: tuple[float, float] | None,
              rotation_deg: float) -> tuple[float, float]:
     """``centre`` moved by ``offset`` (row, col) turned by ``rotation_deg``."""

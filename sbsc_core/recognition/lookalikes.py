@@ -110,7 +110,7 @@ def _mean_lab(t: ModelTemplate) -> np.ndarray | None:
     return lab[fg].mean(axis=0)
 
 
-def _same_size(a: ModelTemplate, b: ModelTemplate, tol: float) -> bool:
+def same_size(a: ModelTemplate, b: ModelTemplate, tol: float) -> bool:
     """Whether the two models' contents (:func:`content_box`) have the same sides within
     ``tol`` (a share of the longer), in either orientation."""
     def close(x: float, y: float) -> bool:
@@ -191,7 +191,7 @@ def lookalike_sets(templates: dict[str, ModelTemplate], settings: LookalikeSetti
         for b in ids[i + 1:]:
             for (ta, la), (tb, lb) in ((x, y) for x in zip(designs[a], labs[a], strict=True)
                                        for y in zip(designs[b], labs[b], strict=True)):
-                if la is None or lb is None or not _same_size(ta, tb, settings.size_tolerance):
+                if la is None or lb is None or not same_size(ta, tb, settings.size_tolerance):
                     continue
                 same_colour = float(np.linalg.norm(la - lb)) <= settings.max_colour_delta_e
                 if not same_colour and not settings.depth_alike_any_colour:
@@ -260,19 +260,20 @@ _FLAT_M = 0.05  # a depth model varying by less than this share of its height in
 def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[str, np.ndarray],
               offsets: dict[str, tuple[float, float]], *, relief: np.ndarray | None,
               models: dict[str, np.ndarray | list[np.ndarray]], model_offsets: dict[str, tuple[float, float]],
-              search_px: int) -> tuple[dict[str, float] | None, bool]:
+              search_px: int, relief_mute: frozenset[str] = frozenset()) -> tuple[dict[str, float] | None, bool]:
     """Each class's evidence at a candidate: the mean of the comparisons available for every
     class of ``seen``: its print NCC (when each has a view on this wall) and its relief score
-    (:func:`relief_score`, when ``relief`` is given and each has a relief model); and whether
-    the relief was compared. None when neither is available."""
+    (:func:`relief_score`, when ``relief`` is given, each has a relief model and none is in
+    ``relief_mute``, :func:`relief_muted`); and whether the relief was compared. None when
+    neither is available."""
     parts: list[dict[str, float]] = []
     if all(c in views for c in seen):
         parts.append({c: max(print_score(diff, v, _shifted(cand.centre, offsets.get(c), cand.rotation_deg),
                                          cand.rotation_deg, search_px=search_px) for v in designs(views[c]))
                       for c in seen})
     with_relief = False
-    if relief is not None and all(c in models for c in seen):
-        reliefs = {c: _best_design(relief, models[c], _shifted(cand.centre, model_offsets.get(c), cand.rotation_deg),
+    if relief is not None and all(c in models and c not in relief_mute for c in seen):
+        reliefs = {c: best_design_relief(relief, models[c], _shifted(cand.centre, model_offsets.get(c), cand.rotation_deg),
                                    cand.rotation_deg, search_px=search_px) for c in seen}
         if all(v is not None for v in reliefs.values()):
             parts.append({c: float(v) for c, v in reliefs.items()})  # type: ignore[arg-type]
@@ -282,13 +283,31 @@ def _evidence(cand: Candidate, seen: list[str], diff: np.ndarray, views: dict[st
     return {c: float(np.mean([p[c] for p in parts])) for c in seen}, with_relief
 
 
-def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, threshold: float
-                  ) -> dict[str, list[np.ndarray]]:
+RELIEF_DECIDES_KEY = "relief_decides"  # model.json: false when the examples showed that the relief cannot tell
+
+
+def relief_muted(templates: dict[str, ModelTemplate]) -> frozenset[str]:
+    """The classes whose fine relief takes no part in look-alike decisions: ``model.json``
+    ``relief_decides`` false, written by ``sbsc learn`` when on the class's own examples
+    another class of its size explained the relief at least as well as the class's own
+    models did (:func:`~sbsc_core.recognition.learning.library.relief_tells`). A library
+    without it decides exactly as before."""
+    return frozenset(c for c, t in templates.items() if t.extra.get(RELIEF_DECIDES_KEY) is False)
+
+
+def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, threshold: float,
+                  pad_px: int = 0) -> dict[str, list[np.ndarray]]:
     """The front views of the further designs of each class that has some (the last
     ``learnt_views`` of its views, ``model.json``; written by ``sbsc learn``) as seen on a wall
     of colour ``wall_rgb``: the Lab difference to the wall where it exceeds ``threshold``,
     cropped to the model's content like :func:`print_views`. Learnt views are crops of the
-    scan, so they are compared as they are (no blur, no noise)."""
+    scan, so they are compared as they are (no blur, no noise), with a ring of ``pad_px``
+    pixels of the surface (no difference) around them: the examples showed the object alone
+    on its surface, and the NCC of a plate of one colour that fills its box is its noise
+    (a dark switch plate correlated 0.12 with itself on a light wall, 0.96 with its ring).
+    :func:`resolve_on_wall` then gives every class's view the same ring: a ring favours the
+    class that has it (alt / standard: the alt one-gang socket's learnt print took the library's
+    switches)."""
     out: dict[str, list[np.ndarray]] = {}
     wall = cv2.cvtColor(np.asarray(wall_rgb, np.float32).reshape(1, 1, 3) / 255.0, cv2.COLOR_RGB2Lab).reshape(3)
     for c, t in templates.items():
@@ -304,13 +323,13 @@ def design_prints(templates: dict[str, ModelTemplate], wall_rgb: np.ndarray, thr
             diff = lab - wall[None, None, :]
             fg = (np.linalg.norm(diff, axis=2) > threshold) & (view[..., 3] > 127)
             diff = np.where(fg[..., None], diff, 0.0).astype(np.float32)
-            prints.append(np.ascontiguousarray(diff[b.r0:b.r1, b.c0:b.c1]))
+            prints.append(np.ascontiguousarray(np.pad(diff[b.r0:b.r1, b.c0:b.c1], ((pad_px, pad_px), (pad_px, pad_px), (0, 0)))))
         if prints:
             out[c] = prints
     return out
 
 
-def _best_design(relief: np.ndarray, model: np.ndarray | list[np.ndarray], centre: tuple[float, float],
+def best_design_relief(relief: np.ndarray, model: np.ndarray | list[np.ndarray], centre: tuple[float, float],
                  rotation_deg: float, *, search_px: int) -> float | None:
     """:func:`relief_score` of a class's depth model, or the best of its designs' (a list:
     the reference model and the further ones, e.g. learnt by ``sbsc learn``). None when one of
@@ -328,7 +347,8 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
                        relief: np.ndarray | None = None,
                        models: dict[str, np.ndarray | list[np.ndarray]] | None = None,
                        model_offsets: dict[str, tuple[float, float]] | None = None,
-                       gain_range: tuple[float, float] | None = None) -> list[Candidate]:
+                       gain_range: tuple[float, float] | None = None,
+                       relief_mute: frozenset[str] = frozenset()) -> list[Candidate]:
     """Candidates with every look-alike class decided by its print (see the module).
 
     ``diff`` is the wall's Lab difference to the local wall colour (0 off the foreground);
@@ -344,6 +364,8 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
     With ``gain_range`` and ``relief``, a look-alike whose depth model stands out much more or
     much less than the scene does at the candidate (:func:`amplitude_compatible`) is not one
     of the classes it may be: the library's depth models and the scan decide that, not the print.
+
+    ``relief_mute``: classes whose fine relief is left out of the comparison (:func:`relief_muted`).
     """
     if not groups or not cands:
         return cands
@@ -363,7 +385,8 @@ def resolve_lookalikes(cands: list[Candidate], diff: np.ndarray, views: dict[str
                                         cand.rotation_deg, gain_range)
             seen = [c for c in seen if c == cand.class_id or fits.get(c, True)]
         scores, both = (None, False) if g is None or len(seen) < 2 or cand.class_id not in seen else _evidence(
-            cand, seen, diff, views, offsets or {}, relief=relief, models=models or {}, model_offsets=model_offsets or {}, search_px=settings.search_px)
+            cand, seen, diff, views, offsets or {}, relief=relief, models=models or {}, model_offsets=model_offsets or {},
+            search_px=settings.search_px, relief_mute=relief_mute)
         if scores is None:
             out.append(cand)
             continue
@@ -448,7 +471,7 @@ def same_size_pairs(templates: dict[str, ModelTemplate], settings: LookalikeSett
     """The pairs of classes whose contents have the same size (:func:`content_box`, ``size_tolerance``)."""
     ids = sorted(templates)
     return [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
-            if _same_size(templates[a], templates[b], settings.size_tolerance)]
+            if same_size(templates[a], templates[b], settings.size_tolerance)]
 
 
 def colour_confusable(protos: dict, templates: dict[str, ModelTemplate], settings: LookalikeSettings,
@@ -497,13 +520,18 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
     if not groups:
         return depth, colour
     views, offsets = print_views(protos, prototypes.templates)
-    for c, prints in design_prints(prototypes.templates, image.wall_rgb, image.threshold).items():
+    learnt = design_prints(prototypes.templates, image.wall_rgb, image.threshold, settings.learnt_print_pad_px)
+    if learnt:  # every print with the same ring of surface as the learnt ones: no class favoured by it
+        pad = settings.learnt_print_pad_px
+        views = {c: np.pad(v, ((pad, pad), (pad, pad), (0, 0))) for c, v in views.items()}
+    for c, prints in learnt.items():
         if c in views:  # a class's further designs (sbsc learn): the best of its prints speaks for it
             views[c] = [views[c], *prints]  # type: ignore[list-item]
     models, model_offsets = library_relief_models(prototypes)
     diff = np.ascontiguousarray(image.lab - image.background, dtype=np.float32)
     np.copyto(diff, 0.0, where=~image.foreground[..., None])  # in place: most of the image
     kw = {"offsets": offsets, "relief": relief, "models": models, "model_offsets": model_offsets,
-          "gain_range": gain_range if settings.amplitude_decides else None}
+          "gain_range": gain_range if settings.amplitude_decides else None,
+          "relief_mute": relief_muted(prototypes.templates)}
     return (resolve_lookalikes(depth, diff, views, groups, settings, **kw),
             resolve_lookalikes(colour, diff, views, groups, settings, **kw))

@@ -21,6 +21,7 @@ from pathlib import Path
 from ...errors import InputError
 from ...io.atomic import atomic_output_dir
 from ...io.models import COLOUR_FILE_RE, EXTRA_DEPTH_RE, load_model_library
+from ..amplitude import EXAMPLE_RELIEF_KEY
 
 NEW_CLASS = "class"
 DESIGNS = "designs"
@@ -98,6 +99,7 @@ def forget_learnt(models: Path, out: Path, class_ids: list[str]) -> dict[str, st
             if cid in done:
                 meta = _meta(tmp / cid)
                 meta.pop("learnt_views", None)
+                meta.pop(EXAMPLE_RELIEF_KEY, None)  # what its examples measured goes with them
                 (tmp / cid / "model.json").write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
         if not any(tmp.iterdir()):
             raise InputError(models, "the library would be empty")

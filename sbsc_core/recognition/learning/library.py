@@ -26,7 +26,7 @@ import json
 import math
 import shutil
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -43,9 +43,20 @@ from ...io.models import (
     load_object_model,
 )
 from ...io.safe_json import load_json_file
+from ...settings import LookalikeSettings
 from ...types import SURFACE_KINDS, ObjectModel
-from ..templates import make_template
-from .crops import learnt_depth, learnt_view, object_alpha
+from ..amplitude import EXAMPLE_RELIEF_KEY, relief_amplitude
+from ..amplitude import designs as model_designs
+from ..amplitude import shifted_centre as shifted
+from ..lookalikes import (
+    RELIEF_DECIDES_KEY,
+    best_design_relief,
+    design_templates,
+    relief_models,
+    same_size,
+)
+from ..templates import ModelTemplate, make_template, resample_depth
+from .crops import footprint, learnt_depth, learnt_view, object_alpha
 from .examples import (
     Example,
     cut,
@@ -75,10 +86,12 @@ class Taught:
     rho: float | None = None  # median best depth correlation with the library's models
     colour_delta: float | None = None  # median best CIELAB distance to its front views
     files: list[str] = field(default_factory=list)
+    relief_decides: bool = True  # False: its relief does not tell its examples from another class's
 
     def to_dict(self) -> dict:
         return {"class": self.class_id, "action": self.action, "examples": self.examples,
-                "rho": self.rho, "colour_delta": self.colour_delta, "files": self.files}
+                "rho": self.rho, "colour_delta": self.colour_delta, "files": self.files,
+                "relief_decides": self.relief_decides}
 
 
 # --------------------------------------------------------------------------- CLASSES.json
@@ -209,6 +222,94 @@ def _count_learnt_view(class_dir: Path, files: list[str]) -> None:
     path.write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
 
 
+def _record_amplitudes(class_dir: Path, examples: list[Example]) -> None:
+    """Write how far each example stood out (``model.json`` ``example_relief_m``, metres:
+    :func:`~sbsc_core.recognition.amplitude.relief_amplitude` of its relief over the class's
+    footprint). Recognition refuses a colour match of the class where the scan stands out much
+    further than every example did (:func:`~sbsc_core.recognition.amplitude.colour_as_far_as_examples`)."""
+    amps = [a for a in (relief_amplitude(e.relief) for e in examples) if a is not None and a > 0]
+    if not amps:
+        return
+    _set_meta(class_dir, EXAMPLE_RELIEF_KEY, [round(a, 5) for a in amps])
+
+
+def _set_meta(class_dir: Path, key: str, value: object) -> None:
+    """Set one key of a class's ``model.json``."""
+    path = class_dir / "model.json"
+    meta = json.loads(path.read_text(encoding="utf-8"))
+    meta[key] = value
+    path.write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
+
+
+def relief_tells(cid: str, examples: list[Example], templates: dict[str, ModelTemplate],
+                 settings: LookalikeSettings | None = None, *, reference: bool = False) -> bool | None:
+    """Whether a class's learnt relief tells its examples from every other class of its size.
+
+    Look-alikes are decided by the print and the fine relief together
+    (:mod:`~sbsc_core.recognition.lookalikes`). A learnt depth model is the median of a few
+    crops of a scan: on a flat plate (a sign) its "fine relief" is the scan's noise and the
+    plate's edge, which another plate's model explains as well or better. The examples are
+    instances of the class in this building, so they show it, each left out in turn: at each
+    example (its place, upright) the class's models, with its learnt one made from the *other*
+    examples (a median fits the crops it was made of, noise included), and every class of the
+    same size (any of its designs and any of the class's, as
+    :func:`~sbsc_core.recognition.lookalikes.lookalike_sets` compares them) score the relief
+    (:func:`~sbsc_core.recognition.lookalikes.relief_score`, the best of each class's designs).
+    When another class's median score over the examples reaches the class's own, the relief
+    does not tell this class's instances from that one's. No threshold: the class's own
+    models against the others', on the class's own examples.
+
+    ``reference``: the learnt relief is the class's reference depth model (a new class), else
+    its last further depth model (a new design).
+
+    Returns
+    -------
+    bool or None
+        None when it cannot be told: fewer than two examples, no learnt relief, or no other
+        class of its size with a relief.
+    """
+    settings = settings or LookalikeSettings()
+    t = templates[cid]
+    if len(examples) < 2 or t.depth is None or (not reference and not t.extra_depths):
+        return None
+    own_designs = design_templates(t)
+    others = [c for c in sorted(templates) if c != cid and any(
+        same_size(a, b, settings.size_tolerance) for a in own_designs for b in design_templates(templates[c]))]
+    models, offsets = relief_models({c: templates[c] for c in others})
+    others = [c for c in others if c in models]
+    if not others:
+        return None
+    scores: dict[str, list[float]] = {c: [] for c in [cid, *others]}
+    for i, e in enumerate(examples):
+        rest = learnt_depth([x.relief for j, x in enumerate(examples) if j != i])
+        if rest is None:
+            return None
+        rest = resample_depth(rest, t.shape)
+        loo = replace(t, depth=rest) if reference else replace(t, extra_depths=[*t.extra_depths[:-1], rest])
+        own_models, own_offsets = relief_models({cid: loo})
+        if cid not in own_models:
+            return None
+        s = e.surface
+        win = footprint(s.depth().shape, s.frame.height_m, s.pixel_m, e.u, e.v, e.width_m, e.height_m)
+        if win is None:
+            continue
+        r0, c0, r1, c1 = win
+        with np.errstate(all="ignore"):
+            level = float(np.nanmedian(s.depth()[r0:r1, c0:c1] - e.relief))
+        relief = np.nan_to_num(s.depth() - level, nan=0.0)
+        centre = ((s.frame.height_m - e.v) / s.pixel_m - 0.5, e.u / s.pixel_m - 0.5)
+        for c in scores:
+            mods, offs = (own_models, own_offsets) if c == cid else (models, offsets)
+            found = [x for m in model_designs(mods[c]) if (x := best_design_relief(
+                relief, m, shifted(centre, offs.get(c), 0.0), 0.0, search_px=settings.search_px)) is not None]
+            if found:
+                scores[c].append(max(found))
+    if not scores[cid]:
+        return None
+    own = float(np.median(scores[cid]))
+    return not any(scores[c] and float(np.median(scores[c])) >= own for c in others)
+
+
 def _new_class_size(label: str, objs: list, surfaces_and_clicks: list) -> tuple[float, float]:
     """The median size of a new class's examples: given (``width_m``, ``height_m``) or measured."""
     sizes = []
@@ -272,6 +373,7 @@ def learn_library(detect_out: Path, reviewed: Path, models: Path, out: Path, *,
     pixel_m = next(iter(surfaces.values())).pixel_m
     detections = load_json_file(detect_out / "detections.json", max_bytes=64 << 20)["detections"]
     taught: list[Taught] = []
+    used: dict[str, list[Example]] = {}  # every class's examples, as cut
     designs: dict[str, list[Example]] = {}
     new: dict[str, tuple[dict, list[Example]]] = {}
     for cid in sorted(by_class):
@@ -293,6 +395,7 @@ def learn_library(detect_out: Path, reviewed: Path, models: Path, out: Path, *,
             delta = _median([colour_delta(learnt_view([e.colour]), m.colour_views) for e in examples])
             missed = sum(not found(e, detections) for e in examples)
             matches = missed == 0 and (rho is None or rho >= min_rho) and (delta is None or delta <= max_colour_delta)
+            used[cid] = examples
             t = Taught(cid, "matches" if matches else "new design", len(examples), rho,
                        None if delta is None else round(delta, 2))
             if not matches:
@@ -316,6 +419,7 @@ def learn_library(detect_out: Path, reviewed: Path, models: Path, out: Path, *,
                     "learnt_from": len(examples)}
             new[cid] = (meta, examples)
             t = Taught(cid, "new class", len(examples))
+        used[cid] = examples
         taught.append(t)
     with atomic_output_dir(out) as tmp:
         for cid in library.class_ids:
@@ -330,9 +434,20 @@ def learn_library(detect_out: Path, reviewed: Path, models: Path, out: Path, *,
                 cdir.mkdir()
                 (cdir / "model.json").write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
                 t.files = ["model.json", *_write_design(cdir, examples, None)]
-            if t.action != "matches":
-                load_object_model(cdir)  # read back: the library reader accepts what was written
+            _record_amplitudes(cdir, used[t.class_id])
+            load_object_model(cdir)  # read back: the library reader accepts what was written
+        learnt = [t for t in taught if any(f.startswith("depth") for f in t.files)]  # a learnt relief was written
+        if learnt:  # whether each learnt relief tells the class's examples from the other classes of its size
+            pixel = used[learnt[0].class_id][0].surface.pixel_m
+            templates = {c: make_template(load_object_model(tmp / c), pixel) for c in sorted(p.name for p in tmp.iterdir())}
+            for t in learnt:
+                if relief_tells(t.class_id, used[t.class_id], templates, reference=t.action == "new class") is False:
+                    _set_meta(tmp / t.class_id, RELIEF_DECIDES_KEY, False)
+                    load_object_model(tmp / t.class_id)
+                    t.relief_decides = False
+        for t in taught:
             log(f"{t.class_id}: {t.action} from {t.examples} example(s)"
                 + (f" (rho {t.rho:.2f})" if t.rho is not None else "")
-                + (f" (colour {t.colour_delta:.1f})" if t.colour_delta is not None else ""))
+                + (f" (colour {t.colour_delta:.1f})" if t.colour_delta is not None else "")
+                + ("" if t.relief_decides else " (its relief does not tell it from another class of its size)"))
     return taught
