@@ -290,7 +290,8 @@ def relief_tells(cid: str, examples: list[Example], templates: dict[str, ModelTe
         if cid not in own_models:
             return None
         s = e.surface
-        win = footprint(s.depth().shape, s.frame.height_m, s.pixel_m, e.u, e.v, e.width_m, e.height_m)
+        win = footprint(s.depth().shape, s.frame.height_m, s.pixel_m, u=e.u, v=e.v, width_m=e.width_m,
+                        height_m=e.height_m)
         if win is None:
             continue
         r0, c0, r1, c1 = win
