@@ -64,8 +64,11 @@ from sbsc_core.recognition.confidence import (  # noqa: E402
     hit_features,
     model_reliefs,
     reliability,
+    screened_consensus,
 )
 from sbsc_core.recognition.consensus import consensus_all  # noqa: E402
+from sbsc_core.recognition.mounting import within_wall_height  # noqa: E402
+from sbsc_core.recognition.placement import place_hits  # noqa: E402
 from sbsc_core.recognition.templates import make_templates  # noqa: E402
 from sbsc_core.settings import DetectionSettings  # noqa: E402
 from sbsc_core.simulate.designs import RANDOM, design_builder  # noqa: E402
@@ -134,15 +137,14 @@ def rows_of(scan: Path, settings: DetectionSettings, radius: float,
     depth, colour = data["depth"], data["colour"]
     data["reliefs"] = model_reliefs(make_templates(load_model_library(scan / "models"), settings.orthoimage.pixel_m,
                                                    data["classes"]))
+    orthos = parked(data["frames"])
     out = []
     for exp in (None, expected):
         hits = [h for v in consensus_all(depth, colour, exp, settings.consensus, data["classes"]).values() for h in v]
         feats = [hit_features(h, depth, colour, data["reliefs"]) for h in hits]
         pos = []
         for h in hits:
-            frame, pixel_m = data["frames"][h.wall_id]
-            o = Orthoimage(wall_id=h.wall_id, frame=frame, pixel_m=pixel_m, colour=np.zeros((0, 0, 3), np.uint8),
-                           depth=np.zeros((0, 0), np.float32), mask=np.zeros((0, 0), bool))
+            o = orthos[h.wall_id]
             u, v = o.pixel_to_uv(h.centre[0], h.centre[1])
             pos.append(o.frame.to_world(u, v, 0.0))
         order = np.argsort([-f[2] - f[3] for f in feats])  # the best evidence takes an object first
@@ -161,6 +163,66 @@ def rows_of(scan: Path, settings: DetectionSettings, radius: float,
                 right[k] = 1
         out.extend(zip(feats, right, strict=True))
     return out
+
+
+def parked(frames: dict) -> dict[str, Orthoimage]:
+    """Orthoimages without images (frame and pixel size only) of every surface of ``frames``."""
+    return {k: Orthoimage(wall_id=k, frame=f, pixel_m=px, colour=np.zeros((0, 0, 3), np.uint8),
+                          depth=np.zeros((0, 0), np.float32), mask=np.zeros((0, 0), bool))
+            for k, (f, px) in frames.items()}
+
+
+def table_of(scan: Path, settings: DetectionSettings, calibration: Path) -> tuple[int, int, int, np.ndarray, np.ndarray]:
+    """Table 1 of a scene detected with its expected counts and ``calibration``, from its kept
+    candidates: the steps of ``sbsc detect`` after recognition (mount heights, screened
+    consensus, counts filled by confidence, placement), scored like ``sbsc evaluate``.
+
+    Returns instances, TP, FP, and each detection's confidence and whether it is right.
+    """
+    from sbsc_core.evaluate import evaluate
+    from sbsc_core.io.documents import read_truth
+    from sbsc_core.io.models import read_library_metadata
+
+    data = candidates_of(scan, settings)
+    orthos = parked(data["frames"])
+    margin = settings.consensus.mount_margin_m
+    depth = within_wall_height(data["depth"], orthos, margin_m=margin)
+    colour = within_wall_height(data["colour"], orthos, margin_m=margin)
+    templates = make_templates(load_model_library(scan / "models"), settings.orthoimage.pixel_m, data["classes"])
+    conf = DetectionSettings().confidence
+    conf.calibration = str(calibration)
+    expected = json.loads((scan / "expected.json").read_text())["counts"]
+    hits = screened_consensus(depth, colour, expected, data["classes"], consensus_settings=settings.consensus,
+                              settings=conf, reliefs=model_reliefs(templates), frames=data["frames"])
+    doc = {"detections": [d.to_dict() for d in place_hits(hits, orthos, templates)]}
+    table = evaluate(doc, read_truth(scan / "ground_truth.json"), library=read_library_metadata(scan / "models"))
+    used = {m.detection_id for m in table.matches}
+    p = np.array([d.get("confidence") or 0.0 for d in doc["detections"]], float)
+    right = np.array([d["id"] in used for d in doc["detections"]], float)
+    return table.total.instances, table.total.tp, table.total.fp, p, right
+
+
+def print_tables(scans: list[Path], settings: DetectionSettings, calibrations: dict[str, Path]) -> None:
+    """Table 1 (with counts) of every scene under each calibration, their mean and worst, and the ECE."""
+    pooled: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {k: [] for k in calibrations}
+    tps: dict[str, list[float]] = {k: [] for k in calibrations}
+    fps: dict[str, list[float]] = {k: [] for k in calibrations}
+    print("\nTable 1 with counts, TP % / FP %: " + ", ".join(f"{k} = {v}" for k, v in calibrations.items()))
+    for scan in scans:
+        cells = []
+        for name, path in calibrations.items():
+            n, tp, fp, p, right = table_of(scan, settings, path)
+            tps[name].append(100.0 * tp / n)
+            fps[name].append(100.0 * fp / n)
+            pooled[name].append((p, right))
+            cells.append(f"{name} {tps[name][-1]:5.1f} / {fps[name][-1]:4.1f}")
+        print(f"  {scan.name:28s} " + "   ".join(cells), flush=True)
+    for name in calibrations:
+        p = np.concatenate([a for a, _ in pooled[name]])
+        y = np.concatenate([b for _, b in pooled[name]])
+        _, ece = reliability(p, y)
+        print(f"{name}: TP mean {np.mean(tps[name]):.1f} %, worst {np.min(tps[name]):.1f} %; FP mean "
+              f"{np.mean(fps[name]):.1f} %, worst {np.max(fps[name]):.1f} %; ECE {ece:.4f} ({len(y)} detections)")
 
 
 def main() -> int:
@@ -183,6 +245,9 @@ def main() -> int:
     ap.add_argument("--fit-scenes", nargs="+", type=Path, default=[],
                     help="simulated scenes (any layout, e.g. bench_realism.py --full runs) also fitted on")
     ap.add_argument("--eval-scenes", nargs="+", type=Path, default=[], help="simulated scenes also evaluated on")
+    ap.add_argument("--table", action="store_true",
+                    help="also Table 1 with counts of every evaluation scene, with the shipped calibration "
+                         "and the fitted one (the steps of sbsc detect after recognition, from the kept candidates)")
     ap.add_argument("--write", action="store_true", help="store the fitted model in the package")
     ap.add_argument("--out", type=Path, default=None, help="store the fitted model there (to try it first)")
     args = ap.parse_args()
@@ -243,6 +308,10 @@ def main() -> int:
     for lo, hi, n, conf, acc in table:
         print(f"{lo:5.1f}-{hi:4.1f}   {n:6d} {conf:10.3f} {acc:9.3f}")
     print(f"\nECE (evaluation scenes, 10 bins): {ece:.4f}   (fit scenes: {ece_fit:.4f})")
+    if args.table:
+        fitted = args.work / "fitted_confidence.json"
+        fitted.write_text(json.dumps(cal.to_dict(), indent=1) + "\n", encoding="utf-8")
+        print_tables(list(args.eval_scenes), settings, {"shipped": CALIBRATION_PATH, "fitted": fitted})
     if args.write or args.out:
         cal.info = {"fit_seeds": list(args.fit_seeds), "eval_seeds": list(args.eval_seeds), "scenes": "one_room.yaml",
                     "fit_families": list(args.fit_families), "eval_families": list(args.eval_families),

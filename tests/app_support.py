@@ -235,6 +235,24 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def server_with_users(base: Path, users: Sequence[tuple[str, str]], env: dict[str, str] | None = None
+                      ) -> ServerProcess:
+    """A started server on ``base/data`` with each (name, role) of ``users`` added first.
+
+    The server carries ``tokens`` (name -> API token), ``base`` and ``data``; the caller
+    stops it.
+    """
+    from app.config import AppSettings
+    from app.users import add_user
+
+    data = base / "data"
+    settings = AppSettings(data_dir=data)
+    tokens = {name: add_user(settings, name, role) for name, role in users}
+    server = ServerProcess(data, env).start()
+    server.tokens, server.base, server.data = tokens, base, data
+    return server
+
+
 class ServerProcess:
     """``sbsc serve`` in a child process on a free port, with ``SBSC_*`` settings in its env."""
 

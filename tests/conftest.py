@@ -17,7 +17,7 @@ from app.sample import ensure_sample_project
 from app.users import add_user
 from sbsc_core.bim.design_writer import write_as_designed_ifc
 
-from .app_support import ServerProcess, _fake_output, auth, join, write_small_ply
+from .app_support import ServerProcess, _fake_output, auth, join, server_with_users, write_small_ply
 from .bim_fixtures import truth_document
 from .browser_support import CHROMIUM_ARGS, LONG_CLASSES, SHOTS, chromium_path
 from .teach_support import RUNNER as TEACH_RUNNER
@@ -73,12 +73,8 @@ def site(tmp_path_factory):
 @pytest.fixture(scope="module")
 def teach_srv(tmp_path_factory):
     """A server whose jobs run the teach scene's fake runner; four users of every role."""
-    base = tmp_path_factory.mktemp("teach")
-    data = base / "data"
-    settings = AppSettings(data_dir=data)
-    tokens = {name: add_user(settings, name, role) for name, role in
-              [("rita", "reviewer"), ("max", "manager"), ("ada", "admin"), ("olga", "reviewer")]}
-    server = ServerProcess(data, {"SBSC_JOB_RUNNER": TEACH_RUNNER, "SBSC_VIEWER": "0"}).start()
-    server.tokens, server.base, server.data = tokens, base, data
+    server = server_with_users(tmp_path_factory.mktemp("teach"),
+                               [("rita", "reviewer"), ("max", "manager"), ("ada", "admin"), ("olga", "reviewer")],
+                               {"SBSC_JOB_RUNNER": TEACH_RUNNER, "SBSC_VIEWER": "0"})
     yield server
     server.stop()

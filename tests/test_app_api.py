@@ -28,6 +28,7 @@ from .app_support import (
     db_rows_at,
     fake_control,
     pid_alive,
+    server_with_users,
     wait_job,
     worker_pid,
     write_library_zip,
@@ -42,17 +43,11 @@ LIMIT = 1 << 20  # scan size limit of the shared server
 
 @pytest.fixture(scope="module")
 def srv(tmp_path_factory):
-    base = tmp_path_factory.mktemp("app_api")
-    data = base / "data"
-    settings = AppSettings(data_dir=data)
-    tokens = {name: add_user(settings, name, role) for name, role in
-              [("rita", "reviewer"), ("rob", "reviewer"), ("max", "manager"), ("ada", "admin")]}
-    server = ServerProcess(data, {"SBSC_JOB_RUNNER": RUNNER, "SBSC_MAX_SCAN_BYTES": str(LIMIT),
-                                  "SBSC_MAX_MODELS_ZIP_BYTES": str(LIMIT),
-                                  "SBSC_UPLOAD_DRAIN_BYTES": str(4 * LIMIT)}).start()
-    fake_control(data, mode="ok", delay_s=0.2, detections=6)
-    server.tokens = tokens
-    server.base = base
+    server = server_with_users(tmp_path_factory.mktemp("app_api"),
+                               [("rita", "reviewer"), ("rob", "reviewer"), ("max", "manager"), ("ada", "admin")],
+                               {"SBSC_JOB_RUNNER": RUNNER, "SBSC_MAX_SCAN_BYTES": str(LIMIT),
+                                "SBSC_MAX_MODELS_ZIP_BYTES": str(LIMIT), "SBSC_UPLOAD_DRAIN_BYTES": str(4 * LIMIT)})
+    fake_control(server.data, mode="ok", delay_s=0.2, detections=6)
     yield server
     server.stop()
 

@@ -13,9 +13,7 @@ import httpx
 import numpy as np
 import pytest
 
-from app.config import AppSettings
 from app.snap import snap_to_relief
-from app.users import add_user
 
 from .app_support import (
     auth,
@@ -33,17 +31,12 @@ RUNNER = "tests.app_support:fake_with_suggestions"
 
 @pytest.fixture(scope="module")
 def srv(tmp_path_factory):
-    from .app_support import ServerProcess
+    from .app_support import server_with_users
 
-    base = tmp_path_factory.mktemp("review_loop")
-    data = base / "data"
-    settings = AppSettings(data_dir=data)
-    tokens = {name: add_user(settings, name, role) for name, role in
-              [("rita", "reviewer"), ("max", "manager"), ("ada", "admin")]}
-    server = ServerProcess(data, {"SBSC_JOB_RUNNER": RUNNER, "SBSC_VIEWER": "0"}).start()
-    fake_control(data, delay_s=0.2, detections=8)
-    server.tokens = tokens
-    server.base = base
+    server = server_with_users(tmp_path_factory.mktemp("review_loop"),
+                               [("rita", "reviewer"), ("max", "manager"), ("ada", "admin")],
+                               {"SBSC_JOB_RUNNER": RUNNER, "SBSC_VIEWER": "0"})
+    fake_control(server.data, delay_s=0.2, detections=8)
     yield server
     server.stop()
 
