@@ -1,4 +1,4 @@
-"""Surfaces beyond walls (contract 4's ``surfaces``: ceilings and column faces) in the review app.
+"""Surfaces beyond walls (contract 4's ``surfaces``: ceilings, column faces and pendants) in the review app.
 
 A surface is stored like a wall (``app.models.WallRow`` with a ``kind``) and framed like one:
 ``origin``, ``axis_u``, ``axis_v``, ``normal``, ``width_m``, ``height_m``. A ceiling's normal
@@ -13,7 +13,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-SURFACE_KINDS: tuple[str, ...] = ("ceiling", "column")
+SURFACE_KINDS: tuple[str, ...] = ("ceiling", "column", "pendant")
 FRAME_FIELDS: tuple[str, ...] = ("id", "kind", "origin", "axis_u", "axis_v", "normal", "width_m",
                                  "height_m", "storey")
 
@@ -36,5 +36,5 @@ def point_on(surface: Mapping[str, Any], u: float, v: float) -> list[float]:
 
 
 def kind_of(surface: Mapping[str, Any]) -> str:
-    """``wall``, ``ceiling`` or ``column``."""
+    """``wall``, ``ceiling``, ``column`` or ``pendant`` (a panel hanging from the ceiling)."""
     return str(surface.get("kind") or "wall")

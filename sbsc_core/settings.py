@@ -330,6 +330,26 @@ class ColumnSettings:
 
 
 @dataclass
+class PendantSettings:
+    """Objects hanging from the ceiling (issue 27; :mod:`sbsc_core.scene.pendants`): searched with
+    the ceilings (``sbsc detect --no-ceilings``: not), for the classes that may be on a ceiling."""
+
+    enabled: bool = True
+    cell_m: float = 0.02  # plan cells of the search
+    min_cell_points: int = 2  # a cell with fewer points is noise (stray returns of the ceiling)
+    reach_m: float = 1.0  # a panel hangs at most this far below the ceiling ...
+    gap_m: float = 0.03  # ... and at least this far (the ceiling's own points and what is on it)
+    wall_clear_m: float = 0.15  # points this close to a wall's plane or a column are theirs
+    max_thickness_m: float = 0.12  # a panel is at most this thick ...
+    upright_ratio: float = 1.5  # ... and this many times taller than thick (a thing on the ceiling is flat)
+    size_slack: float = 1.5  # as wide and tall as the classes mounted on ceilings, within this factor
+    below_m: float = 0.3  # under a panel, down to this above the floor, ...
+    max_under_share: float = 0.05  # ... at most this share of its points (it hangs: furniture stands)
+    min_points: int = 30  # a panel has at least this many points in the sample
+    margin_m: float = 0.1  # its surface reaches this far beyond it on each side
+
+
+@dataclass
 class RegistrationSettings:
     """Fine registration of the stations when they come as several files (:mod:`sbsc_core.scene.registration`)."""
 
@@ -362,6 +382,7 @@ class DetectionSettings:
     confidence: ConfidenceSettings = field(default_factory=ConfidenceSettings)
     ceilings: CeilingSettings = field(default_factory=CeilingSettings)
     columns: ColumnSettings = field(default_factory=ColumnSettings)
+    pendants: PendantSettings = field(default_factory=PendantSettings)
     workers: int = 0  # processes for the per-wall stages; 0 = up to 2, by the CPU count
 
     def to_dict(self) -> dict[str, Any]:

@@ -115,23 +115,26 @@ class CylinderFrame(WallFrame):
 
 @dataclass(frozen=True)
 class Surface:
-    """A surface beyond walls (contract 4 ``surfaces``): a ceiling or a column face.
+    """A surface beyond walls (contract 4 ``surfaces``): a ceiling, a column face or a pendant.
 
     ``frame`` follows contract 4 (a ceiling's ``normal`` points down into the room). A round
     column's face is unrolled around its axis: ``u`` is the arc length counter-clockwise
     from +x around ``centre``, ``v`` the height above ``frame.origin``, and ``radius_m`` and
     ``centre`` are given. ``column`` names the column a face belongs to; ``room`` (the
-    simulator's) and ``storey`` are optional.
+    simulator's) and ``storey`` are optional. A pendant (:mod:`sbsc_core.scene.pendants`) is
+    an upright panel hanging from the ceiling, framed like a wall; ``hangs_from`` names the
+    ceiling's storey (or ceiling) it hangs from.
     """
 
     id: str
-    kind: str  # "ceiling" | "column"
+    kind: str  # "ceiling" | "column" | "pendant"
     frame: WallFrame
     room: str | None = None
     column: str | None = None
     radius_m: float | None = None
     centre: tuple[float, float] | None = None
     storey: str | None = None
+    hangs_from: str | None = None
 
     @property
     def round(self) -> bool:
@@ -162,6 +165,8 @@ class Surface:
             doc["centre"] = [round(float(c), 4) for c in self.centre]
         if self.storey is not None:
             doc["storey"] = self.storey
+        if self.hangs_from is not None:
+            doc["hangs_from"] = self.hangs_from
         return doc
 
     @classmethod
@@ -173,7 +178,7 @@ class Surface:
                    room=d.get("room"), column=d.get("column"),
                    radius_m=float(radius) if radius is not None else None,
                    centre=(float(centre[0]), float(centre[1])) if centre is not None else None,
-                   storey=d.get("storey"))
+                   storey=d.get("storey"), hangs_from=d.get("hangs_from"))
 
 
 @dataclass

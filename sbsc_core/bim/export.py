@@ -774,10 +774,13 @@ def export_ifc(document: dict, *, library: ModelLibrary | None = None, schema: s
     fixed: set[int] = set()
     for det in selected_detections(doc.detections, accepted_only):
         wall_id = det.get("wall") if det.get("wall") in doc.walls or det.get("wall") in doc.surfaces else None
+        normal = None
+        if wall_id in doc.surfaces and doc.surfaces[wall_id].kind == "pendant":  # hangs free, facing its normal
+            wall_id, normal = None, doc.surfaces[wall_id].frame.normal
         label = str(det.get("id") or "")
         typing = builder.typing_of(det["class"], det.get("width_m") or 0.1, det.get("height_m") or 0.1)
         element = builder.add_component(
-            det["class"], np.asarray(det["position"], float), wall_id=wall_id,
+            det["class"], np.asarray(det["position"], float), wall_id=wall_id, normal=normal,
             name=f"{typing.name} {label}".strip(), tag=label or None,
             width_m=det.get("width_m"), height_m=det.get("height_m"),
             psets={PSET_RECOGNITION: _recognition_pset(det)}, rotation_deg=_rotation(det))

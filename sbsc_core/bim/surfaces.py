@@ -80,14 +80,14 @@ def read_surfaces(doc: Mapping[str, Any], where: str = "detections") -> dict[str
         vectors = np.stack([f.origin, f.axis_u, f.axis_v, f.normal])
         if vectors.shape != (4, 3) or not np.isfinite(vectors).all():
             raise InputError(at, "frame vectors must be 3 finite numbers each")
-        if s.kind not in ("ceiling", "column"):
-            raise InputError(f"{at}.kind", f"unknown surface kind '{s.kind}' (expected ceiling or column)")
+        if s.kind not in ("ceiling", "column", "pendant"):
+            raise InputError(f"{at}.kind", f"unknown surface kind '{s.kind}' (expected ceiling, column or pendant)")
         if s.id in out:
             raise InputError(f"{at}.id", f"duplicate surface id '{s.id}'")
         if s.kind == "ceiling" and abs(f.normal[2]) < 0.9:
             raise InputError(f"{at}.normal", "a ceiling's normal must be vertical")
-        if s.kind == "column" and np.linalg.norm(f.normal[:2]) < 0.9:
-            raise InputError(f"{at}.normal", "a column face's normal must be horizontal")
+        if s.kind in ("column", "pendant") and np.linalg.norm(f.normal[:2]) < 0.9:
+            raise InputError(f"{at}.normal", f"a {'column face' if s.kind == 'column' else 'pendant'}'s normal must be horizontal")
         if np.linalg.norm(f.axis_u[:2]) < 0.9:
             raise InputError(f"{at}.axis_u", f"a {s.kind}'s axis_u must be horizontal")
         if s.radius_m is not None and not (s.radius_m > 0 and s.centre is not None):

@@ -275,6 +275,25 @@ def _columns_of(cloud: PointCloud, seg: Segmentation, s: DetectionSettings,
     return columns
 
 
+def _pendants_of(cloud: PointCloud, seg: Segmentation, library: ModelLibrary, expected: ExpectedCounts | None,
+                 s: DetectionSettings, *, columns: list, levels: list | None,
+                 log: Callable[[str], None] | None = None) -> list:
+    """The panels hanging from the ceilings found in ``cloud`` (the segmentation sample), when
+    ceilings are searched (:func:`~sbsc_core.scene.pendants.find_pendants`): as big as the
+    classes that may be on a ceiling."""
+    if not (s.ceilings.enabled and s.pendants.enabled):
+        return []
+    from ..scene.pendants import find_pendants
+
+    classes = search_classes(library, None if expected is None else expected.counts, kind="ceiling")
+    sizes = [(library[c].width_m, library[c].height_m) for c in classes]
+    faces = find_pendants(cloud, seg, s.pendants, sizes=sizes, columns=columns, levels=levels)
+    if faces and log is not None:
+        log(f"{len(faces)} panel(s) hanging from the ceiling: " + ", ".join(
+            f"{f.id} ({f.frame.width_m - 2 * s.pendants.margin_m:.2f} m wide)" for f in faces))
+    return faces
+
+
 def _beyond_walls_in_memory(cloud: PointCloud, seg: Segmentation, library: ModelLibrary,
                             expected: ExpectedCounts | None, s: DetectionSettings,
                             *, pool: ProcessPoolExecutor | None, progress: Progress,
@@ -288,13 +307,15 @@ def _beyond_walls_in_memory(cloud: PointCloud, seg: Segmentation, library: Model
 
     from ..scene.ceilings import ceiling_levels, memory_parts
 
-    levels = ceiling_levels(_regular_sample(cloud, s), seg, s.ceilings) if s.ceilings.enabled else None
+    sample = _regular_sample(cloud, s)
+    levels = ceiling_levels(sample, seg, s.ceilings) if s.ceilings.enabled else None
+    pendants = _pendants_of(sample, seg, library, expected, s, columns=columns, levels=levels)
     own = pool is None
     executor: Executor = (wall_pool(s) if own else pool) or InlineExecutor()
     try:
         with tempfile.TemporaryDirectory(prefix=".sbsc-surfaces-", dir=os.environ.get("SBSC_SCRATCH_DIR")) as tmp:
             return _beyond_walls(memory_parts(cloud), np.asarray(cloud.origin, np.float64), seg,
-                                 levels=levels, columns=columns,
+                                 levels=levels, columns=columns, pendants=pendants,
                                  library=library, expected=expected, s=s, executor=executor,
                                  scratch=Path(tmp), parked=None,
                                  in_flight=2 * max(1, _worker_count(s)), progress=progress, timings=timings,
@@ -321,7 +342,8 @@ class _BeyondWalls:
         """Name each detection's surface kind and put those on a round column back on it."""
         if not self.surfaces:
             return
-        kinds = {sf["id"]: sf["kind"] for sf in self.surfaces}
+        # an object on a pendant hangs from the ceiling: its surface is the ceiling (contract 4)
+        kinds = {sf["id"]: "ceiling" if sf["kind"] == "pendant" else sf["kind"] for sf in self.surfaces}
         for d in result.detections:
             d.surface = kinds.get(d.wall_id)
             if d.wall_id in self.faces:  # a round column's face is unrolled: put the object back on it
@@ -331,7 +353,7 @@ class _BeyondWalls:
 
 
 def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, levels: list | None,
-                  columns: list,
+                  columns: list, pendants: list = (),
                   library: ModelLibrary, expected: ExpectedCounts | None, s: DetectionSettings,
                   executor: Executor, scratch: Path, parked: Path | None, in_flight: int, progress: Progress,
                   timings: dict[str, float], log: Callable[[str], None],
@@ -362,6 +384,16 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, lev
         out.classes = sorted(set(out.classes) | set(cols.classes))
         out.surfaces += cols.surfaces()
         out.faces = {f.id: f for f in cols.faces}
+    if pendants:  # objects hanging from the ceilings: their panels join the walls in the consensus too
+        from .surfaces import detect_pendants
+
+        pend = detect_pendants(parts, origin, list(pendants), library=library, expected=counts, s=s,
+                               executor=executor, scratch=scratch, parked=parked, in_flight=in_flight,
+                               progress=progress, timings=timings, log=log, part_executor=part_executor)
+        out.walls.update(pend.walls)
+        out.templates = {**pend.templates, **out.templates}
+        out.classes = sorted(set(out.classes) | set(pend.classes))
+        out.surfaces += pend.surfaces()
     return out
 
 
@@ -517,6 +549,7 @@ def detect_scans(
         from ..scene.ceilings import ceiling_levels
 
         levels = ceiling_levels(cloud, seg, s.ceilings)
+    pendants = _pendants_of(cloud, seg, library, expected, s, columns=found_columns, levels=levels, log=log)
     cloud = None
     for wall in seg.walls:  # indices into the sample: the walls' points come from their partitions
         wall.point_index = np.zeros(0, np.int64)
@@ -561,7 +594,7 @@ def detect_scans(
 
         done = _collect_walls(results(), len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
-    beyond = _beyond_walls(parts, origin, seg, levels=levels, columns=found_columns,
+    beyond = _beyond_walls(parts, origin, seg, levels=levels, columns=found_columns, pendants=pendants,
                            library=library, expected=expected, s=s, executor=executor,
                            scratch=Path(scratch), parked=parked, in_flight=2 * workers, progress=progress,
                            timings=timings, log=log)

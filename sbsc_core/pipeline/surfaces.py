@@ -1,4 +1,4 @@
-"""The stages beyond the walls: ceiling tiles and column faces, run as the walls' are.
+"""The stages beyond the walls: ceiling tiles, column faces and pendants, run as the walls' are.
 
 The geometry (which ceilings and columns there are, their tiles and faces, their partition) is
 ``sbsc_core.scene``'s; here each tile or face goes through the walls' stages
@@ -31,7 +31,8 @@ from ..scene.columns import (
     column_part,
     face_orthoimage,
 )
-from ..stages import Stage
+from ..scene.pendants import PendantFace
+from ..stages import Stage, no_progress
 from ..types import Segmentation
 
 
@@ -122,3 +123,34 @@ def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray,
     log(f"{len(columns)} columns ({', '.join(c.shape for c in columns)}), {len(faces)} faces: "
         f"{int(kept.sum()):,} points, searched for {', '.join(classes)} in {timings['columns']:.1f} s")
     return ColumnResults(results, templates, classes, columns, [f for f in faces if f.id in results])
+
+
+def detect_pendants(parts: list[ScanPart | MemoryPart], origin: np.ndarray,
+                    faces: list[PendantFace], *, library,
+                    expected: dict | None, s, executor, scratch: Path, parked: Path, in_flight: int, progress,
+                    timings: dict, log, part_executor=None) -> ColumnResults:
+    """Bin the points near each pendant (:func:`~sbsc_core.scene.pendants.find_pendants`) into
+    its surface, then run the walls' stages on it with the classes that may be on a ceiling.
+
+    The surfaces are framed like a column's flat faces, so the columns' binning and job do
+    the work; their progress is the ceilings' (reported done at the end).
+    """
+    from .executors import surface_stage
+    from .walls import search_classes
+
+    t0 = time.perf_counter()
+    classes = search_classes(library, expected, kind="ceiling")
+    if not faces or not classes:
+        return ColumnResults({}, {}, classes, [], [])
+    reach = [f.frame.width_m / 2 + s.orthoimage.depth_range_m[1] + 0.05 for f in faces]
+    jobs = [dict(part=part, origin=origin, faces=faces, reach_m=reach, scratch=str(scratch) + "/pendants",
+                 ortho=s.orthoimage) for part in parts]
+    kept, results, templates = surface_stage(
+        executor, stage=Stage.CEILINGS, part_fn=column_part, part_jobs=jobs, job_fn=column_face_job, surfaces=faces,
+        library=library, classes=classes, s=s, scratch=Path(str(scratch) + "/pendants"), parked=parked,
+        in_flight=in_flight, progress=no_progress, part_executor=part_executor)
+    progress(Stage.CEILINGS, 1.0)
+    timings["pendants"] = time.perf_counter() - t0
+    log(f"{len(faces)} pendant(s) hanging from the ceiling: {int(kept.sum()):,} points, searched for "
+        f"{', '.join(classes)} in {timings['pendants']:.1f} s")
+    return ColumnResults(results, templates, classes, [], [f for f in faces if f.id in results])
