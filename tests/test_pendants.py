@@ -111,3 +111,54 @@ def test_a_sign_under_a_lower_ceiling_is_found_under_it():
     assert centres == [3.0, 5.0]
     low = next(f for f in faces if f.frame.origin[0] > 4)
     assert low.frame.origin[2] + low.frame.height_m <= 2.3 - PendantSettings().gap_m + 1e-6
+
+
+def _hall(**options) -> dict:
+    """A 6 m x 5 m room, 2.8 m high, with a door and no exit light on the walls: the door's
+    exit light is on the ceiling (hanging, with ``pendants``)."""
+    return {"schema": "sbsc.scene/1", "name": "hall", "ceiling_height_m": 2.8,
+            "rooms": [{"id": "H", "rect": [0, 0, 6, 5]}],
+            "openings": [{"wall": "H-S", "kind": "door", "u": 2.0, "width_m": 0.9, "height_m": 2.1}],
+            "objects": [{"class": "switch", "wall": "H-S", "u": 3.2, "v": 1.1},
+                        {"class": "socket_x1", "wall": "H-W", "u": 2.0, "v": 0.3}], **options}
+
+
+def test_the_simulator_hangs_the_ceilings_exit_lights():
+    from sbsc_core.errors import InputError
+    from sbsc_core.simulate.building import build_building
+    from sbsc_core.simulate.scene import parse_scene
+
+    truth = build_building(parse_scene(_hall(ceiling_objects=True, pendants=True), "hall.yaml")).truth_document()
+    exit_light = next(o for o in truth["objects"] if o["class"] == "exit_light")
+    pendant = next(s for s in truth["surfaces"] if s["id"] == exit_light["wall"])
+    assert exit_light["surface"] == "ceiling" and pendant["kind"] == "pendant" and pendant["hangs_from"] == "H-C"
+    assert pendant["normal"] == pytest.approx([0.0, 1.0, 0.0])  # facing the room, as the door's wall
+    assert exit_light["position"][2] + 0.07 == pytest.approx(2.8 - 0.08, abs=1e-6)  # its top 8 cm under the ceiling
+    with pytest.raises(InputError, match=r"^hall.yaml: pendants: needs ceiling_objects"):
+        parse_scene(_hall(pendants=True), "hall.yaml")
+
+
+@pytest.mark.slow
+def test_a_hanging_exit_light_is_found_end_to_end(tmp_path):
+    import json
+
+    import yaml
+
+    from sbsc_core.cli import main
+    from sbsc_core.simulate.scenarios import simulate_scene
+
+    path = tmp_path / "hall.yaml"
+    path.write_text(yaml.safe_dump(_hall(ceiling_objects=True, pendants=True, scanner={"angular_step_deg": 0.25})))
+    simulate_scene(path, tmp_path / "sim", seed=2, design=False)
+    sim = tmp_path / "sim"
+    assert main(["-q", "detect", str(sim / "scan.ply"), "--models", str(sim / "models"),
+                 "--expected", str(sim / "expected.json"), "--out", str(tmp_path / "det")]) == 0
+    doc = json.loads((tmp_path / "det" / "detections.json").read_text())
+    pendants = [s for s in doc["surfaces"] if s["kind"] == "pendant"]
+    assert len(pendants) == 1
+    hung = [d for d in doc["detections"] if d["wall"] == pendants[0]["id"]]
+    assert [(d["class"], d["surface"]) for d in hung] == [("exit_light", "ceiling")]
+    truth = json.loads((sim / "ground_truth.json").read_text())
+    t = next(o for o in truth["objects"] if o["class"] == "exit_light")
+    assert np.linalg.norm(np.subtract(hung[0]["position"], t["position"])) < 0.03
+    assert main(["-q", "export-ifc", str(tmp_path / "det" / "detections.json"), "--out", str(tmp_path / "a.ifc")]) == 0

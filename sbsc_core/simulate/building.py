@@ -199,7 +199,7 @@ def add_surface_objects(scene: SceneDescription, layout: Layout, stations: np.nd
     from .surfaces import plan_surfaces
 
     plan = plan_surfaces(scene, layout, stations, ceilings=ceilings)
-    parts += [c.mesh() for c in plan.columns]
+    parts += [c.mesh() for c in plan.columns] + plan.pendant_meshes()
     index = max((o.index for o in objects), default=-1) + 1
     for k, so in enumerate(plan.objects):
         spec = scene.specs[so.class_id]

@@ -20,6 +20,7 @@ outlines, openings (doors, windows) on walls and objects placed on walls::
       - {room: R1, xy: [2.0, 1.5]}
     scanner: {angular_step_deg: 0.1}                # optional ScannerSettings fields
     ceiling_objects: true            # optional: objects on the ceilings (see surfaces.py)
+    pendants: true                   # optional, with ceiling_objects: the exit lights hang on rods
     columns: true                    # optional: free-standing columns with objects on them
     # optional realism (all off by default; see realism.py, clutter.py, survey.py):
     realism: {}                      # the realistic scanner; {} = published defaults, or ScanEffects fields
@@ -164,6 +165,7 @@ class SceneDescription:
     survey_frame: SurveyFrameSpec | None = None  # write scan and truth in a survey frame
     ceiling_objects: bool = False  # smoke detectors and exit lights on the ceilings (surfaces.py)
     columns: bool = False  # free-standing columns with objects on them (surfaces.py)
+    pendants: bool = False  # with ceiling_objects: the ceilings' exit lights hang on rods (surfaces.py)
     # sizes of the objects' designs: the design family's (see building.sized_for), the catalogue's by default
     specs: Mapping[str, ObjectSpec] = field(default_factory=lambda: CATALOGUE)
 
@@ -257,7 +259,7 @@ def parse_scene(data: Any, source: str = "scene") -> SceneDescription:
     r.known_keys(data, "", {"schema", "name", "ceiling_height_m", "exterior_wall_thickness_m",
                             "door_frame_width_m", "colours", "rooms", "openings", "objects",
                             "stations", "scanner", "object_rotation", "realism", "clutter", "furniture",
-                            "survey_frame", "ceiling_objects", "columns"})
+                            "survey_frame", "ceiling_objects", "columns", "pendants"})
     schema = data.get("schema", SCHEMA)
     if schema != SCHEMA:
         raise InputError(f"{source}: schema", f"unsupported schema {schema!r} (expected {SCHEMA!r})")
@@ -285,11 +287,13 @@ def parse_scene(data: Any, source: str = "scene") -> SceneDescription:
     stations = [r.station(item, i, height) for i, item in enumerate(r.seq(data, "stations"))]
     scanner = r.scanner(data.get("scanner", {}) or {})
     extras = r.realism_options(data)
-    for key in ("ceiling_objects", "columns"):
+    for key in ("ceiling_objects", "columns", "pendants"):
         if data.get(key) is not None:
             if not isinstance(data[key], bool):
                 raise InputError(f"{source}: {key}", f"expected true or false, got {data[key]!r}")
             extras[key] = data[key]
+    if extras.get("pendants") and not extras.get("ceiling_objects"):
+        raise InputError(f"{source}: pendants", "needs ceiling_objects: true (the exit lights that hang are the ceilings')")
     scene = SceneDescription(
         name=str(data.get("name", source)), source=source, ceiling_height_m=height,
         exterior_wall_thickness_m=r.number(data, "exterior_wall_thickness_m", "", default=0.25,

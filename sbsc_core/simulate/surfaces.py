@@ -9,6 +9,10 @@ scene itself, deterministically, so that any floor can have them:
   the scanner stations (a station does not see the ceiling right above it). Every door
   without an exit light above it gets an exit light on the ceiling in front of it, on the
   side of the room with more doors (the escape route), its width along the door's wall.
+  With the scene's ``pendants`` option each such exit light hangs instead on a rod,
+  ``PENDANT_DROP_M`` under the ceiling, upright and parallel to the door's wall, facing the
+  room (a surface of kind ``pendant``, id ``<room>-C-P<k>``, ``hangs_from`` the ceiling,
+  framed like a wall with the sign's back on its plane; the sign's back is closed by a plate).
   A room's ceiling is a surface (contract 4) with id ``<room>-C``: ``axis_u`` = +x,
   ``axis_v`` = -y, ``normal`` = -z (down into the room), origin at the corner of the
   room's bounding box where u and v are 0 (min x, max y), so an object seen from below is
@@ -51,6 +55,8 @@ SMOKE_SPACING_M = 6.0  # about one ceiling smoke detector per this many metres e
 CEILING_MARGIN_M = 0.6  # ceiling objects keep this far from the walls
 STATION_CLEAR_M = 1.0  # ... and this far (in plan) from a station below
 EXIT_OFFSET_M = 0.6  # a ceiling exit light hangs this far in front of its door
+PENDANT_DROP_M = 0.08  # a hanging exit light's top is this far under the ceiling (its rod)
+PENDANT_BACK_RGB = (225, 225, 220)  # the plate closing a hanging sign's back
 COLUMN_ROOM_MIN_M = 6.0  # a room gets a column if one of its rectangles is this big each way
 COLUMN_RECT_M = 0.45  # side of a rectangular column
 COLUMN_ROUND_M = 0.50  # diameter of a round column
@@ -126,6 +132,19 @@ class SurfacePlan:
     surfaces: list[Surface] = field(default_factory=list)
     columns: list[Column] = field(default_factory=list)
     objects: list[SurfaceObject] = field(default_factory=list)
+    pendants: list[tuple[WallFrame, float]] = field(default_factory=list)  # a hanging sign's frame, its ceiling's z
+
+    def pendant_meshes(self) -> list[ColouredMesh]:
+        """The plate closing each hanging sign's back and the rod it hangs on."""
+        out = []
+        for f, ceiling_z in self.pendants:
+            out.append(M.quad(f.origin + f.width_m * f.axis_u, -f.width_m * f.axis_u, f.height_m * f.axis_v,
+                              PENDANT_BACK_RGB))
+            top = f.origin + f.width_m / 2 * f.axis_u + f.height_m * f.axis_v
+            rod = ceiling_z - float(top[2])
+            out.append(M.box((0.01, 0.01, rod), PENDANT_BACK_RGB, centre=top + np.array([0.0, 0.0, rod / 2])
+                             - 0.01 * f.normal))
+        return out
 
 
 def plan_surfaces(scene: SceneDescription, layout: Layout, stations: np.ndarray, *,
@@ -194,6 +213,9 @@ def _plan_ceilings(scene: SceneDescription, layout: Layout, stations: np.ndarray
         wall = layout.walls[o.wall]  # the face in the room with more doors: the sort puts it first
         fr = wall.frame
         centre = fr.to_world((o.u_min + o.u_max) / 2, 0.0, EXIT_OFFSET_M)[:2]
+        if scene.pendants:
+            _try_pendant(plan, taken, rooms[wall.room], fr, xy=centre, ceiling_z=heights[wall.room], specs=scene.specs)
+            continue
         turn = math.degrees(math.atan2(-fr.axis_u[1], fr.axis_u[0]))  # wall's u in the ceiling's (u, v)
         _try_ceiling(plan, taken, rooms[wall.room], frames[wall.room], class_id="exit_light",
                      xy=centre, rotation_deg=round(turn, 6),
@@ -242,6 +264,32 @@ def _try_ceiling(plan: SurfacePlan, taken: list, room: RoomSpec, frame: WallFram
     uvd = frame.to_uvd(np.array([[xy[0], xy[1], frame.origin[2]]]))[0]
     plan.objects.append(SurfaceObject(class_id, f"{room.id}-C", "ceiling", frame, float(uvd[0]), float(uvd[1]),
                                       rotation_deg))
+    return True
+
+
+def _try_pendant(plan: SurfacePlan, taken: list, room: RoomSpec, wall: WallFrame, *, xy: np.ndarray,
+                 ceiling_z: float, specs: Mapping[str, ObjectSpec]) -> bool:
+    """Hang an exit light at plan position ``xy``, parallel to ``wall`` and facing the room,
+    if its footprint fits the room and is free (see the module docstring)."""
+    spec = specs["exit_light"]
+    u, n = np.asarray(wall.axis_u, float), np.asarray(wall.normal, float)
+    half = np.abs(u[:2]) * spec.width_m / 2 + np.abs(n[:2]) * 0.05
+    lo, hi = xy - half, xy + half
+    corners = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+    grown = np.vstack([corners + d for d in ((-0.3, -0.3), (0.3, -0.3), (0.3, 0.3), (-0.3, 0.3))])
+    if not point_in_outline(grown, room.outline).all():
+        return False
+    for r, tlo, thi in taken:
+        if r == room.id and np.all(np.minimum(hi + 0.2, thi) - np.maximum(lo - 0.2, tlo) > 0):
+            return False
+    taken.append((room.id, lo, hi))
+    bottom = ceiling_z - PENDANT_DROP_M - spec.height_m
+    origin = np.array([xy[0], xy[1], bottom]) - spec.width_m / 2 * u
+    frame = WallFrame(origin, u.copy(), np.array([0.0, 0.0, 1.0]), n.copy(), float(spec.width_m), float(spec.height_m))
+    sid = f"{room.id}-C-P{sum(1 for s in plan.surfaces if s.kind == 'pendant') + 1}"
+    plan.surfaces.append(Surface(sid, "pendant", frame, room=room.id, hangs_from=f"{room.id}-C"))
+    plan.objects.append(SurfaceObject("exit_light", sid, "ceiling", frame, spec.width_m / 2, spec.height_m / 2))
+    plan.pendants.append((frame, ceiling_z))
     return True
 
 
