@@ -161,6 +161,9 @@ class DepthRecognitionSettings:
     match_sigma_px: float = 1.0  # J_D and the models are both smoothed by this before correlating
     min_template_relief_m: float = 0.002  # models flatter than this are not matched in depth
     gain_range: tuple[float, float] = (0.5, 2.0)  # accepted scene / model relief amplitude ratio
+    examples_limit: bool = True  # a hit (depth or colour) of a class taught from examples (model.json
+    # example_relief_m) where the relief stands out further than its examples, their spread and the wall's
+    # noise relief is refused (amplitude.as_far_as_examples); a library without examples is not affected
     rotations: tuple[float, ...] = (0, 90, 180, 270)  # in-plane model rotations always tried (degrees)
     rotation_margin: float = 0.05  # a rotated match must correlate this much better than upright
     free_rotation: bool = True  # RoIs whose relief is turned are also searched with turned models

@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from sbsc_core.recognition.amplitude import (
+    as_far_as_examples,
     colour_where_relief_allows,
+    example_limit,
     relief_amplitude,
     scene_amplitude,
 )
@@ -60,3 +62,26 @@ def test_noise_never_makes_a_real_object_refused() -> None:
         noisy[22:38, 22:38] += 0.003
         kept, refused = colour_where_relief_allows([_cand("sign")], noisy, models, {}, (0.5, 2.0))
         assert len(kept) == 1 and not refused
+
+
+def test_a_taught_class_refuses_what_stands_out_beyond_its_examples_spread_and_the_noise() -> None:
+    """Examples that stood out 11.0 and 11.2 mm: an instance may stand out 11.2 + 0.2 mm + the
+    wall's noise relief. A 21 mm box (1.9x: inside the generic gain_range) is refused as that
+    class; the class's own instance on a noisy wall is kept (its noise relief is measured there);
+    a class without examples and a place seen too sparsely are kept."""
+    assert abs(example_limit([0.011, 0.0112], 0.0025) - (0.0112 + 0.0002 + 0.0025)) < 1e-9
+    taught = {"switch": ((16, 16), [0.011, 0.0112])}
+    box = _wall(4)
+    box[22:38, 22:38] += 0.021
+    kept, refused = as_far_as_examples([_cand("switch"), _cand("socket")], box, taught, 0.0025)
+    assert [c.class_id for c in kept] == ["socket"]
+    assert len(refused) == 1 and refused[0].scene_m > refused[0].limit_m > refused[0].examples_m
+    for seed in range(5):  # 2 mm of noise: the wall's noise relief is 4 sigmas of it
+        noisy = _wall(seed, sigma_m=0.002)
+        noisy[22:38, 22:38] += 0.011
+        kept, refused = as_far_as_examples([_cand("switch")], noisy, taught, 4 * 0.002)
+        assert len(kept) == 1 and not refused
+    unseen = box.copy()
+    unseen[20:40, 20:40] = np.nan
+    assert len(as_far_as_examples([_cand("switch")], unseen, taught, 0.0025)[0]) == 1
+    assert as_far_as_examples([_cand("switch")], box, {}, 0.0025) == ([_cand("switch")], [])

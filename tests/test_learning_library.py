@@ -350,6 +350,55 @@ def test_a_taught_class_refuses_its_print_on_a_relief_much_taller_than_its_examp
     assert near(after, at) and not near(after, box)  # the example stood out 3 mm, the box 20 mm
 
 
+def test_a_taught_class_refuses_a_depth_match_standing_out_twice_as_far_as_its_examples(tmp_path: Path) -> None:
+    """A library switch (12 mm), the building's switches (11 mm: the examples, found) and a box of
+    the switch's shape standing out 21 mm (a room controller): within the depth recognizer's
+    generic 2x of the library's model and of the examples, so the library alone takes the box in
+    depth and in colour. Taught, the examples measured 11 mm and their spread 0, the wall's
+    noise relief is a few mm: the box is refused, the switches are kept."""
+    from dataclasses import replace
+
+    from sbsc_core.pipeline.walls import _templates_job, process_orthoimage
+    from sbsc_core.settings import DetectionSettings
+
+    view, depth = socket_like(relief_m=0.012)
+    library = write_library(ModelLibrary({"switch": make_model("switch", view, depth)}, "x"), tmp_path / "lib")
+    own = make_template(make_model("switch", view, depth * (0.011 / 0.012)), PIXEL_M)
+    box = make_template(make_model("switch", view, depth * (0.021 / 0.012)), PIXEL_M)
+    ortho, area = make_wall(seed=23)
+    switches, controller = [(150.0, 80.0), (150.0, 200.0)], (150.0, 380.0)
+    for k, at in enumerate(switches):
+        paste(ortho, area, own, at, seed=23 + k)
+    paste(ortho, area, box, controller, seed=29)
+    found = []
+    for k, at in enumerate(switches):
+        u, v = (float(x) for x in ortho.pixel_to_uv(*at))
+        found.append({"id": f"D{k}", "class": "switch", "wall": "W01", "position": world(ortho, *at), "u": u, "v": v,
+                      "width_m": 0.08, "height_m": 0.08, "alpha": 0.9, "rho_depth": 0.9, "rho_colour": 0.5,
+                      "source": "both"})
+    det = write_detect_output([ortho], tmp_path / "det", found)
+    rev = reviewed(tmp_path / "r.json", [{"class": "switch", "position": world(ortho, *at)} for at in switches])
+    learnt = learn_and(det, rev, library, tmp_path / "new")
+    amps = json.loads((learnt / "switch" / "model.json").read_text())["example_relief_m"]
+    assert len(amps) == 2 and all(0.010 < a < 0.012 for a in amps)  # matched: no new design, the amplitudes only
+
+    def hits(models: Path, source: str) -> list[tuple[float, float]]:
+        lib = load_model_library(models)
+        s = DetectionSettings()
+        templates, protos = _templates_job(lib, s, lib.class_ids)
+        o = replace(ortho, colour=ortho.colour.copy(), depth=ortho.depth.copy(), mask=ortho.mask.copy())
+        res, _ = process_orthoimage(o, templates, protos, s)
+        return [c.centre for c in (res.depth_candidates if source == "depth" else res.colour_candidates)]
+
+    def near(found: list, where: tuple) -> bool:
+        return any(abs(r - where[0]) < 6 and abs(c - where[1]) < 6 for r, c in found)
+
+    before, after = hits(library, "depth"), hits(learnt, "depth")
+    assert near(before, controller) and all(near(before, at) for at in switches)  # 1.75x the library's model
+    assert all(near(after, at) for at in switches) and not near(after, controller)  # 1.9x the examples: refused
+    assert near(hits(library, "colour"), controller) and not near(hits(learnt, "colour"), controller)
+
+
 def _two_designs(tmp_path: Path, lib: dict, building: dict) -> tuple[list, Path]:
     """Learn, from two examples each, the building's designs (``building``: class -> (view,
     depth)) of the library's classes (``lib``: class -> (view, depth)), on one noisy wall."""

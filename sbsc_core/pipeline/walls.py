@@ -21,7 +21,7 @@ from ..imaging.partition import (
 )
 from ..imaging.wall_area import find_wall_area
 from ..recognition.amplitude import (
-    colour_as_far_as_examples,
+    as_far_as_examples,
     colour_where_relief_allows,
     taught_amplitudes,
 )
@@ -32,7 +32,7 @@ from ..recognition.colour_recognition import (
     learn_prototypes,
     match_colour,
 )
-from ..recognition.depth_recognition import depth_images, depth_rois, match_depth
+from ..recognition.depth_recognition import depth_images, depth_rois, match_depth, noise_relief
 from ..recognition.lookalikes import library_relief_models, resolve_on_wall
 from ..recognition.templates import ModelTemplate, make_templates
 from ..settings import DetectionSettings
@@ -103,9 +103,11 @@ def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], p
     if s.colour.relief_must_allow:  # a print without its object's relief is not the object
         c_cands, _ = colour_where_relief_allows(c_cands, d_img.levelled, *library_relief_models(prototypes),
                                                 s.depth.gain_range)
-        # ... nor a print on a relief much taller than the building's own examples of it (sbsc learn)
-        c_cands, _ = colour_as_far_as_examples(c_cands, d_img.levelled, taught_amplitudes(prototypes.templates),
-                                               s.depth.gain_range)
+    taught = taught_amplitudes(prototypes.templates) if s.depth.examples_limit else {}
+    if taught:  # nor a hit where the relief stands out further than the building's own examples (sbsc learn)
+        noise_m = noise_relief(ortho, area, d_img, s.depth)
+        d_cands, _ = as_far_as_examples(d_cands, d_img.levelled, taught, noise_m)
+        c_cands, _ = as_far_as_examples(c_cands, d_img.levelled, taught, noise_m)
     t_stage["colour"] = time.perf_counter() - t
     return WallResult(ortho, area, d_rois, c_rois, d_cands, c_cands), t_stage
 

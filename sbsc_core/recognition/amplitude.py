@@ -4,8 +4,11 @@ Depth is metric: the orthoimage's relief above the wall plane says how far an ob
 stands out, and each class's depth model (contract 2) how far an object of that class does.
 The depth recognizer accepts a scene / model amplitude ratio within its ``gain_range``; the
 same range decides here, so that no other stage takes a place for a class that the relief
-there rules out. Nothing in it is fitted to a design family: the figures are the given
-library's and the given scan's.
+there rules out. A class taught from examples of the building (``sbsc learn``) knows more:
+how far its instances stand out there, so a hit of it standing out further than its
+examples, their spread and the scan's noise allow is refused (:func:`as_far_as_examples`).
+Nothing in it is fitted to a design family: the figures are the given library's, the
+examples' and the given scan's.
 """
 
 from __future__ import annotations
@@ -153,42 +156,63 @@ def taught_amplitudes(templates: dict) -> dict[str, tuple[tuple[int, int], list[
     return out
 
 
+def example_limit(amplitudes: list[float], noise_m: float) -> float:
+    """How far an instance of a class taught from examples may stand out: its furthest example,
+    plus the examples' own spread (the furthest minus the nearest: how much this building's
+    instances were seen to differ), plus ``noise_m`` (the wall's noise relief, the smallest relief
+    the depth recognizer tells from its plain wall,
+    :func:`~sbsc_core.recognition.depth_recognition.noise_relief`: a difference smaller than
+    that is no evidence).
+
+    The examples are instances of the class in this building, measured in a scan of it: unlike
+    a library's model of some product of the class (whose amplitude the scene may exceed by
+    ``gain_range``'s generic 2x), they say how far its instances stand out. Nothing in it is
+    a design family's figure: the examples' and the scan's only.
+    """
+    return max(amplitudes) + (max(amplitudes) - min(amplitudes)) + float(noise_m)
+
+
 @dataclass(frozen=True)
 class TallRefusal:
-    """A colour candidate refused because the relief there stands out much further than
-    every example of its class did."""
+    """A candidate refused because the relief there stands out further than every example of
+    its class did, beyond their spread and the scan's noise (:func:`example_limit`)."""
 
     candidate: Candidate
     examples_m: float  # how far the class's examples stood out (the furthest)
+    limit_m: float  # how far an instance may stand out (example_limit)
     scene_m: float  # how far the scene does in its footprint
 
 
-def colour_as_far_as_examples(colour: list[Candidate], relief: np.ndarray | None,
-                              taught: dict[str, tuple[tuple[int, int], list[float]]],
-                              gain_range: tuple[float, float]) -> tuple[list[Candidate], list[TallRefusal]]:
-    """The colour candidates whose footprint stands out no further than ``gain_range[1]``
-    times the furthest example of their class, and the refused ones.
+def as_far_as_examples(cands: list[Candidate], relief: np.ndarray | None,
+                       taught: dict[str, tuple[tuple[int, int], list[float]]],
+                       noise_m: float) -> tuple[list[Candidate], list[TallRefusal]]:
+    """The candidates (depth or colour) whose footprint stands out no further than their
+    class's :func:`example_limit`, and the refused ones.
 
     ``taught``: class -> (footprint (h, w) pixels, the amplitudes of its examples,
-    :func:`example_amplitudes`). Only classes taught from examples of this building take
-    part: their examples measured, in a scan of this building with its noise, how far its
-    instances stand out. A colour match where the scene stands out several times as far is
-    a print on another object of that size (a flush built-in socket's print on a 20 mm
-    room controller). Without examples the check is one-sided
+    :func:`example_amplitudes`); ``noise_m``: the wall's noise relief. Only classes taught
+    from examples of this building take part: their examples measured, in a scan of this
+    building with its noise, how far its instances stand out. A match where the scene stands
+    out further is another object of that size: a flush built-in socket's print on a 20 mm
+    room controller (colour), or a switch whose examples stood out 11 mm matched by depth on
+    a 22 mm room controller, which the depth recognizer's generic ``gain_range`` (2x a
+    library model of another product) lets through. Without examples the check is one-sided
     (:func:`colour_where_relief_allows`): a library's model of another product says nothing
     certain about how far this building's stands out, and noise raises a scene's amplitude.
-    The amplitude is measured over the class's footprint, as the examples' was.
+    The amplitude is measured over the class's footprint, as the examples' was; a place seen
+    too sparsely to measure is kept.
     """
-    if relief is None or not colour or not taught:
-        return colour, []
+    if relief is None or not cands or not taught:
+        return cands, []
     kept: list[Candidate] = []
     refused: list[TallRefusal] = []
-    for cand in colour:
+    for cand in cands:
         if cand.class_id in taught:
             shape, amps = taught[cand.class_id]
+            limit = example_limit(amps, noise_m)
             seen = scene_amplitude(relief, shape, cand.centre, cand.rotation_deg)
-            if seen is not None and seen > gain_range[1] * max(amps):
-                refused.append(TallRefusal(cand, max(amps), seen))
+            if seen is not None and seen > limit:
+                refused.append(TallRefusal(cand, max(amps), limit, seen))
                 continue
         kept.append(cand)
     return kept, refused

@@ -385,6 +385,14 @@ def _plain_wall(ortho: Orthoimage, area: WallArea, jd: np.ndarray, settings: Dep
     return wall
 
 
+def noise_relief(ortho: Orthoimage, area: WallArea, images: DepthImages,
+                 settings: DepthRecognitionSettings) -> float:
+    """The wall's noise relief (metres): the smallest relief told from its plain wall,
+    ``min_relief_m`` raised to ``noise_k`` robust sigmas of the depth noise measured there
+    (:func:`relief_thresholds` on the levelled J_D, as :func:`match_depth` uses it)."""
+    return relief_thresholds(images.levelled, _plain_wall(ortho, area, images.levelled, settings), settings)[0]
+
+
 def _rois_from_jd(jd: np.ndarray, wall: np.ndarray, settings: DepthRecognitionSettings, margin_px: int = 0,
                   limits: tuple[float, float] | None = None) -> list[Box]:
     relief_m, grad_m = relief_thresholds(jd, wall, settings)
@@ -677,12 +685,12 @@ def match_depth(
         return []
     images = images or depth_images(ortho, area, settings)
     jd, known, jl = images.jd, images.known, images.levelled
-    noise_relief, _ = relief_thresholds(jl, _plain_wall(ortho, area, jl, settings), settings)
+    noise_m = noise_relief(ortho, area, images, settings)
     jm = _smooth(jd, settings.match_sigma_px)  # correlated: the scene's own relief
     jml = _smooth(jl, settings.match_sigma_px)  # checked: relief above the local wall
     edges = EdgeSettings() if settings.sharp_edge_position else None
     matched_model: dict[int, np.ndarray] = {}  # id of a candidate -> the (turned) model it matched
-    turns = roi_turns(jml, rois, max(noise_relief, settings.min_relief_m), settings) if settings.free_rotation else []
+    turns = roi_turns(jml, rois, max(noise_m, settings.min_relief_m), settings) if settings.free_rotation else []
 
     peaks = [float(np.abs(t.depth).max()) for t in templates.values() if t.depth is not None and t.depth.size]
     source = foreground_source(jml, settings.min_relief_m, settings.foreground_edge_px,
@@ -720,7 +728,7 @@ def match_depth(
             g = settings.isolation_gap_px  # the footprint's own blurred edge may meet a ramp of the other object
             if v.front_share(Box(box.r0 + g, box.c0 + g, box.r1 - g, box.c1 - g)) > 1.0 - settings.full_known_share:
                 return False  # partly behind another object: not told apart from a smaller class
-            thr = max(settings.isolation_relief_fraction * relief * gain, noise_relief)
+            thr = max(settings.isolation_relief_fraction * relief * gain, noise_m)
             if isolation(jml, box, thr, settings.isolation_gap_px, settings.isolation_width_px,
                          known=v.known, min_known=settings.min_known_share,
                          trails=settings.isolation_trails) > settings.isolation_max_occupancy:

@@ -225,8 +225,9 @@ def _count_learnt_view(class_dir: Path, files: list[str]) -> None:
 def _record_amplitudes(class_dir: Path, examples: list[Example]) -> None:
     """Write how far each example stood out (``model.json`` ``example_relief_m``, metres:
     :func:`~sbsc_core.recognition.amplitude.relief_amplitude` of its relief over the class's
-    footprint). Recognition refuses a colour match of the class where the scan stands out much
-    further than every example did (:func:`~sbsc_core.recognition.amplitude.colour_as_far_as_examples`)."""
+    footprint). Recognition refuses a hit of the class (depth or colour) where the scan stands out
+    further than every example did, beyond their spread and the wall's noise
+    (:func:`~sbsc_core.recognition.amplitude.as_far_as_examples`)."""
     amps = [a for a in (relief_amplitude(e.relief) for e in examples) if a is not None and a > 0]
     if not amps:
         return
