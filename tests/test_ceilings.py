@@ -185,22 +185,22 @@ def test_surfaces_without_points_are_left_out(tmp_path):
     def part_fn(n):
         return [0, n, 0]
 
-    def job_fn(scratch, k, sf, *, templates, prototypes, s):
-        ran.append(k)
+    def job_fn(scratch, k, sf, *, templates, prototypes, s, images):
+        ran.append((k, images))  # the task parks its result itself
         return sf, "result", {}
 
     import sbsc_core.pipeline.executors as pl
 
-    saved = pl.park_wall, pl._templates_job
-    pl.park_wall, pl._templates_job = (lambda res, parked: res), (lambda library, s, classes: ({}, None))
+    saved = pl._templates_job
+    pl._templates_job = lambda library, s, classes: ({}, None)
     try:
         kept, results, _ = surface_stage(InlineExecutor(), stage="x", part_fn=part_fn, part_jobs=[(3,), (4,)],
                                          job_fn=job_fn, surfaces=["A", "B", "C"], library=None, classes=[],
                                          s=DetectionSettings(), scratch=tmp_path, parked=tmp_path, in_flight=2,
                                          progress=lambda *a: None)
     finally:
-        pl.park_wall, pl._templates_job = saved
-    assert list(kept) == [0, 7, 0] and ran == [1] and results == {"B": "result"}
+        pl._templates_job = saved
+    assert list(kept) == [0, 7, 0] and ran == [(1, str(tmp_path))] and results == {"B": "result"}
 
 
 def test_surfaces_are_searched_where_the_library_mounts_a_searched_class():

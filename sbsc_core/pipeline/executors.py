@@ -40,7 +40,6 @@ from .walls import (
     _process_wall_job,
     _templates_job,
     _wall_cloud,
-    park_wall,
     process_wall,
 )
 from .worker_env import _environment, _worker_count, worker_environment
@@ -199,10 +198,12 @@ def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_job
 
     ``part_fn(*job)`` (``part_fn(**job)`` for a mapping) bins one scan part's points into the
     surfaces' partitions and returns the points written per surface; then ``job_fn(scratch, k,
-    surface, templates=, prototypes=, s=)`` runs the walls' stages on surface number ``k`` and returns ``(id, result, timings)``.
+    surface, templates=, prototypes=, s=, images=)`` runs the walls' stages on surface number ``k``
+    and returns ``(id, result, timings)``, the result parked (its images written to the folder
+    ``images``, :func:`~.walls.park_wall`) unless ``images`` is None.
     Surfaces that got no point are left out (no work, no result). Returns the points binned
-    per surface, the results by surface id (their images parked in ``parked``,
-    :func:`park_wall`, unless it is None) and the templates of ``classes``. ``part_executor`` (default:
+    per surface, the results by surface id (parked in ``parked`` unless it is None) and the
+    templates of ``classes``. ``part_executor`` (default:
     ``executor``) runs the binning (an in-memory cloud's parts are binned in this process).
     """
     kept = np.zeros(len(surfaces), np.int64)
@@ -210,9 +211,11 @@ def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_job
         kept += np.asarray(written, np.int64)
     templates, prototypes = _templates_job(library, s, classes)
     jobs = [(str(scratch), k, sf) for k, sf in enumerate(surfaces) if kept[k] > 0]
-    job = functools.partial(job_fn, templates=templates, prototypes=prototypes, s=s)
+    # each task writes its surface's images itself: this process only receives the small results
+    job = functools.partial(job_fn, templates=templates, prototypes=prototypes, s=s,
+                            images=None if parked is None else str(parked))
     results: dict[str, WallResult] = {}
     for i, (sid, res, _) in enumerate(_in_order(executor, jobs, job, in_flight)):
-        results[sid] = res if parked is None else park_wall(res, parked)
+        results[sid] = res
         progress(stage, (i + 1) / len(jobs))
     return kept, results, templates

@@ -35,9 +35,11 @@ from ..stages import Stage
 from ..types import Segmentation
 
 
-def ceiling_tile_job(scratch: str, k: int, tile: CeilingTile, *, templates: dict, prototypes, s) -> tuple:
-    """One tile's work (what a worker runs): orthoimage, the walls' stages, candidates in its core."""
-    from .walls import WallResult, process_orthoimage
+def ceiling_tile_job(scratch: str, k: int, tile: CeilingTile, *, templates: dict, prototypes, s,
+                     images: str | None = None) -> tuple:
+    """One tile's work (what a worker runs): orthoimage, the walls' stages, candidates in its core;
+    with ``images``, its images written there and left out of the result (:func:`~.walls.park_wall`)."""
+    from .walls import WallResult, park_wall, process_orthoimage
 
     t = time.perf_counter()
     ortho = tile_orthoimage(scratch, k, tile, s.orthoimage)
@@ -45,7 +47,7 @@ def ceiling_tile_job(scratch: str, k: int, tile: CeilingTile, *, templates: dict
     px = s.orthoimage.pixel_m
     res = WallResult(res.ortho, res.area, res.depth_rois, res.colour_rois,
                      in_core(res.depth_candidates, tile, px), in_core(res.colour_candidates, tile, px))
-    return tile.id, res, t_stage
+    return tile.id, res if images is None else park_wall(res, Path(images)), t_stage
 
 
 def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg: Segmentation, *, library,
@@ -80,9 +82,11 @@ def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg:
     return CeilingResults(results, templates, classes, [t for t in tiles if t.id in results])
 
 
-def column_face_job(scratch: str, k: int, face: ColumnFace, *, templates: dict, prototypes, s) -> tuple:
-    """One face's work (what a worker runs): orthoimage and the walls' stages."""
-    from .walls import WallResult, process_orthoimage
+def column_face_job(scratch: str, k: int, face: ColumnFace, *, templates: dict, prototypes, s,
+                    images: str | None = None) -> tuple:
+    """One face's work (what a worker runs): orthoimage and the walls' stages; with ``images``,
+    its images written there and left out of the result (:func:`~.walls.park_wall`)."""
+    from .walls import WallResult, park_wall, process_orthoimage
 
     t = time.perf_counter()
     ortho = face_orthoimage(scratch, k, face, s.orthoimage)
@@ -92,7 +96,7 @@ def column_face_job(scratch: str, k: int, face: ColumnFace, *, templates: dict, 
         res = WallResult(res.ortho, res.area, res.depth_rois, res.colour_rois,
                          [c for c in res.depth_candidates if face.owns((c.centre[1] + 0.5) * px)],
                          [c for c in res.colour_candidates if face.owns((c.centre[1] + 0.5) * px)])
-    return face.id, res, t_stage
+    return face.id, res if images is None else park_wall(res, Path(images)), t_stage
 
 
 def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray,
