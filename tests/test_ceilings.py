@@ -11,6 +11,8 @@ import pytest
 from sbsc_core.imaging.partition import plan_parts, scan_origin
 from sbsc_core.io.ply import write_ply
 from sbsc_core.scene.ceilings import (
+    CeilingBinning,
+    binned_records,
     ceiling_levels,
     ceiling_part,
     ceiling_tiles,
@@ -143,6 +145,43 @@ def _stepped_cloud(rng, low_x: float = 8.0, low_z: float = 2.5) -> PointCloud:
     floor = np.column_stack([rng.uniform((0.0, 0.0), (13.0, 7.0), (40_000, 2)), np.zeros(40_000)])
     xyz = np.vstack([ceiling, step, floor]).astype(np.float32)
     return PointCloud(xyz, np.full((len(xyz), 3), 200, np.uint8), np.zeros(3))
+
+
+def test_the_walls_partition_pass_bins_the_ceilings_as_ceiling_part_does(tmp_path):
+    """The walls' partition pass with a :class:`CeilingBinning` writes the tiles' partitions
+    byte for byte as :func:`ceiling_part` does (the scan read once for both, in several
+    parts), and :func:`binned_records` counts what each tile got."""
+    from sbsc_core.imaging.partition import WallIndex, partition_part
+    from sbsc_core.settings import SegmentationSettings
+
+    seg = _room()
+    s = CeilingSettings()
+    rng = np.random.default_rng(5)
+    cloud = _stepped_cloud(rng)
+    tiles = ceiling_tiles(seg, s, ceiling_levels(cloud, seg, s))
+    assert any(t.level == 1 for t in tiles)
+    wall = np.column_stack([np.zeros(20_000), rng.uniform(0, 7, 20_000), rng.uniform(0, 2.8, 20_000)])  # W1, x = 0
+    xyz = np.vstack([cloud.xyz, wall.astype(np.float32)])
+    write_ply(tmp_path / "scan.ply", xyz, np.full((len(xyz), 3), 200, np.uint8))
+    parts, _ = plan_parts([tmp_path / "scan.ply"], part_points=len(xyz) // 3)
+    assert len(parts) >= 3
+    origin = scan_origin(tmp_path / "scan.ply")
+    ortho = OrthoimageSettings()
+    walls = [w.frame for w in seg.walls]
+    alone, fused = tmp_path / "alone", tmp_path / "fused"
+    want = sum(np.asarray(ceiling_part(p, origin, tiles, walls, str(alone), ortho=ortho, wall_clear_m=0.05))
+               for p in parts)
+    index = WallIndex.build(seg.walls, origin, SegmentationSettings())
+    binning = CeilingBinning(tiles, walls, str(fused), origin, ortho, 0.05)
+    for p in parts:
+        partition_part(p, origin, index, str(fused), points=0, spilled=False, ortho=ortho, also=binning)
+    assert want.sum() > 100_000 and (want == 0).any()
+    np.testing.assert_array_equal(binned_records(fused, len(tiles)), want)
+    files = sorted(f.relative_to(alone) for f in (alone / "ceilings").rglob("*.rec"))
+    assert files == sorted(f.relative_to(fused) for f in (fused / "ceilings").rglob("*.rec"))
+    for f in files:
+        assert (alone / f).read_bytes() == (fused / f).read_bytes()
+    assert any((fused / "wall-0000").rglob("*.rec"))  # and the walls' partitions as ever
 
 
 def test_a_lower_ceiling_gets_its_own_level_and_tiles(tmp_path):

@@ -33,7 +33,7 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -451,12 +451,15 @@ def band_rows(frame: WallFrame, ortho: OrthoimageSettings) -> int:
 
 
 def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch: str, *, points: int,
-                   spilled: bool, ortho: OrthoimageSettings) -> list[int]:
+                   spilled: bool, ortho: OrthoimageSettings,
+                   also: Callable[[ScanChunk, str], object] | None = None) -> list[int]:
     """Stream one part again (or its spill) and append each wall's binned points to its partition.
 
     A wall's partition is cut into bands of orthoimage rows (:func:`band_rows`), one folder
-    each, so that its orthoimage is made band by band. Returns the number of records
-    written per wall.
+    each, so that its orthoimage is made band by band. ``also`` is called with each chunk
+    and the part's key: another binning of the same points (the ceilings',
+    :class:`~sbsc_core.scene.ceilings.CeilingBinning`) without reading them again. Returns
+    the number of records written per wall.
     """
     root = Path(scratch)
     chunks = spilled_chunks(root, part, origin, points) if spilled else part_chunks(part, origin)
@@ -464,6 +467,8 @@ def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch
     band_px = [band_rows(f, ortho) * ortho_shape(f, ortho.pixel_m)[1] for f in index.frames]
     made: set[tuple[int, int]] = set()
     for chunk in chunks:
+        if also is not None:
+            also(chunk, part.key)
         for w, idx, uvd in assign_chunk(chunk.xyz, index):
             keep, pixel = ortho_pixels(uvd, index.frames[w], ortho)
             kept = np.flatnonzero(keep)

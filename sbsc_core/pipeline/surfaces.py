@@ -14,10 +14,12 @@ import numpy as np
 
 from ..imaging.partition import ScanPart
 from ..scene.ceilings import (
+    CeilingBinning,
     CeilingLevels,
     CeilingResults,
     CeilingTile,
     MemoryPart,
+    binned_records,
     ceiling_part,
     ceiling_tiles,
     in_core,
@@ -53,11 +55,12 @@ def ceiling_tile_job(scratch: str, k: int, tile: CeilingTile, *, templates: dict
 def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg: Segmentation, *, library,
                     expected: dict | None, s, executor, scratch: Path, parked: Path, in_flight: int, progress,
                     timings: dict, log, levels: list[CeilingLevels] | None = None,
-                    part_executor=None) -> CeilingResults:
+                    part_executor=None, binned: CeilingBinning | None = None) -> CeilingResults:
     """Bin the ceilings' points into tiles, then run the walls' stages on every tile (see the module).
 
     ``levels`` (:func:`ceiling_levels`) gives the storeys' lower ceilings their own tiles.
-    Tiles that got no point are left out.
+    Tiles that got no point are left out. ``binned``: the binning (:func:`ceiling_binning`)
+    that the walls' partition pass already ran (the parts are not read again).
     """
     from .executors import surface_stage
     from .walls import search_classes
@@ -74,12 +77,25 @@ def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg:
     kept, results, templates = surface_stage(
         executor, stage=Stage.CEILINGS, part_fn=ceiling_part, part_jobs=jobs, job_fn=ceiling_tile_job, surfaces=tiles,
         library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress,
-        part_executor=part_executor)
+        part_executor=part_executor, binned=None if binned is None else binned_records(scratch, len(tiles)))
     timings[Stage.CEILINGS] = time.perf_counter() - t0
     lower = [f"{lv.storey + ' ' if lv.storey else ''}{z:.2f} m" for lv in levels or [] for z in lv.z]
     log(f"{len(results)} ceiling tiles" + (f" (lower ceilings at {', '.join(lower)})" if lower else "")
         + f": {int(kept.sum()):,} points, searched for {', '.join(classes)} in {timings['ceilings']:.1f} s")
     return CeilingResults(results, templates, classes, [t for t in tiles if t.id in results])
+
+
+def ceiling_binning(seg: Segmentation, origin: np.ndarray, *, library, expected: dict | None, s, scratch: Path,
+                    levels: list[CeilingLevels] | None = None) -> CeilingBinning | None:
+    """The binning of the ceiling tiles that :func:`detect_ceilings` searches, for the walls'
+    partition pass to run on the chunks it reads; None when no tile or no class is searched."""
+    from .walls import search_classes
+
+    tiles = ceiling_tiles(seg, s.ceilings, levels)
+    if not tiles or not search_classes(library, expected, kind="ceiling"):
+        return None
+    return CeilingBinning(tiles, [w.frame for w in seg.walls], str(scratch), np.asarray(origin, np.float64),
+                          s.orthoimage, s.ceilings.wall_clear_m)
 
 
 def column_face_job(scratch: str, k: int, face: ColumnFace, *, templates: dict, prototypes, s,

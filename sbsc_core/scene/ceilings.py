@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..imaging.orthoimage import near_walls, ortho_pixels, orthoimage_from_pixels, wall_coordinates
-from ..imaging.partition import ScanPart, append_records, folder_records
+from ..imaging.partition import RECORD, ScanPart, append_records, folder_records
 from ..imaging.partition import part_chunks as file_chunks
 from ..io.scan_source import ScanChunk
 from ..settings import CeilingSettings, OrthoimageSettings
@@ -293,14 +293,37 @@ def ceiling_part(part: ScanPart | MemoryPart, origin: np.ndarray, tiles: list[Ce
     several levels takes only the points over its level's cells. ``part`` is a scan part or
     a :class:`MemoryPart`. Returns records per tile.
     """
-    root = Path(scratch)
-    written = [0] * len(tiles)
-    d0, d1 = ortho.depth_range_m
-    groups: dict[tuple, list[int]] = {}  # tiles at one height under one level of one storey
-    for k, t in enumerate(tiles):
-        groups.setdefault((float(t.frame.origin[2]), t.storey, t.level), []).append(k)
-    margin = 0.01 + 2 * float(ortho.pixel_m)  # an image's last pixel may reach past its frame; float32 rounding
+    binning = CeilingBinning(tiles, walls, scratch, np.asarray(origin, np.float64), ortho, wall_clear_m)
+    written = np.zeros(len(tiles), np.int64)
     for chunk in part_chunks(part, origin):
+        written += binning(chunk, part.key)
+    return written.tolist()
+
+
+@dataclass(frozen=True)
+class CeilingBinning:
+    """:func:`ceiling_part` of one chunk at a time: called with each chunk of a part and the
+    part's key, it appends the tiles' binned points and returns the records per tile. The walls'
+    partition pass calls it on the chunks it reads
+    (:func:`~sbsc_core.imaging.partition.partition_part`'s ``also``), so the scan is read once
+    for both; :func:`binned_records` then counts what each tile got."""
+
+    tiles: list[CeilingTile]
+    walls: list[WallFrame]
+    scratch: str
+    origin: np.ndarray  # the scan's recentring origin (the chunks' points are relative to it)
+    ortho: OrthoimageSettings
+    wall_clear_m: float
+
+    def __call__(self, chunk: ScanChunk, key: str) -> np.ndarray:
+        tiles, origin, ortho = self.tiles, self.origin, self.ortho
+        root = Path(self.scratch)
+        written = np.zeros(len(tiles), np.int64)
+        d0, d1 = ortho.depth_range_m
+        groups: dict[tuple, list[int]] = {}  # tiles at one height under one level of one storey
+        for k, t in enumerate(tiles):
+            groups.setdefault((float(t.frame.origin[2]), t.storey, t.level), []).append(k)
+        margin = 0.01 + 2 * float(ortho.pixel_m)  # an image's last pixel may reach past its frame; float32 rounding
         z = chunk.xyz[:, 2].astype(np.float64) + float(origin[2])
         for (cz, _, level), ks in groups.items():
             idx = np.flatnonzero((z >= cz - d1) & (z <= cz - d0))
@@ -314,7 +337,7 @@ def ceiling_part(part: ScanPart | MemoryPart, origin: np.ndarray, tiles: list[Ce
             xyz = np.take(chunk.xyz, idx, axis=0)
             below = np.flatnonzero(z[idx] < cz - CEILING_SKIN_M)  # hangs below the ceiling: may be a wall's top
             on_wall = np.zeros(len(idx), bool)
-            on_wall[below[near_walls(np.take(xyz, below, axis=0), walls, wall_clear_m, origin)]] = True
+            on_wall[below[near_walls(np.take(xyz, below, axis=0), self.walls, self.wall_clear_m, origin)]] = True
             if on_wall.any():
                 off = ~on_wall
                 idx, xyz = idx[off], np.compress(off, xyz, axis=0)
@@ -329,9 +352,19 @@ def ceiling_part(part: ScanPart | MemoryPart, origin: np.ndarray, tiles: list[Ce
                 keep, pixel = ortho_pixels(uvd, t.frame, ortho)
                 if not len(pixel):
                     continue
-                written[k] += append_records(_tile_dir(root, k), part.key, pixel, uvd[:, 2][keep],
+                written[k] += append_records(_tile_dir(root, k), key, pixel, uvd[:, 2][keep],
                                              np.take(chunk.rgb, idx[inside[keep]], axis=0))
-    return written
+        return written
+
+
+def binned_records(scratch: str | Path, tiles: int) -> np.ndarray:
+    """The records in each of the first ``tiles`` tiles' partitions (what :class:`CeilingBinning` wrote)."""
+    out = np.zeros(tiles, np.int64)
+    for k in range(tiles):
+        d = _tile_dir(Path(scratch), k)
+        if d.is_dir():
+            out[k] = sum(f.stat().st_size for f in d.glob("*.rec")) // RECORD.itemsize
+    return out
 
 
 def _in_span(xyz: np.ndarray, axis: int, lo: float, hi: float, *, origin: np.ndarray, margin: float,
