@@ -233,4 +233,13 @@ def test_near_walls_is_near_wall_of_each_wall_or_ed() -> None:
     assert 5000 < want.sum() < len(xyz) - 20000
     np.testing.assert_array_equal(got, want)
     assert not near_walls(xyz, [], 0.05, origin).any()
+    site = frames + [frame((2500, 2000, 0), 0.3, 5.0)]  # a wall far off: a coarser grid over the site
+    f = site[-1]
+    far_wall = f.origin + rng.uniform(0, 5, 3000)[:, None] * f.axis_u + rng.normal(0, 0.06, 3000)[:, None] * f.normal
+    xyz = np.concatenate([xyz, (far_wall - origin).astype(np.float32)])
+    want = np.zeros(len(xyz), bool)
+    for f in site:
+        want |= near_wall(xyz, f, 0.05, origin)
+    assert want[-3000:].sum() > 1000
+    np.testing.assert_array_equal(near_walls(xyz, site, 0.05, origin), want)
     assert not near_walls(xyz[:0], frames, 0.05, origin).any()

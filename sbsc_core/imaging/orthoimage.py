@@ -165,7 +165,8 @@ def _slab_box(frame: WallFrame, clear_m: float) -> tuple[np.ndarray, np.ndarray]
     return corners.min(axis=0), corners.max(axis=0)
 
 
-_NEAR_CELL_M = 0.5  # plan cells of :func:`near_walls`' lookup grid
+_NEAR_CELL_M = 0.5  # plan cells of :func:`near_walls`' lookup grid ...
+_NEAR_MAX_CELLS = 1 << 22  # ... at most this many (larger cells over a large site)
 
 
 def near_walls(xyz: np.ndarray, frames: list[WallFrame], clear_m: float, cloud_origin: np.ndarray | None = None
@@ -189,18 +190,19 @@ def near_walls(xyz: np.ndarray, frames: list[WallFrame], clear_m: float, cloud_o
     if not upright:
         return out
     o = np.zeros(2) if cloud_origin is None else np.asarray(cloud_origin, np.float64)[:2]
-    cell = _NEAR_CELL_M
     boxes = [_slab_box(f, clear_m) for f in upright]
+    span = np.max([b[1] for b in boxes], axis=0) - np.min([b[0] for b in boxes], axis=0)
+    cell = max(_NEAR_CELL_M, math.sqrt(float((span[0] + 1) * (span[1] + 1)) / _NEAR_MAX_CELLS))  # a site: coarser
     lo = np.min([b[0] for b in boxes], axis=0) - o - 2 * cell  # the grid, relative to the cloud's origin
     hi = np.max([b[1] for b in boxes], axis=0) - o + 2 * cell
     nx, ny = (np.ceil((hi - lo) / cell).astype(np.int64) + 1).tolist()
     cells_of: dict[int, list[int]] = {}
     for w, (b0, b1) in enumerate(boxes):
-        i0, j0 = np.floor((b0 - o - lo) / cell).astype(np.int64) - 1
-        i1, j1 = np.floor((b1 - o - lo) / cell).astype(np.int64) + 1
-        for j in range(max(0, j0), min(ny - 1, j1) + 1):
-            for i in range(max(0, i0), min(nx - 1, i1) + 1):
-                cells_of.setdefault(j * nx + i, []).append(w)
+        i0, j0 = np.maximum(np.floor((b0 - o - lo) / cell).astype(np.int64) - 1, 0)
+        i1, j1 = np.minimum(np.floor((b1 - o - lo) / cell).astype(np.int64) + 1, (nx - 1, ny - 1))
+        jj, ii = np.mgrid[j0:j1 + 1, i0:i1 + 1]
+        for key in (jj * nx + ii).ravel().tolist():
+            cells_of.setdefault(key, []).append(w)
     combo_id: dict[tuple[int, ...], int] = {}
     lut = np.zeros(nx * ny, np.int32)
     for key, ws in cells_of.items():
