@@ -287,3 +287,25 @@ def test_cells_sorted_highest_first_as_lexsort():
     assert np.array_equal(cell_s, cell[order])
     assert np.array_equal(z_s, z[order])
     assert z_s.dtype == np.float32
+
+
+def test_ceiling_binning_is_made_when_a_ceiling_class_is_searched(tmp_path):
+    """The walls' partition pass bins the ceilings only when :func:`detect_ceilings` will search
+    a tile for a class: the binning holds the tiles it will search, else there is none."""
+    from sbsc_core.io.models import load_model_library
+    from sbsc_core.paths import bundled_models_dir
+    from sbsc_core.pipeline.surfaces import ceiling_binning
+    from sbsc_core.settings import DetectionSettings
+
+    lib = load_model_library(bundled_models_dir())
+    seg = _room()
+    s = DetectionSettings()
+    on_ceiling = lib.classes_on("ceiling")
+    assert on_ceiling and "switch" not in on_ceiling
+    binning = ceiling_binning(seg, np.zeros(3), library=lib, expected={on_ceiling[0]: 2, "switch": 3}, s=s,
+                              scratch=tmp_path)
+    assert [t.id for t in binning.tiles] == [t.id for t in ceiling_tiles(seg, s.ceilings)]
+    assert len(binning.walls) == len(seg.walls) and binning.scratch == str(tmp_path)
+    assert ceiling_binning(seg, np.zeros(3), library=lib, expected={"switch": 3}, s=s, scratch=tmp_path) is None
+    assert ceiling_binning(Segmentation(0.0, 2.8, [], []), np.zeros(3), library=lib, expected=None, s=s,
+                           scratch=tmp_path) is None
