@@ -11,6 +11,8 @@ import pytest
 from sbsc_core.imaging.partition import plan_parts, scan_origin
 from sbsc_core.io.ply import write_ply
 from sbsc_core.scene.ceilings import (
+    CeilingBinning,
+    binned_records,
     ceiling_levels,
     ceiling_part,
     ceiling_tiles,
@@ -145,6 +147,43 @@ def _stepped_cloud(rng, low_x: float = 8.0, low_z: float = 2.5) -> PointCloud:
     return PointCloud(xyz, np.full((len(xyz), 3), 200, np.uint8), np.zeros(3))
 
 
+def test_the_walls_partition_pass_bins_the_ceilings_as_ceiling_part_does(tmp_path):
+    """The walls' partition pass with a :class:`CeilingBinning` writes the tiles' partitions
+    byte for byte as :func:`ceiling_part` does (the scan read once for both, in several
+    parts), and :func:`binned_records` counts what each tile got."""
+    from sbsc_core.imaging.partition import WallIndex, partition_part
+    from sbsc_core.settings import SegmentationSettings
+
+    seg = _room()
+    s = CeilingSettings()
+    rng = np.random.default_rng(5)
+    cloud = _stepped_cloud(rng)
+    tiles = ceiling_tiles(seg, s, ceiling_levels(cloud, seg, s))
+    assert any(t.level == 1 for t in tiles)
+    wall = np.column_stack([np.zeros(20_000), rng.uniform(0, 7, 20_000), rng.uniform(0, 2.8, 20_000)])  # W1, x = 0
+    xyz = np.vstack([cloud.xyz, wall.astype(np.float32)])
+    write_ply(tmp_path / "scan.ply", xyz, np.full((len(xyz), 3), 200, np.uint8))
+    parts, _ = plan_parts([tmp_path / "scan.ply"], part_points=len(xyz) // 3)
+    assert len(parts) >= 3
+    origin = scan_origin(tmp_path / "scan.ply")
+    ortho = OrthoimageSettings()
+    walls = [w.frame for w in seg.walls]
+    alone, fused = tmp_path / "alone", tmp_path / "fused"
+    want = sum(np.asarray(ceiling_part(p, origin, tiles, walls, str(alone), ortho=ortho, wall_clear_m=0.05))
+               for p in parts)
+    index = WallIndex.build(seg.walls, origin, SegmentationSettings())
+    binning = CeilingBinning(tiles, walls, str(fused), origin, ortho, 0.05)
+    for p in parts:
+        partition_part(p, origin, index, str(fused), points=0, spilled=False, ortho=ortho, also=binning)
+    assert want.sum() > 100_000 and (want == 0).any()
+    np.testing.assert_array_equal(binned_records(fused, len(tiles)), want)
+    files = sorted(f.relative_to(alone) for f in (alone / "ceilings").rglob("*.rec"))
+    assert files == sorted(f.relative_to(fused) for f in (fused / "ceilings").rglob("*.rec"))
+    for f in files:
+        assert (alone / f).read_bytes() == (fused / f).read_bytes()
+    assert any((fused / "wall-0000").rglob("*.rec"))  # and the walls' partitions as ever
+
+
 def test_a_lower_ceiling_gets_its_own_level_and_tiles(tmp_path):
     seg = _room()
     s = CeilingSettings()
@@ -185,22 +224,22 @@ def test_surfaces_without_points_are_left_out(tmp_path):
     def part_fn(n):
         return [0, n, 0]
 
-    def job_fn(scratch, k, sf, *, templates, prototypes, s):
-        ran.append(k)
+    def job_fn(scratch, k, sf, *, templates, prototypes, s, images):
+        ran.append((k, images))  # the task parks its result itself
         return sf, "result", {}
 
     import sbsc_core.pipeline.executors as pl
 
-    saved = pl.park_wall, pl._templates_job
-    pl.park_wall, pl._templates_job = (lambda res, parked: res), (lambda library, s, classes: ({}, None))
+    saved = pl._templates_job
+    pl._templates_job = lambda library, s, classes: ({}, None)
     try:
         kept, results, _ = surface_stage(InlineExecutor(), stage="x", part_fn=part_fn, part_jobs=[(3,), (4,)],
                                          job_fn=job_fn, surfaces=["A", "B", "C"], library=None, classes=[],
                                          s=DetectionSettings(), scratch=tmp_path, parked=tmp_path, in_flight=2,
                                          progress=lambda *a: None)
     finally:
-        pl.park_wall, pl._templates_job = saved
-    assert list(kept) == [0, 7, 0] and ran == [1] and results == {"B": "result"}
+        pl._templates_job = saved
+    assert list(kept) == [0, 7, 0] and ran == [(1, str(tmp_path))] and results == {"B": "result"}
 
 
 def test_surfaces_are_searched_where_the_library_mounts_a_searched_class():
@@ -248,3 +287,25 @@ def test_cells_sorted_highest_first_as_lexsort():
     assert np.array_equal(cell_s, cell[order])
     assert np.array_equal(z_s, z[order])
     assert z_s.dtype == np.float32
+
+
+def test_ceiling_binning_is_made_when_a_ceiling_class_is_searched(tmp_path):
+    """The walls' partition pass bins the ceilings only when :func:`detect_ceilings` will search
+    a tile for a class: the binning holds the tiles it will search, else there is none."""
+    from sbsc_core.io.models import load_model_library
+    from sbsc_core.paths import bundled_models_dir
+    from sbsc_core.pipeline.surfaces import ceiling_binning
+    from sbsc_core.settings import DetectionSettings
+
+    lib = load_model_library(bundled_models_dir())
+    seg = _room()
+    s = DetectionSettings()
+    on_ceiling = lib.classes_on("ceiling")
+    assert on_ceiling and "switch" not in on_ceiling
+    binning = ceiling_binning(seg, np.zeros(3), library=lib, expected={on_ceiling[0]: 2, "switch": 3}, s=s,
+                              scratch=tmp_path)
+    assert [t.id for t in binning.tiles] == [t.id for t in ceiling_tiles(seg, s.ceilings)]
+    assert len(binning.walls) == len(seg.walls) and binning.scratch == str(tmp_path)
+    assert ceiling_binning(seg, np.zeros(3), library=lib, expected={"switch": 3}, s=s, scratch=tmp_path) is None
+    assert ceiling_binning(Segmentation(0.0, 2.8, [], []), np.zeros(3), library=lib, expected=None, s=s,
+                           scratch=tmp_path) is None

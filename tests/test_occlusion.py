@@ -127,3 +127,23 @@ def test_occlusion_is_a_setting() -> None:
     assert DetectionSettings.from_dict({"orthoimage": {"occlusion_gap_m": 0.03}}).orthoimage.occlusion_gap_m == 0.03
     with pytest.raises(Exception, match="occlusion_gap_m"):
         DetectionSettings.from_dict({"orthoimage": {"occlusion_gap_m": "off"}})
+
+
+def test_front_layers_of_record_fields_as_of_arrays() -> None:
+    """The depths and colours of a partition's records (strided fields of one structured array,
+    as :func:`~sbsc_core.imaging.partition.folder_records` returns them) give exactly the front
+    layers of the same values in contiguous arrays."""
+    rng = np.random.default_rng(7)
+    n, shape = 20000, (40, 50)
+    rec = np.empty(n, np.dtype([("pixel", "<i4"), ("depth", "<f4"), ("rgb", "u1", 3)]))
+    rec["pixel"] = rng.integers(0, shape[0] * shape[1], n)
+    rec["depth"] = np.where(rng.random(n) < 0.3, 0.05, 0.0) + rng.normal(0, 0.002, n)  # two layers in many pixels
+    rec["rgb"] = rng.integers(0, 256, (n, 3))
+    assert not rec["depth"].flags.c_contiguous
+    pixel = rec["pixel"].astype(np.int64)
+    got = front_layers(pixel, rec["depth"], rec["rgb"], shape, gap_m=0.02, far_m=0.25)
+    want = front_layers(pixel, rec["depth"].copy(), rec["rgb"].copy(), shape, gap_m=0.02, far_m=0.25)
+    assert np.isfinite(want.depth).sum() > 100
+    for a, b in zip((got.depth, got.colour, got.points, got.front_points),
+                    (want.depth, want.colour, want.points, want.front_points), strict=True):
+        np.testing.assert_array_equal(a, b)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from sbsc_core.imaging.orthoimage import build_orthoimage, rasterize_median
+from sbsc_core.imaging.orthoimage import build_orthoimage, near_wall, near_walls, rasterize_median
 from sbsc_core.settings import OrthoimageSettings
 from sbsc_core.types import PointCloud, Wall, WallFrame
 
@@ -201,3 +201,45 @@ def test_desk_in_front_of_a_wall_leaves_the_wall_and_a_socket_under_it() -> None
     assert s == pytest.approx(0.012, abs=0.003)
     old = build_orthoimage(cloud, w, OrthoimageSettings(fill_gaps_px=0, layer_gap_m=None))
     assert np.nanmax(old.depth[row, : int(0.78 / px)]) > 0.05  # the plain median mixed the desk in
+
+
+def test_near_walls_is_near_wall_of_each_wall_or_ed() -> None:
+    """Walls of a room (one turned 30 degrees, one leaning), points near them, beyond their
+    ends and far off, relative to a far origin: :func:`near_walls` marks exactly the points
+    that :func:`near_wall` marks for some wall."""
+    rng = np.random.default_rng(3)
+    origin = np.array([1000.0, -2000.0, 5.0])
+
+    def frame(o, u, w, lean=0.0):
+        u = np.array([math.cos(u), math.sin(u), 0.0])
+        n = np.array([-u[1], u[0], 0.0])
+        up = np.array([0.0, 0.0, 1.0])
+        v = math.cos(lean) * up + math.sin(lean) * n
+        return WallFrame(np.array(o, float) + origin, u, v, np.cross(u, v), w, 3.0)
+
+    frames = [frame((0, 0, 0), 0.0, 8.0), frame((8, 0, 0), math.pi / 2, 6.0), frame((8, 6, 0), math.pi, 8.0),
+              frame((0, 6, 0), -math.pi / 2, 6.0), frame((2, 2, 0), math.pi / 6, 3.0),
+              frame((1, 5, 0), 0.0, 2.0, lean=0.3)]
+    on = []
+    for f in frames:  # points on and about each wall's plane, a little beyond its ends
+        u, v, d = rng.uniform(-0.3, f.width_m + 0.3, 4000), rng.uniform(0, 3, 4000), rng.normal(0, 0.06, 4000)
+        on.append(f.origin + u[:, None] * f.axis_u + v[:, None] * f.axis_v + d[:, None] * f.normal)
+    far = rng.uniform((-20, -20, 0), (30, 30, 3), (20000, 3)) + origin
+    xyz = (np.concatenate(on + [far]) - origin).astype(np.float32)
+    want = np.zeros(len(xyz), bool)
+    for f in frames:
+        want |= near_wall(xyz, f, 0.05, origin)
+    got = near_walls(xyz, frames, 0.05, origin)
+    assert 5000 < want.sum() < len(xyz) - 20000
+    np.testing.assert_array_equal(got, want)
+    assert not near_walls(xyz, [], 0.05, origin).any()
+    site = frames + [frame((2500, 2000, 0), 0.3, 5.0)]  # a wall far off: a coarser grid over the site
+    f = site[-1]
+    far_wall = f.origin + rng.uniform(0, 5, 3000)[:, None] * f.axis_u + rng.normal(0, 0.06, 3000)[:, None] * f.normal
+    xyz = np.concatenate([xyz, (far_wall - origin).astype(np.float32)])
+    want = np.zeros(len(xyz), bool)
+    for f in site:
+        want |= near_wall(xyz, f, 0.05, origin)
+    assert want[-3000:].sum() > 1000
+    np.testing.assert_array_equal(near_walls(xyz, site, 0.05, origin), want)
+    assert not near_walls(xyz[:0], frames, 0.05, origin).any()

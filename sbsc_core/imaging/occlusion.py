@@ -78,7 +78,7 @@ def front_layers(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shape: t
     front_colour = np.zeros((npx, 3), np.uint8)
     front_points = np.zeros(npx, np.int32)
     pixel = np.asarray(pixel, np.int64)
-    d = np.asarray(depth, np.float32)
+    d = np.ascontiguousarray(depth, np.float32)  # ufunc.at is slow on a strided view (a record field)
     points = np.bincount(pixel, minlength=npx).astype(np.int32)
     if len(pixel):
         lo = np.full(npx, np.inf, np.float32)

@@ -31,7 +31,7 @@ from ..types import Orthoimage, PointCloud, Wall, WallFrame
 from .occlusion import FrontLayers, front_layers, hide_occluded
 
 __all__ = ["build_orthoimage", "ortho_shape", "ortho_pixels", "orthoimage_from_pixels", "orthoimage_from_images",
-           "wall_coordinates", "rasterize_median", "fill_sampling_gaps", "layer_options", "front_images"]
+           "wall_coordinates", "near_wall", "near_walls", "rasterize_median", "fill_sampling_gaps", "layer_options", "front_images"]
 
 
 def build_orthoimage(cloud: PointCloud, wall: Wall, settings: OrthoimageSettings | None = None) -> Orthoimage:
@@ -146,15 +146,87 @@ def near_wall(xyz: np.ndarray, frame: WallFrame, clear_m: float, cloud_origin: n
     """
     keep = np.zeros(len(xyz), bool)
     idx = np.arange(len(xyz))
-    if abs(float(frame.axis_u[2])) < 1e-9 and abs(float(frame.normal[2])) < 1e-9:  # upright: a plan box
-        u, n = np.asarray(frame.axis_u[:2], np.float64), np.asarray(frame.normal[:2], np.float64)
-        o = np.asarray(frame.origin[:2], np.float64)
-        corners = np.array([o + a * u + b * n for a in (-clear_m, frame.width_m + clear_m) for b in (-clear_m, clear_m)])
-        idx = np.flatnonzero(in_plan_box(xyz, corners.min(axis=0), corners.max(axis=0), cloud_origin,
-                                         margin_m=_PLAN_MARGIN_M))
-    uvd = wall_coordinates(xyz[idx], frame, cloud_origin)
+    if _upright(frame):  # a plan box
+        idx = np.flatnonzero(in_plan_box(xyz, *_slab_box(frame, clear_m), cloud_origin, margin_m=_PLAN_MARGIN_M))
+    uvd = wall_coordinates(np.take(xyz, idx, axis=0), frame, cloud_origin)  # take: as xyz[idx], faster
     keep[idx] = (np.abs(uvd[:, 2]) < clear_m) & (uvd[:, 0] > -clear_m) & (uvd[:, 0] < frame.width_m + clear_m)
     return keep
+
+
+def _upright(frame: WallFrame) -> bool:
+    return abs(float(frame.axis_u[2])) < 1e-9 and abs(float(frame.normal[2])) < 1e-9
+
+
+def _slab_box(frame: WallFrame, clear_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Plan box (world x, y) of an upright wall's slab within ``clear_m`` (what :func:`near_wall` tests)."""
+    u, n = np.asarray(frame.axis_u[:2], np.float64), np.asarray(frame.normal[:2], np.float64)
+    o = np.asarray(frame.origin[:2], np.float64)
+    corners = np.array([o + a * u + b * n for a in (-clear_m, frame.width_m + clear_m) for b in (-clear_m, clear_m)])
+    return corners.min(axis=0), corners.max(axis=0)
+
+
+_NEAR_CELL_M = 0.5  # plan cells of :func:`near_walls`' lookup grid ...
+_NEAR_MAX_CELLS = 1 << 22  # ... at most this many (larger cells over a large site)
+
+
+def near_walls(xyz: np.ndarray, frames: list[WallFrame], clear_m: float, cloud_origin: np.ndarray | None = None
+               ) -> np.ndarray:
+    """Which points lie within ``clear_m`` of any of the walls' planes: :func:`near_wall` of
+    each wall, or-ed, with each point tested only against the walls whose slab may hold it.
+
+    A plan grid of ``_NEAR_CELL_M`` cells tells which upright walls' slabs (their plan boxes
+    grown by a cell: float rounding of a point's cell never loses one) touch each cell; the
+    points are grouped by that set and :func:`near_wall` runs on each group for each of its
+    walls (on a point it gives what it gives on all points). A wall that is not upright is
+    tested on every point.
+    """
+    out = np.zeros(len(xyz), bool)
+    if not len(xyz) or not frames:
+        return out
+    upright = [f for f in frames if _upright(f)]
+    for f in frames:
+        if not _upright(f):
+            out |= near_wall(xyz, f, clear_m, cloud_origin)
+    if not upright:
+        return out
+    o = np.zeros(2) if cloud_origin is None else np.asarray(cloud_origin, np.float64)[:2]
+    boxes = [_slab_box(f, clear_m) for f in upright]
+    span = np.max([b[1] for b in boxes], axis=0) - np.min([b[0] for b in boxes], axis=0)
+    cell = max(_NEAR_CELL_M, math.sqrt(float((span[0] + 1) * (span[1] + 1)) / _NEAR_MAX_CELLS))  # a site: coarser
+    lo = np.min([b[0] for b in boxes], axis=0) - o - 2 * cell  # the grid, relative to the cloud's origin
+    hi = np.max([b[1] for b in boxes], axis=0) - o + 2 * cell
+    nx, ny = (np.ceil((hi - lo) / cell).astype(np.int64) + 1).tolist()
+    cells_of: dict[int, list[int]] = {}
+    for w, (b0, b1) in enumerate(boxes):
+        i0, j0 = np.maximum(np.floor((b0 - o - lo) / cell).astype(np.int64) - 1, 0)
+        i1, j1 = np.minimum(np.floor((b1 - o - lo) / cell).astype(np.int64) + 1, (nx - 1, ny - 1))
+        jj, ii = np.mgrid[j0:j1 + 1, i0:i1 + 1]
+        for key in (jj * nx + ii).ravel().tolist():
+            cells_of.setdefault(key, []).append(w)
+    combo_id: dict[tuple[int, ...], int] = {}
+    lut = np.zeros(nx * ny, np.int32)
+    for key, ws in cells_of.items():
+        lut[key] = combo_id.setdefault(tuple(ws), len(combo_id) + 1)
+    combos = sorted(combo_id, key=combo_id.__getitem__)
+    ix = np.floor((xyz[:, 0].astype(np.float64) - lo[0]) / cell)
+    iy = np.floor((xyz[:, 1].astype(np.float64) - lo[1]) / cell)
+    inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)  # beyond the grid: far from every slab
+    combo = np.zeros(len(xyz), np.int32)
+    combo[inside] = lut[(iy[inside] * nx + ix[inside]).astype(np.int64)]
+    del ix, iy, inside
+    sel = np.flatnonzero(combo)
+    order = sel[np.argsort(combo[sel].astype(np.uint16 if len(combos) < 65536 else np.int32), kind="stable")]
+    cuts = np.searchsorted(combo[order], np.arange(1, len(combos) + 2))
+    for c, ws in enumerate(combos):
+        pts = order[cuts[c]:cuts[c + 1]]
+        if not len(pts):
+            continue
+        sub = np.take(xyz, pts, axis=0)
+        hit = np.zeros(len(pts), bool)
+        for w in ws:
+            hit |= near_wall(sub, upright[w], clear_m, cloud_origin)
+        out[pts[hit]] = True
+    return out
 
 
 def in_plan_box(xyz: np.ndarray, lo: np.ndarray, hi: np.ndarray, cloud_origin: np.ndarray | None = None, *,

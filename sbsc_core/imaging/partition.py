@@ -33,7 +33,7 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -397,14 +397,14 @@ def assign_chunk(xyz: np.ndarray, index: WallIndex) -> Iterator[tuple[int, np.nd
     for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
         idx = sel[a:b]
         walls = index.combos[int(c[a])]
-        pts = xyz[idx]
+        pts = np.take(xyz, idx, axis=0)  # np.take, np.compress: as xyz[idx], uvd[ok], without fancy indexing's slow path
         best = None
         for w in walls.tolist():
             uvd = wall_coordinates(pts, index.frames[w], index.origin)
             ok = _inside(uvd, index.frames[w], index)
             if len(walls) == 1:
                 if ok.any():
-                    per_wall.setdefault(w, []).append((idx[ok], uvd[ok]))
+                    per_wall.setdefault(w, []).append((idx[ok], np.compress(ok, uvd, axis=0)))
                 break
             ad = np.abs(uvd[:, 2])
             if best is None:
@@ -419,7 +419,7 @@ def assign_chunk(xyz: np.ndarray, index: WallIndex) -> Iterator[tuple[int, np.nd
             for w, uvd in kept.items():
                 mine = owner == w
                 if mine.any():
-                    per_wall.setdefault(w, []).append((idx[mine], uvd[mine]))
+                    per_wall.setdefault(w, []).append((idx[mine], np.compress(mine, uvd, axis=0)))
     for w in sorted(per_wall):
         pieces = per_wall[w]
         if len(pieces) == 1:
@@ -451,12 +451,15 @@ def band_rows(frame: WallFrame, ortho: OrthoimageSettings) -> int:
 
 
 def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch: str, *, points: int,
-                   spilled: bool, ortho: OrthoimageSettings) -> list[int]:
+                   spilled: bool, ortho: OrthoimageSettings,
+                   also: Callable[[ScanChunk, str], object] | None = None) -> list[int]:
     """Stream one part again (or its spill) and append each wall's binned points to its partition.
 
     A wall's partition is cut into bands of orthoimage rows (:func:`band_rows`), one folder
-    each, so that its orthoimage is made band by band. Returns the number of records
-    written per wall.
+    each, so that its orthoimage is made band by band. ``also`` is called with each chunk
+    and the part's key: another binning of the same points (the ceilings',
+    :class:`~sbsc_core.scene.ceilings.CeilingBinning`) without reading them again. Returns
+    the number of records written per wall.
     """
     root = Path(scratch)
     chunks = spilled_chunks(root, part, origin, points) if spilled else part_chunks(part, origin)
@@ -464,6 +467,8 @@ def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch
     band_px = [band_rows(f, ortho) * ortho_shape(f, ortho.pixel_m)[1] for f in index.frames]
     made: set[tuple[int, int]] = set()
     for chunk in chunks:
+        if also is not None:
+            also(chunk, part.key)
         for w, idx, uvd in assign_chunk(chunk.xyz, index):
             keep, pixel = ortho_pixels(uvd, index.frames[w], ortho)
             kept = np.flatnonzero(keep)
@@ -476,8 +481,8 @@ def partition_part(part: ScanPart, origin: np.ndarray, index: WallIndex, scratch
                 band += b0
             rec = np.empty(len(pixel), RECORD)
             rec["pixel"] = pixel
-            rec["depth"] = uvd[kept, 2]
-            rec["rgb"] = chunk.rgb[idx[kept]]
+            rec["depth"] = uvd[:, 2][kept]
+            rec["rgb"] = np.take(chunk.rgb, idx[kept], axis=0)
             cuts = np.searchsorted(band, np.arange(b0, b1 + 2))
             for b in range(b0, b1 + 1):
                 a, z = int(cuts[b - b0]), int(cuts[b - b0 + 1])

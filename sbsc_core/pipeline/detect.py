@@ -357,8 +357,11 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, lev
                   library: ModelLibrary, expected: ExpectedCounts | None, s: DetectionSettings,
                   executor: Executor, scratch: Path, parked: Path | None, in_flight: int, progress: Progress,
                   timings: dict[str, float], log: Callable[[str], None],
-                  part_executor: Executor | None = None) -> _BeyondWalls:
-    """The ceiling tiles' and column faces' results (issue 11), when the settings ask for them."""
+                  part_executor: Executor | None = None, ceilings_binned=None) -> _BeyondWalls:
+    """The ceiling tiles' and column faces' results (issue 11), when the settings ask for them.
+
+    ``ceilings_binned``: the ceilings' binning that the walls' partition pass already ran
+    (:func:`~sbsc_core.pipeline.surfaces.ceiling_binning`)."""
     out = _BeyondWalls()
     counts = None if expected is None else expected.counts
     if s.ceilings.enabled:  # objects on ceilings: the tiles join the walls in the consensus
@@ -367,7 +370,7 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, lev
         ceil = detect_ceilings(parts, origin, seg, library=library, expected=counts, s=s,
                                executor=executor, scratch=scratch,
                                parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
-                               levels=levels, part_executor=part_executor)
+                               levels=levels, part_executor=part_executor, binned=ceilings_binned)
         out.walls.update(ceil.walls)
         out.templates.update(ceil.templates)
         out.classes = sorted(set(out.classes) | set(ceil.classes))
@@ -564,8 +567,14 @@ def detect_scans(
     t = time.perf_counter()
     progress(Stage.PARTITION, 0.0)
     index = WallIndex.build(seg.walls, origin, s.segmentation)
+    ceilings = None
+    if s.ceilings.enabled:  # the ceiling tiles' points are binned in the same pass (the scan is read once)
+        from .surfaces import ceiling_binning
+
+        ceilings = ceiling_binning(seg, origin, library=library, expected=None if expected is None else expected.counts,
+                                   s=s, scratch=Path(scratch), levels=levels)
     part_jobs = [dict(part=part, origin=origin, index=index, scratch=str(scratch), points=n, spilled=spilled,
-                      ortho=s.orthoimage) for part, (n, spilled) in zip(parts, sample_meta, strict=True)]
+                      ortho=s.orthoimage, also=ceilings) for part, (n, spilled) in zip(parts, sample_meta, strict=True)]
     kept = np.zeros(len(seg.walls), np.int64)
     for i, (_, written) in enumerate(_as_done(executor, part_jobs, partition_part, 2 * workers)):
         kept += np.asarray(written, np.int64)
@@ -597,7 +606,7 @@ def detect_scans(
     beyond = _beyond_walls(parts, origin, seg, levels=levels, columns=found_columns, pendants=pendants,
                            library=library, expected=expected, s=s, executor=executor,
                            scratch=Path(scratch), parked=parked, in_flight=2 * workers, progress=progress,
-                           timings=timings, log=log)
+                           timings=timings, log=log, ceilings_binned=ceilings)
     walls.update(beyond.walls)
     if s.ceilings.enabled or found_columns:
         templates, classes = {**beyond.templates, **templates}, sorted(set(classes) | set(beyond.classes))

@@ -40,7 +40,6 @@ from .walls import (
     _process_wall_job,
     _templates_job,
     _wall_cloud,
-    park_wall,
     process_wall,
 )
 from .worker_env import _environment, _worker_count, worker_environment
@@ -177,42 +176,41 @@ def _as_done(ex: Executor, jobs: Iterable[Job], fn: Callable, in_flight: int) ->
             f.cancel()
 
 
-def _in_order(ex: Executor, jobs: Iterable[Job], fn: Callable, in_flight: int) -> Iterator:
-    """Results of ``fn(*job)`` (or ``fn(**job)``) in job order, computed as by :func:`_as_done` (a result that is
-    ready early waits for the ones before it)."""
-    ready: dict[int, object] = {}
-    nxt = 0
-    for k, res in _as_done(ex, jobs, fn, in_flight):
-        ready[k] = res
-        while nxt in ready:
-            yield ready.pop(nxt)
-            nxt += 1
-
-
 def surface_stage(executor: Executor, *, stage: str, part_fn: Callable, part_jobs: list[Job],
                   job_fn: Callable,
                   surfaces: Sequence, library: ModelLibrary, classes: list[str], s: DetectionSettings,
                   scratch: Path, parked: Path | None, in_flight: int, progress: Progress,
-                  part_executor: Executor | None = None,
+                  part_executor: Executor | None = None, binned: np.ndarray | None = None,
                   ) -> tuple[np.ndarray, dict[str, WallResult], dict[str, ModelTemplate]]:
     """A stage on surfaces beyond the walls (ceiling tiles, column faces), run as the walls' is.
 
     ``part_fn(*job)`` (``part_fn(**job)`` for a mapping) bins one scan part's points into the
     surfaces' partitions and returns the points written per surface; then ``job_fn(scratch, k,
-    surface, templates=, prototypes=, s=)`` runs the walls' stages on surface number ``k`` and returns ``(id, result, timings)``.
+    surface, templates=, prototypes=, s=, images=)`` runs the walls' stages on surface number ``k``
+    and returns ``(id, result, timings)``, the result parked (its images written to the folder
+    ``images``, :func:`~.walls.park_wall`) unless ``images`` is None.
     Surfaces that got no point are left out (no work, no result). Returns the points binned
-    per surface, the results by surface id (their images parked in ``parked``,
-    :func:`park_wall`, unless it is None) and the templates of ``classes``. ``part_executor`` (default:
+    per surface, the results by surface id (parked in ``parked`` unless it is None) and the
+    templates of ``classes``. ``part_executor`` (default:
     ``executor``) runs the binning (an in-memory cloud's parts are binned in this process).
+    ``binned``: the points already binned per surface (by the walls' partition pass): the
+    parts are not binned again.
     """
     kept = np.zeros(len(surfaces), np.int64)
+    if binned is not None:
+        kept += np.asarray(binned, np.int64)
+        part_jobs = []
     for _, written in _as_done(part_executor or executor, part_jobs, part_fn, in_flight):
         kept += np.asarray(written, np.int64)
     templates, prototypes = _templates_job(library, s, classes)
-    jobs = [(str(scratch), k, sf) for k, sf in enumerate(surfaces) if kept[k] > 0]
-    job = functools.partial(job_fn, templates=templates, prototypes=prototypes, s=s)
-    results: dict[str, WallResult] = {}
-    for i, (sid, res, _) in enumerate(_in_order(executor, jobs, job, in_flight)):
-        results[sid] = res if parked is None else park_wall(res, parked)
+    # the biggest surfaces first, so that no worker is left with a big one at the end; the
+    # results are put back in the surfaces' order
+    jobs = sorted(((str(scratch), k, sf) for k, sf in enumerate(surfaces) if kept[k] > 0), key=lambda j: -int(kept[j[1]]))
+    # each task writes its surface's images itself: this process only receives the small results
+    job = functools.partial(job_fn, templates=templates, prototypes=prototypes, s=s,
+                            images=None if parked is None else str(parked))
+    done: dict[int, tuple[str, WallResult]] = {}
+    for i, (j, (sid, res, _)) in enumerate(_as_done(executor, jobs, job, in_flight)):
+        done[jobs[j][1]] = (sid, res)
         progress(stage, (i + 1) / len(jobs))
-    return kept, results, templates
+    return kept, dict(done[k] for k in sorted(done)), templates

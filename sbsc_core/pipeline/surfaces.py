@@ -14,10 +14,12 @@ import numpy as np
 
 from ..imaging.partition import ScanPart
 from ..scene.ceilings import (
+    CeilingBinning,
     CeilingLevels,
     CeilingResults,
     CeilingTile,
     MemoryPart,
+    binned_records,
     ceiling_part,
     ceiling_tiles,
     in_core,
@@ -36,9 +38,11 @@ from ..stages import Stage, no_progress
 from ..types import Segmentation
 
 
-def ceiling_tile_job(scratch: str, k: int, tile: CeilingTile, *, templates: dict, prototypes, s) -> tuple:
-    """One tile's work (what a worker runs): orthoimage, the walls' stages, candidates in its core."""
-    from .walls import WallResult, process_orthoimage
+def ceiling_tile_job(scratch: str, k: int, tile: CeilingTile, *, templates: dict, prototypes, s,
+                     images: str | None = None) -> tuple:
+    """One tile's work (what a worker runs): orthoimage, the walls' stages, candidates in its core;
+    with ``images``, its images written there and left out of the result (:func:`~.walls.park_wall`)."""
+    from .walls import WallResult, park_wall, process_orthoimage
 
     t = time.perf_counter()
     ortho = tile_orthoimage(scratch, k, tile, s.orthoimage)
@@ -46,17 +50,18 @@ def ceiling_tile_job(scratch: str, k: int, tile: CeilingTile, *, templates: dict
     px = s.orthoimage.pixel_m
     res = WallResult(res.ortho, res.area, res.depth_rois, res.colour_rois,
                      in_core(res.depth_candidates, tile, px), in_core(res.colour_candidates, tile, px))
-    return tile.id, res, t_stage
+    return tile.id, res if images is None else park_wall(res, Path(images)), t_stage
 
 
 def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg: Segmentation, *, library,
                     expected: dict | None, s, executor, scratch: Path, parked: Path, in_flight: int, progress,
                     timings: dict, log, levels: list[CeilingLevels] | None = None,
-                    part_executor=None) -> CeilingResults:
+                    part_executor=None, binned: CeilingBinning | None = None) -> CeilingResults:
     """Bin the ceilings' points into tiles, then run the walls' stages on every tile (see the module).
 
     ``levels`` (:func:`ceiling_levels`) gives the storeys' lower ceilings their own tiles.
-    Tiles that got no point are left out.
+    Tiles that got no point are left out. ``binned``: the binning (:func:`ceiling_binning`)
+    that the walls' partition pass already ran (the parts are not read again).
     """
     from .executors import surface_stage
     from .walls import search_classes
@@ -73,7 +78,7 @@ def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg:
     kept, results, templates = surface_stage(
         executor, stage=Stage.CEILINGS, part_fn=ceiling_part, part_jobs=jobs, job_fn=ceiling_tile_job, surfaces=tiles,
         library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress,
-        part_executor=part_executor)
+        part_executor=part_executor, binned=None if binned is None else binned_records(scratch, len(tiles)))
     timings[Stage.CEILINGS] = time.perf_counter() - t0
     lower = [f"{lv.storey + ' ' if lv.storey else ''}{z:.2f} m" for lv in levels or [] for z in lv.z]
     log(f"{len(results)} ceiling tiles" + (f" (lower ceilings at {', '.join(lower)})" if lower else "")
@@ -81,9 +86,24 @@ def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg:
     return CeilingResults(results, templates, classes, [t for t in tiles if t.id in results])
 
 
-def column_face_job(scratch: str, k: int, face: ColumnFace, *, templates: dict, prototypes, s) -> tuple:
-    """One face's work (what a worker runs): orthoimage and the walls' stages."""
-    from .walls import WallResult, process_orthoimage
+def ceiling_binning(seg: Segmentation, origin: np.ndarray, *, library, expected: dict | None, s, scratch: Path,
+                    levels: list[CeilingLevels] | None = None) -> CeilingBinning | None:
+    """The binning of the ceiling tiles that :func:`detect_ceilings` searches, for the walls'
+    partition pass to run on the chunks it reads; None when no tile or no class is searched."""
+    from .walls import search_classes
+
+    tiles = ceiling_tiles(seg, s.ceilings, levels)
+    if not tiles or not search_classes(library, expected, kind="ceiling"):
+        return None
+    return CeilingBinning(tiles, [w.frame for w in seg.walls], str(scratch), np.asarray(origin, np.float64),
+                          s.orthoimage, s.ceilings.wall_clear_m)
+
+
+def column_face_job(scratch: str, k: int, face: ColumnFace, *, templates: dict, prototypes, s,
+                    images: str | None = None) -> tuple:
+    """One face's work (what a worker runs): orthoimage and the walls' stages; with ``images``,
+    its images written there and left out of the result (:func:`~.walls.park_wall`)."""
+    from .walls import WallResult, park_wall, process_orthoimage
 
     t = time.perf_counter()
     ortho = face_orthoimage(scratch, k, face, s.orthoimage)
@@ -93,7 +113,7 @@ def column_face_job(scratch: str, k: int, face: ColumnFace, *, templates: dict, 
         res = WallResult(res.ortho, res.area, res.depth_rois, res.colour_rois,
                          [c for c in res.depth_candidates if face.owns((c.centre[1] + 0.5) * px)],
                          [c for c in res.colour_candidates if face.owns((c.centre[1] + 0.5) * px)])
-    return face.id, res, t_stage
+    return face.id, res if images is None else park_wall(res, Path(images)), t_stage
 
 
 def detect_columns(parts: list[ScanPart | MemoryPart], origin: np.ndarray,

@@ -36,8 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..imaging.orthoimage import near_wall, ortho_pixels, orthoimage_from_pixels, wall_coordinates
-from ..imaging.partition import ScanPart, append_records, folder_records
+from ..imaging.orthoimage import near_walls, ortho_pixels, orthoimage_from_pixels, wall_coordinates
+from ..imaging.partition import RECORD, ScanPart, append_records, folder_records
 from ..imaging.partition import part_chunks as file_chunks
 from ..io.scan_source import ScanChunk
 from ..settings import CeilingSettings, OrthoimageSettings
@@ -175,22 +175,25 @@ def ceiling_levels(cloud: PointCloud, seg: Segmentation, s: CeilingSettings) -> 
         idx = np.flatnonzero((z_all > cz - s.level_max_drop_m) & (z_all < cz + 0.05))
         if len(idx) < 100:
             continue
-        xy = cloud.xyz[idx, :2].astype(np.float64) + origin[:2]
+        xy = np.take(cloud.xyz, idx, axis=0)[:, :2].astype(np.float64) + origin[:2]  # as cloud.xyz[idx, :2]
         z = z_all[idx]
         x0, y0 = xy.min(axis=0)
         ij = np.floor((xy - (x0, y0)) / c).astype(np.int64)
         nx, ny = int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1
         cell = ij[:, 1] * nx + ij[:, 0]
-        cell_s, z32_s = _by_cell_highest_first(cell, cloud.xyz[idx, 2])
+        # a cell is free (its top more than the tolerance below the storey's ceiling) when it has
+        # three points but fewer than three at that height or above: only the free cells' tops
+        # are measured (by sorting their points), the others' are never looked at
+        low = cz - s.level_tolerance_m
+        free = ((np.bincount(cell, minlength=nx * ny) >= 3)
+                & (np.bincount(cell[z >= low], minlength=nx * ny) < 3))
+        mine = np.flatnonzero(free[cell])
+        cell_s, z32_s = _by_cell_highest_first(cell[mine], cloud.xyz[:, 2][idx[mine]])
         z_s = z32_s.astype(np.float64) + origin[2]  # as z_all: the same values, in this order
-        first = np.flatnonzero(np.r_[True, cell_s[1:] != cell_s[:-1]])
-        count = np.diff(np.r_[first, len(cell_s)])
-        pick = first + np.minimum(count, 3) - 1
+        first = np.flatnonzero(np.r_[True, cell_s[1:] != cell_s[:-1]]) if len(cell_s) else np.zeros(0, np.int64)
         top = np.full(nx * ny, np.nan)
-        top[cell_s[pick]] = z_s[pick]
-        top[cell_s[first[count < 3]]] = np.nan  # too few points to say
+        top[cell_s[first + 2]] = z_s[first + 2]  # the third-highest point: below ``low``
         labels = np.zeros(nx * ny, np.int8)
-        free = np.isfinite(top) & (top < cz - s.level_tolerance_m)
         levels: list[float] = []
         kernel = np.ones((3, 3), np.uint8)
         while len(levels) < _MAX_LOWER_LEVELS and free.sum() >= min_cells:
@@ -290,30 +293,54 @@ def ceiling_part(part: ScanPart | MemoryPart, origin: np.ndarray, tiles: list[Ce
     several levels takes only the points over its level's cells. ``part`` is a scan part or
     a :class:`MemoryPart`. Returns records per tile.
     """
-    root = Path(scratch)
-    written = [0] * len(tiles)
-    d0, d1 = ortho.depth_range_m
-    groups: dict[tuple, list[int]] = {}  # tiles at one height under one level of one storey
-    for k, t in enumerate(tiles):
-        groups.setdefault((float(t.frame.origin[2]), t.storey, t.level), []).append(k)
-    margin = 0.01 + 2 * float(ortho.pixel_m)  # an image's last pixel may reach past its frame; float32 rounding
+    binning = CeilingBinning(tiles, walls, scratch, np.asarray(origin, np.float64), ortho, wall_clear_m)
+    written = np.zeros(len(tiles), np.int64)
     for chunk in part_chunks(part, origin):
+        written += binning(chunk, part.key)
+    return written.tolist()
+
+
+@dataclass(frozen=True)
+class CeilingBinning:
+    """:func:`ceiling_part` of one chunk at a time: called with each chunk of a part and the
+    part's key, it appends the tiles' binned points and returns the records per tile. The walls'
+    partition pass calls it on the chunks it reads
+    (:func:`~sbsc_core.imaging.partition.partition_part`'s ``also``), so the scan is read once
+    for both; :func:`binned_records` then counts what each tile got."""
+
+    tiles: list[CeilingTile]
+    walls: list[WallFrame]
+    scratch: str
+    origin: np.ndarray  # the scan's recentring origin (the chunks' points are relative to it)
+    ortho: OrthoimageSettings
+    wall_clear_m: float
+
+    def __call__(self, chunk: ScanChunk, key: str) -> np.ndarray:
+        tiles, origin, ortho = self.tiles, self.origin, self.ortho
+        root = Path(self.scratch)
+        written = np.zeros(len(tiles), np.int64)
+        d0, d1 = ortho.depth_range_m
+        groups: dict[tuple, list[int]] = {}  # tiles at one height under one level of one storey
+        for k, t in enumerate(tiles):
+            groups.setdefault((float(t.frame.origin[2]), t.storey, t.level), []).append(k)
+        margin = 0.01 + 2 * float(ortho.pixel_m)  # an image's last pixel may reach past its frame; float32 rounding
         z = chunk.xyz[:, 2].astype(np.float64) + float(origin[2])
         for (cz, _, level), ks in groups.items():
             idx = np.flatnonzero((z >= cz - d1) & (z <= cz - d0))
             levels = tiles[ks[0]].levels
             if len(idx) and levels is not None:
-                xy = chunk.xyz[idx, :2].astype(np.float64) + origin[:2]
+                xy = np.take(chunk.xyz, idx, axis=0)[:, :2].astype(np.float64) + origin[:2]
                 idx = idx[levels.label(xy) == level]
             if not len(idx):
                 continue
-            xyz = chunk.xyz[idx]
+            # np.take and np.compress: as xyz[idx] and xyz[mask], without fancy indexing's slow path
+            xyz = np.take(chunk.xyz, idx, axis=0)
             below = np.flatnonzero(z[idx] < cz - CEILING_SKIN_M)  # hangs below the ceiling: may be a wall's top
-            xyz_below = xyz[below]
             on_wall = np.zeros(len(idx), bool)
-            for f in walls:
-                on_wall[below[near_wall(xyz_below, f, wall_clear_m, origin)]] = True
-            idx, xyz = idx[~on_wall], xyz[~on_wall]
+            on_wall[below[near_walls(np.take(xyz, below, axis=0), self.walls, self.wall_clear_m, origin)]] = True
+            if on_wall.any():
+                off = ~on_wall
+                idx, xyz = idx[off], np.compress(off, xyz, axis=0)
             spans: dict[tuple[int, float, float], np.ndarray] = {}  # tiles of one grid row or column share a span
             for k in ks:
                 t = tiles[k]
@@ -321,13 +348,23 @@ def ceiling_part(part: ScanPart | MemoryPart, origin: np.ndarray, tiles: list[Ce
                 x1, y0 = x0 + t.frame.width_m, y1 - t.frame.height_m
                 inside = np.flatnonzero(_in_span(xyz, 0, x0, x1, origin=origin, margin=margin, cache=spans)
                                         & _in_span(xyz, 1, y0, y1, origin=origin, margin=margin, cache=spans))
-                uvd = wall_coordinates(xyz[inside], t.frame, origin)
+                uvd = wall_coordinates(np.take(xyz, inside, axis=0), t.frame, origin)
                 keep, pixel = ortho_pixels(uvd, t.frame, ortho)
                 if not len(pixel):
                     continue
-                written[k] += append_records(_tile_dir(root, k), part.key, pixel, uvd[keep, 2],
-                                             chunk.rgb[idx[inside[keep]]])
-    return written
+                written[k] += append_records(_tile_dir(root, k), key, pixel, uvd[:, 2][keep],
+                                             np.take(chunk.rgb, idx[inside[keep]], axis=0))
+        return written
+
+
+def binned_records(scratch: str | Path, tiles: int) -> np.ndarray:
+    """The records in each of the first ``tiles`` tiles' partitions (what :class:`CeilingBinning` wrote)."""
+    out = np.zeros(tiles, np.int64)
+    for k in range(tiles):
+        d = _tile_dir(Path(scratch), k)
+        if d.is_dir():
+            out[k] = sum(f.stat().st_size for f in d.glob("*.rec")) // RECORD.itemsize
+    return out
 
 
 def _in_span(xyz: np.ndarray, axis: int, lo: float, hi: float, *, origin: np.ndarray, margin: float,

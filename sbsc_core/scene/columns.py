@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..imaging.orthoimage import near_wall, ortho_pixels, orthoimage_from_pixels, wall_coordinates
+from ..imaging.orthoimage import near_walls, ortho_pixels, orthoimage_from_pixels, wall_coordinates
 from ..imaging.partition import ScanPart, append_records, folder_records
 from ..settings import ColumnSettings, OrthoimageSettings
 from ..types import CylinderFrame, Orthoimage, PointCloud, Segmentation, Wall, WallFrame
@@ -147,12 +147,10 @@ def find_columns(cloud: PointCloud, seg: Segmentation, s: ColumnSettings, *,
         walls = [w for w in seg.walls if sid is None or w.storey in (sid, None)]
         if not len(idx) or not walls:
             continue
-        xyz = cloud.xyz[idx]
-        keep = np.ones(len(idx), bool)
-        for w in walls:
-            if w.id not in lone_walls:  # a lone short "wall" may be a column's face: its points stay
-                keep &= ~near_wall(xyz, w.frame, s.wall_clear_m, origin)
-        xy = xyz[keep, :2].astype(np.float64) + origin[:2]
+        xyz = np.take(cloud.xyz, idx, axis=0)  # as cloud.xyz[idx], without fancy indexing's slow path
+        # a lone short "wall" may be a column's face: its points stay
+        keep = ~near_walls(xyz, [w.frame for w in walls if w.id not in lone_walls], s.wall_clear_m, origin)
+        xy = np.compress(keep, xyz, axis=0)[:, :2].astype(np.float64) + origin[:2]
         zz = z[idx[keep]]
         if len(xy) < 50:
             continue
