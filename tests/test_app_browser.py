@@ -112,7 +112,7 @@ def test_keyboard_review_survives_reload(browser, sample_server):
         page.locator(f".det[data-id='{target}']").click()
         page.wait_for_function(
             "() => [...document.querySelectorAll('.det img')].slice(0, 12).every(i => i.complete && i.naturalWidth > 0)")
-        page.wait_for_function("document.querySelector('#p-colour').naturalWidth > 0")
+        page.wait_for_function("() => document.querySelector('#p-colour').naturalWidth > 0")
         page.wait_for_selector("#p-history li")
         SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
         page.screenshot(path=str(SCREENSHOT))

@@ -88,7 +88,7 @@ def test_add_missed_from_the_top_and_the_panel_pending_until_confirmed(browser, 
         page.evaluate("window.scrollTo(0, 0)")
         page.click("#to-add")  # and from the top of the page
         assert page.locator("#add-box").bounding_box()["y"] < 800
-        page.wait_for_function("document.getElementById('wall-img').naturalWidth > 0")
+        page.wait_for_function("() => document.getElementById('wall-img').naturalWidth > 0")
         refs = sorted(t.split("·")[0].strip() for t in page.locator(".det .where").all_inner_texts())
         img = page.locator("#wall-img").bounding_box()
         page.mouse.click(img["x"] + img["width"] * 0.5, img["y"] + img["height"] * 0.5)
@@ -161,7 +161,7 @@ def test_project_page_puts_results_first_and_locks_after_signoff(browser, site) 
         db.dispose()
         page.goto(f"{site.url}/project.html?id={p2}")
         page.wait_for_selector(f"#title:has-text('{name}')")
-        page.wait_for_function("document.getElementById('expected').disabled")
+        page.wait_for_function("() => document.getElementById('expected').disabled")
         assert page.locator("#run-job").is_disabled()
     finally:
         page.close()

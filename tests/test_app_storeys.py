@@ -108,9 +108,9 @@ def test_gallery_filters_by_storey(project, browser) -> None:
         assert page.locator(".det").count() == len(on_s2) > 0
         assert page.locator("#p-facts").inner_text().count("S2") >= 1
         page.select_option("#f-storey", "")
-        page.wait_for_function(f"document.querySelectorAll('.det').length === {len(doc['detections'])}")
+        page.wait_for_function(f"() => document.querySelectorAll('.det').length === {len(doc['detections'])}")
         page.select_option("#f-storey", "S1")
-        page.wait_for_function(f"document.querySelectorAll('.det').length === {len(doc['detections']) - len(on_s2)}")
+        page.wait_for_function(f"() => document.querySelectorAll('.det').length === {len(doc['detections']) - len(on_s2)}")
         assert "(S1)" in page.locator(".det .where").first.inner_text()  # W01 does not carry its storey
     finally:
         page.close()

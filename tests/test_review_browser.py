@@ -75,7 +75,7 @@ def test_gallery_add_promote_and_bulk_accept(browser, srv):
         # add a missed object: choose wall and class, click on the wall's image
         page.select_option("#add-wall", "W01")
         page.select_option("#add-class", "switch")
-        page.wait_for_function("document.querySelector('#wall-img').naturalWidth > 0")
+        page.wait_for_function("() => document.querySelector('#wall-img').naturalWidth > 0")
         box = page.locator("#wall-img").bounding_box()
         page.locator("#wall-img").click(position={"x": box["width"] * 0.55, "y": box["height"] * 0.5})
         page.wait_for_selector("#add-msg:has-text('Switch on W01')")  # the library's name

@@ -65,7 +65,7 @@ def test_ceiling_object_reviewed_and_added_in_the_gallery(browser, srv):
         assert "ceiling C01" in page.locator(".det .where").first.inner_text()
         page.locator(".det").first.click()
         page.wait_for_selector("#p-facts:has-text('ceiling, seen from below')")
-        page.wait_for_function("document.querySelector('#p-colour').naturalWidth > 0")  # its crop of the ceiling
+        page.wait_for_function("() => document.querySelector('#p-colour').naturalWidth > 0")  # its crop of the ceiling
         assert "Move (metres on the ceiling)" in page.locator("#p-move-title").inner_text()
         page.keyboard.press("a")
         page.wait_for_selector(".det[data-status='accepted']")
@@ -73,7 +73,7 @@ def test_ceiling_object_reviewed_and_added_in_the_gallery(browser, srv):
         assert d["review"]["status"] == "accepted" and d["review"]["by"] == "rita" and d["surface"] == "ceiling"
         # the columns' objects under "On: columns"
         page.select_option("#f-surface", "column")
-        page.wait_for_function("document.querySelectorAll('.det').length === 2")
+        page.wait_for_function("() => document.querySelectorAll('.det').length === 2")
         # a bulk accept under "On: columns" takes the columns' objects only, and says so
         page.fill("#bulk-min", "0")
         page.click("#bulk-go")
@@ -89,7 +89,7 @@ def test_ceiling_object_reviewed_and_added_in_the_gallery(browser, srv):
         offered = page.eval_on_selector_all("#add-class option", "os => os.map(o => o.value)")
         assert offered == ["exit_light", "smoke_detector"]  # the ceiling classes of the library (model.json mount)
         page.select_option("#add-class", "smoke_detector")
-        page.wait_for_function("document.querySelector('#wall-img').naturalWidth > 0")
+        page.wait_for_function("() => document.querySelector('#wall-img').naturalWidth > 0")
         box = page.locator("#wall-img").bounding_box()
         page.locator("#wall-img").click(position={"x": box["width"] * 0.25, "y": box["height"] * 0.5})
         page.wait_for_selector("#add-msg:has-text('Smoke detector on C01')")  # the library's name
