@@ -245,13 +245,9 @@ def _away_from_stations(xy: np.ndarray, stations: np.ndarray, room: RoomSpec,
     return np.round(cand[best], 3)
 
 
-def _try_ceiling(plan: SurfacePlan, taken: list, room: RoomSpec, frame: WallFrame, *, class_id: str,
-                 xy: np.ndarray, rotation_deg: float, specs: Mapping[str, ObjectSpec]) -> bool:
-    """Add a ceiling object at plan position ``xy`` if its footprint (``specs``' size) fits the room and is free."""
-    spec = specs[class_id]
-    a = math.radians(rotation_deg)
-    ca, sa = abs(math.cos(a)), abs(math.sin(a))
-    half = np.array([spec.width_m * ca + spec.height_m * sa, spec.width_m * sa + spec.height_m * ca]) / 2
+def _claim(taken: list, room: RoomSpec, xy: np.ndarray, half: np.ndarray) -> bool:
+    """Take the plan footprint ``xy`` +- ``half`` for a ceiling object when it lies in the room
+    (0.3 m inside its outline) and 0.2 m clear of every footprint ``taken`` there before."""
     lo, hi = xy - half, xy + half
     corners = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
     grown = np.vstack([corners + d for d in ((-0.3, -0.3), (0.3, -0.3), (0.3, 0.3), (-0.3, 0.3))])
@@ -261,6 +257,18 @@ def _try_ceiling(plan: SurfacePlan, taken: list, room: RoomSpec, frame: WallFram
         if r == room.id and np.all(np.minimum(hi + 0.2, thi) - np.maximum(lo - 0.2, tlo) > 0):
             return False
     taken.append((room.id, lo, hi))
+    return True
+
+
+def _try_ceiling(plan: SurfacePlan, taken: list, room: RoomSpec, frame: WallFrame, *, class_id: str,
+                 xy: np.ndarray, rotation_deg: float, specs: Mapping[str, ObjectSpec]) -> bool:
+    """Add a ceiling object at plan position ``xy`` if its footprint (``specs``' size) fits the room and is free."""
+    spec = specs[class_id]
+    a = math.radians(rotation_deg)
+    ca, sa = abs(math.cos(a)), abs(math.sin(a))
+    half = np.array([spec.width_m * ca + spec.height_m * sa, spec.width_m * sa + spec.height_m * ca]) / 2
+    if not _claim(taken, room, xy, half):
+        return False
     uvd = frame.to_uvd(np.array([[xy[0], xy[1], frame.origin[2]]]))[0]
     plan.objects.append(SurfaceObject(class_id, f"{room.id}-C", "ceiling", frame, float(uvd[0]), float(uvd[1]),
                                       rotation_deg))
@@ -274,15 +282,8 @@ def _try_pendant(plan: SurfacePlan, taken: list, room: RoomSpec, wall: WallFrame
     spec = specs["exit_light"]
     u, n = np.asarray(wall.axis_u, float), np.asarray(wall.normal, float)
     half = np.abs(u[:2]) * spec.width_m / 2 + np.abs(n[:2]) * 0.05
-    lo, hi = xy - half, xy + half
-    corners = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
-    grown = np.vstack([corners + d for d in ((-0.3, -0.3), (0.3, -0.3), (0.3, 0.3), (-0.3, 0.3))])
-    if not point_in_outline(grown, room.outline).all():
+    if not _claim(taken, room, xy, half):
         return False
-    for r, tlo, thi in taken:
-        if r == room.id and np.all(np.minimum(hi + 0.2, thi) - np.maximum(lo - 0.2, tlo) > 0):
-            return False
-    taken.append((room.id, lo, hi))
     bottom = ceiling_z - PENDANT_DROP_M - spec.height_m
     origin = np.array([xy[0], xy[1], bottom]) - spec.width_m / 2 * u
     frame = WallFrame(origin, u.copy(), np.array([0.0, 0.0, 1.0]), n.copy(), float(spec.width_m), float(spec.height_m))
