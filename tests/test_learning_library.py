@@ -321,11 +321,10 @@ def learn_and(det: Path, rev: Path, library: Path, out: Path) -> Path:
     return out
 
 
-def _colour_hits(ortho: Orthoimage, models: Path) -> list[tuple[float, float]]:
-    """The colour candidates' centres of a wall searched with ``models`` (the wall as given)."""
+def _searched(ortho: Orthoimage, models: Path):  # noqa: ANN202 - a WallResult
+    """The walls' stages on (a copy of) ``ortho``, searched with the library at ``models``."""
     from dataclasses import replace
 
-    from sbsc_core.io.models import load_model_library
     from sbsc_core.pipeline.walls import _templates_job, process_orthoimage
     from sbsc_core.settings import DetectionSettings
 
@@ -333,21 +332,26 @@ def _colour_hits(ortho: Orthoimage, models: Path) -> list[tuple[float, float]]:
     s = DetectionSettings()
     templates, protos = _templates_job(lib, s, lib.class_ids)
     o = replace(ortho, colour=ortho.colour.copy(), depth=ortho.depth.copy(), mask=ortho.mask.copy())
-    res, _ = process_orthoimage(o, templates, protos, s)
-    return [c.centre for c in res.colour_candidates if c.class_id == "flush"]
+    return process_orthoimage(o, templates, protos, s)[0]
+
+
+def _colour_hits(ortho: Orthoimage, models: Path) -> list[tuple[float, float]]:
+    """The colour candidates' centres of class ``flush`` on a wall searched with ``models``."""
+    return [c.centre for c in _searched(ortho, models).colour_candidates if c.class_id == "flush"]
+
+
+def _near(hits: list, where: tuple) -> bool:
+    """Whether a candidate centre (row, col) lies within 6 px of ``where``."""
+    return any(abs(r - where[0]) < 6 and abs(c - where[1]) < 6 for r, c in hits)
 
 
 def test_a_taught_class_refuses_its_print_on_a_relief_much_taller_than_its_examples(tmp_path: Path) -> None:
     library, learnt, ortho, at, box = _flush_wall(tmp_path)
     meta = json.loads((learnt / "flush" / "model.json").read_text())
     assert 0.002 < min(meta["example_relief_m"]) <= max(meta["example_relief_m"]) < 0.005
-
-    def near(hits: list, where: tuple) -> bool:
-        return any(abs(r - where[0]) < 6 and abs(c - where[1]) < 6 for r, c in hits)
-
     before, after = _colour_hits(ortho, library), _colour_hits(ortho, learnt)
-    assert near(before, at) and near(before, box)  # the library alone takes the print on the box
-    assert near(after, at) and not near(after, box)  # the example stood out 3 mm, the box 20 mm
+    assert _near(before, at) and _near(before, box)  # the library alone takes the print on the box
+    assert _near(after, at) and not _near(after, box)  # the example stood out 3 mm, the box 20 mm
 
 
 def test_a_taught_class_refuses_a_depth_match_standing_out_twice_as_far_as_its_examples(tmp_path: Path) -> None:
@@ -356,11 +360,6 @@ def test_a_taught_class_refuses_a_depth_match_standing_out_twice_as_far_as_its_e
     generic 2x of the library's model and of the examples, so the library alone takes the box in
     depth and in colour. Taught, the examples measured 11 mm and their spread 0, the wall's
     noise relief is a few mm: the box is refused, the switches are kept."""
-    from dataclasses import replace
-
-    from sbsc_core.pipeline.walls import _templates_job, process_orthoimage
-    from sbsc_core.settings import DetectionSettings
-
     view, depth = socket_like(relief_m=0.012)
     library = write_library(ModelLibrary({"switch": make_model("switch", view, depth)}, "x"), tmp_path / "lib")
     own = make_template(make_model("switch", view, depth * (0.011 / 0.012)), PIXEL_M)
@@ -383,20 +382,13 @@ def test_a_taught_class_refuses_a_depth_match_standing_out_twice_as_far_as_its_e
     assert len(amps) == 2 and all(0.010 < a < 0.012 for a in amps)  # matched: no new design, the amplitudes only
 
     def hits(models: Path, source: str) -> list[tuple[float, float]]:
-        lib = load_model_library(models)
-        s = DetectionSettings()
-        templates, protos = _templates_job(lib, s, lib.class_ids)
-        o = replace(ortho, colour=ortho.colour.copy(), depth=ortho.depth.copy(), mask=ortho.mask.copy())
-        res, _ = process_orthoimage(o, templates, protos, s)
+        res = _searched(ortho, models)
         return [c.centre for c in (res.depth_candidates if source == "depth" else res.colour_candidates)]
 
-    def near(found: list, where: tuple) -> bool:
-        return any(abs(r - where[0]) < 6 and abs(c - where[1]) < 6 for r, c in found)
-
     before, after = hits(library, "depth"), hits(learnt, "depth")
-    assert near(before, controller) and all(near(before, at) for at in switches)  # 1.75x the library's model
-    assert all(near(after, at) for at in switches) and not near(after, controller)  # 1.9x the examples: refused
-    assert near(hits(library, "colour"), controller) and not near(hits(learnt, "colour"), controller)
+    assert _near(before, controller) and all(_near(before, at) for at in switches)  # 1.75x the library's model
+    assert all(_near(after, at) for at in switches) and not _near(after, controller)  # 1.9x the examples: refused
+    assert _near(hits(library, "colour"), controller) and not _near(hits(learnt, "colour"), controller)
 
 
 def _two_designs(tmp_path: Path, lib: dict, building: dict) -> tuple[list, Path]:
