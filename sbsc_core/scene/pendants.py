@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..imaging.orthoimage import near_wall
+from ..imaging.orthoimage import near_walls
 from ..settings import PendantSettings
 from ..types import PointCloud, Segmentation, WallFrame
 from .ceilings import CeilingLevels
@@ -61,12 +61,14 @@ class PendantFace(ColumnFace):
         return doc
 
 
-def _panel_face(xyz: np.ndarray, ceiling_z: float, s: PendantSettings) -> WallFrame | None:
-    """The frame of a group of points (world, float64) when they are an upright panel, else None."""
+def _panel_face(xyz: np.ndarray, ceiling_z: float, s: PendantSettings, *, size_m: tuple[float, float]
+                ) -> WallFrame | None:
+    """The frame of a group of points (world, float64) when they are an upright panel whose width
+    and height lie within ``size_m`` (smallest, largest), else None."""
     xy = xyz[:, :2]
     centre = xy.mean(axis=0)
     cov = np.cov((xy - centre).T)
-    w, v = np.linalg.eigh(cov)
+    _, v = np.linalg.eigh(cov)
     along, across = v[:, 1], v[:, 0]
     a = (xy - centre) @ along
     n = (xy - centre) @ across
@@ -75,6 +77,8 @@ def _panel_face(xyz: np.ndarray, ceiling_z: float, s: PendantSettings) -> WallFr
     z0, z1 = np.percentile(xyz[:, 2], [1.0, 99.0])
     thick, wide, tall = float(n1 - n0), float(a1 - a0), float(z1 - z0)
     if thick > s.max_thickness_m or tall < s.upright_ratio * max(thick, 1e-3):
+        return None
+    if not (size_m[0] <= wide <= size_m[1] and size_m[0] <= tall <= size_m[1]):
         return None
     # the side seen: the one with more points on it (within 1 cm of its extreme)
     plus = int(np.count_nonzero(n > n1 - 0.01))
@@ -132,11 +136,9 @@ def _hangs(cloud: PointCloud, seg: Segmentation, pts: np.ndarray, *, storey: str
     idx = idx[(y > pmin[1]) & (y < pmax[1]) & (z > floor_z + s.below_m) & (z < zmin - s.margin_m)]
     if len(idx) <= s.max_under_share * len(pts):
         return True
-    keep = np.ones(len(idx), bool)
-    for w in seg.walls:
-        if storey is None or w.storey in (storey, None):
-            keep &= ~near_wall(cloud.xyz[idx], w.frame, s.wall_clear_m, cloud.origin)
-    return int(np.count_nonzero(keep)) <= s.max_under_share * len(pts)
+    walls = [w.frame for w in seg.walls if storey is None or w.storey in (storey, None)]
+    on_walls = near_walls(cloud.xyz[idx], walls, s.wall_clear_m, cloud.origin)
+    return int(np.count_nonzero(~on_walls)) <= s.max_under_share * len(pts)
 
 
 def find_pendants(cloud: PointCloud, seg: Segmentation, s: PendantSettings, *,
@@ -208,12 +210,8 @@ def find_pendants(cloud: PointCloud, seg: Segmentation, s: PendantSettings, *,
             if len(idx) < s.min_points:
                 continue
             pts = np.column_stack([xy[idx], z_band[idx]])
-            frame = _panel_face(pts, float(top[idx].min()), s)
+            frame = _panel_face(pts, float(top[idx].min()), s, size_m=(lo_m, hi_m))
             if frame is None:
-                continue
-            wide = frame.width_m - 2 * s.margin_m
-            tall = float(np.percentile(pts[:, 2], 99.0) - np.percentile(pts[:, 2], 1.0))
-            if not (lo_m <= wide <= hi_m and lo_m <= tall <= hi_m):
                 continue
             if not _hangs(cloud, seg, pts, storey=sid, floor_z=fz, s=s):
                 continue
