@@ -163,11 +163,12 @@ def detect_pendants(parts: list[ScanPart | MemoryPart], origin: np.ndarray,
     if not faces or not classes:
         return ColumnResults({}, {}, classes, [], [])
     reach = [f.frame.width_m / 2 + s.orthoimage.depth_range_m[1] + 0.05 for f in faces]
-    jobs = [dict(part=part, origin=origin, faces=faces, reach_m=reach, scratch=str(scratch) + "/pendants",
-                 ortho=s.orthoimage) for part in parts]
+    own = Path(scratch) / "pendants"  # beside the columns' partitions, not among them
+    jobs = [dict(part=part, origin=origin, faces=faces, reach_m=reach, scratch=str(own), ortho=s.orthoimage)
+            for part in parts]
     kept, results, templates = surface_stage(
         executor, stage=Stage.CEILINGS, part_fn=column_part, part_jobs=jobs, job_fn=column_face_job, surfaces=faces,
-        library=library, classes=classes, s=s, scratch=Path(str(scratch) + "/pendants"), parked=parked,
+        library=library, classes=classes, s=s, scratch=own, parked=parked,
         in_flight=in_flight, progress=no_progress, part_executor=part_executor)
     progress(Stage.CEILINGS, 1.0)
     timings["pendants"] = time.perf_counter() - t0
