@@ -111,6 +111,25 @@ def test_two_instances_in_one_roi_are_both_found() -> None:
     assert sorted(round(x.centre[1]) for x in socks) == [100, 122]
 
 
+def test_a_frame_around_the_wall_gathers_no_objects_into_its_roi() -> None:
+    """A door frame joined to the skirting spans the wall: its box would merge every object
+    inside it into one RoI, which holds at most ``max_peaks_per_roi`` of a class."""
+    templates = make_templates(synthetic_library(), PIXEL_M)
+    ortho, area = make_wall(seed=9, holes=0)
+    for r0, r1, c0, c1 in ((40, 280, 20, 30), (40, 280, 470, 480), (270, 280, 20, 480)):
+        ortho.depth[r0:r1, c0:c1] = 0.006  # a 5 cm architrave, 6 mm proud, and the skirting
+    cols = [80, 160, 240, 320, 400]
+    for i, c in enumerate(cols):
+        paste(ortho, area, templates["socket"], (150.0, float(c)), seed=i)
+    s = DepthRecognitionSettings()
+    rois = depth_rois(ortho, area, s, templates)
+    assert sum(r.height > 200 for r in rois) == 1  # the frame: its own RoI
+    for c in cols:  # each socket in a RoI of its own size
+        assert [r for r in rois if _contains(r, 150, c) and r.width < 40], c
+    socks = [x for x in match_depth(ortho, area, rois, templates, s) if x.class_id == "socket"]
+    assert sorted(round(x.centre[1]) for x in socks) == cols
+
+
 def test_a_part_of_something_larger_is_not_an_instance() -> None:
     """Isolation: relief continuing past a side of the footprint (a casing, a double socket)."""
     templates = make_templates(synthetic_library(), PIXEL_M)

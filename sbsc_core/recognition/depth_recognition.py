@@ -355,8 +355,12 @@ def depth_rois(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSett
     the ceiling and the next walls) is no object. With the ``templates`` searched, a
     region longer than ``max_roi_factor`` times the largest model and thinner than half the
     smallest is dropped too (a pipe, a cable, a step in the plaster): such regions would
-    otherwise merge the objects near them into one wall-sized RoI. ``images`` (of this
-    wall) saves computing them again.
+    otherwise merge the objects near them into one wall-sized RoI. A region longer than
+    that which is not thin (a door frame joined to the skirting along the floor, whose box
+    spans the wall) stays a RoI of its own but gathers no other region into its box: every
+    object inside it keeps its own RoI instead of sharing one that holds at most
+    ``max_peaks_per_roi`` instances of a class. ``images`` (of this wall) saves computing
+    them again.
     """
     jd = (images or depth_images(ortho, area, settings)).levelled
     limits = None
@@ -405,10 +409,16 @@ def _rois_from_jd(jd: np.ndarray, wall: np.ndarray, settings: DepthRecognitionSe
         inner[margin_px:-margin_px, margin_px:-margin_px] = 1
         closed &= inner
     boxes = boxes_from_mask(closed > 0, settings.roi_min_px)
-    if limits is not None:
-        longest, thinnest = limits
-        boxes = [b for b in boxes if max(b.height, b.width) <= longest or min(b.height, b.width) >= thinnest]
-    return cluster_boxes(boxes, settings.roi_merge_gap_px, settings.roi_merge_overlap)
+    if limits is None:
+        return cluster_boxes(boxes, settings.roi_merge_gap_px, settings.roi_merge_overlap)
+    longest, thinnest = limits
+    boxes = [b for b in boxes if max(b.height, b.width) <= longest or min(b.height, b.width) >= thinnest]
+    # a region reaching further than any object of the library is no object's part: its box
+    # (a door frame joined to the skirting spans the wall) gathers no other region
+    large = [b for b in boxes if max(b.height, b.width) > longest]
+    objects = [b for b in boxes if max(b.height, b.width) <= longest]
+    return sorted(cluster_boxes(objects, settings.roi_merge_gap_px, settings.roi_merge_overlap) + large,
+                  key=lambda b: (b.r0, b.c0, b.r1, b.c1))
 
 
 # --------------------------------------------------------------------------- matching
