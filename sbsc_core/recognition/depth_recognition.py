@@ -70,7 +70,7 @@ Additions to the paper, each a named setting:
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -512,6 +512,9 @@ class ModelView:
     image: np.ndarray  # J_D smoothed (correlated), other objects in front at the wall plane
     known: np.ndarray  # pixels with data that are not another object in front
     front: np.ndarray | None = None  # the other objects in front with their edges (None: none)
+    # what the correlation around each RoI needs of this image alone, by RoI and window
+    # size: shared by the templates matched on it (match_in_rois's ``windows``)
+    windows: dict = field(default_factory=dict, repr=False, compare=False)
 
     def front_share(self, box: Box) -> float:
         """The share of ``box`` covered by objects in front (0 without any)."""
@@ -740,7 +743,7 @@ def match_depth(
                               sigma_px=settings.match_sigma_px, gain_range=settings.gain_range,
                               min_energy=min_energy, accept=plausible, known=v.known,
                               min_known=settings.min_known_share, full_known=settings.full_known_share,
-                              masked_pre=settings.masked_pre_threshold)
+                              masked_pre=settings.masked_pre_threshold, windows=v.windows)
         reach = settings.template_pad_px + settings.isolation_gap_px + settings.isolation_width_px
 
         def verified(m) -> bool:
