@@ -113,7 +113,8 @@ def _kmeans_1d(values: np.ndarray, k: int, merge_tol: float, bins: int = 256,
             else:
                 groups.append([v])
         if len(groups) < centres.size:
-            centres = np.array([np.mean(g) for g in groups])
+            # np.mean(g)'s value: the sum as np.add.reduce adds, over the count
+            centres = np.array([float(np.add.reduce(np.asarray(g))) / len(g) for g in groups])
     # labels: the nearest centre (ties to the lower), as _nearest gives them, by comparisons
     labels = np.zeros(x.size, np.intp)
     above = [x.size]

@@ -338,6 +338,9 @@ class DepthImages:
     jd: np.ndarray  # J_D (depth_image_known)
     known: np.ndarray  # its pixels with data, enclosed holes or openings
     levelled: np.ndarray  # J_D minus the local wall level (levelled)
+    # (settings, their relief_thresholds of ``levelled``): the RoIs' and the matches' noise, computed once
+    thresholds: tuple[DepthRecognitionSettings, tuple[float, float]] | None = field(
+        default=None, repr=False, compare=False)
 
 
 def depth_images(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSettings) -> DepthImages:
@@ -364,6 +367,9 @@ def depth_rois(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSett
         sides = [(t.height_px, t.width_px) for t in templates.values()]
         limits = (settings.max_roi_factor * max(max(s) for s in sides), 0.5 * min(min(s) for s in sides))
     margin = int(round(settings.border_margin_m / ortho.pixel_m))
+    if images is not None:
+        return _rois_from_jd(jd, None, settings, margin, limits,
+                             thresholds=_levelled_thresholds(ortho, area, images, settings))
     return _rois_from_jd(jd, _plain_wall(ortho, area, jd, settings), settings, margin, limits)
 
 
@@ -390,12 +396,24 @@ def noise_relief(ortho: Orthoimage, area: WallArea, images: DepthImages,
     """The wall's noise relief (metres): the smallest relief told from its plain wall,
     ``min_relief_m`` raised to ``noise_k`` robust sigmas of the depth noise measured there
     (:func:`relief_thresholds` on the levelled J_D, as :func:`match_depth` uses it)."""
-    return relief_thresholds(images.levelled, _plain_wall(ortho, area, images.levelled, settings), settings)[0]
+    return _levelled_thresholds(ortho, area, images, settings)[0]
 
 
-def _rois_from_jd(jd: np.ndarray, wall: np.ndarray, settings: DepthRecognitionSettings, margin_px: int = 0,
-                  limits: tuple[float, float] | None = None) -> list[Box]:
-    relief_m, grad_m = relief_thresholds(jd, wall, settings)
+def _levelled_thresholds(ortho: Orthoimage, area: WallArea, images: DepthImages,
+                         settings: DepthRecognitionSettings) -> tuple[float, float]:
+    """:func:`relief_thresholds` of the levelled J_D on its plain wall, kept on ``images``
+    (the RoIs, the matches and the taught amplitudes of one wall read the same)."""
+    if images.thresholds is None or images.thresholds[0] is not settings:
+        wall = _plain_wall(ortho, area, images.levelled, settings)
+        images.thresholds = (settings, relief_thresholds(images.levelled, wall, settings))
+    return images.thresholds[1]
+
+
+def _rois_from_jd(jd: np.ndarray, wall: np.ndarray | None, settings: DepthRecognitionSettings, margin_px: int = 0,
+                  limits: tuple[float, float] | None = None, *,
+                  thresholds: tuple[float, float] | None = None) -> list[Box]:
+    """RoIs of ``jd``; ``thresholds``: :func:`relief_thresholds` of it on ``wall``, when known."""
+    relief_m, grad_m = relief_thresholds(jd, wall, settings) if thresholds is None else thresholds
     edges = relief_edges(jd, settings, grad_m)
     relief = np.abs(_smooth(jd, settings.canny_sigma_px)) >= relief_m
     relief = cv2.morphologyEx(relief.astype(np.uint8), cv2.MORPH_OPEN, np.ones((2, 2), np.uint8)) > 0
