@@ -858,10 +858,14 @@ def refine_turn(search: Callable[[float, list[Box]], list[Candidate]], cand: Can
     """
     best = cand
     place = [box_at(cand.centre, 1, 1)]
+    tried: dict[float, Candidate | None] = {}  # by angle: a step back to an angle tried is not searched again
 
     def at(a: float) -> Candidate | None:
-        found = search(round(a % 360.0, 3), place)
-        return max(found, key=lambda c: c.score) if found else None
+        a = round(a % 360.0, 3)
+        if a not in tried:
+            found = search(a, place)
+            tried[a] = max(found, key=lambda c: c.score) if found else None
+        return tried[a]
 
     for step in steps:
         for _ in range(6):
