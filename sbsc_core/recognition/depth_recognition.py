@@ -783,6 +783,8 @@ def match_depth(
         t = templates[cid]
         if t.depth is None or t.relief_m() < settings.min_template_relief_m:
             continue
+        for v in views.values():  # RoI windows are shared by one class's models and turns, then let go (memory)
+            v.windows.clear()
         # the reference model and any further ones (exemplars): each is searched, NMS keeps the best
         models = [m for i, m in enumerate(t.depth_models())
                   if i == 0 or float(np.abs(m).max()) >= settings.min_template_relief_m]
