@@ -531,7 +531,7 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
     orthoimage's pixels), for the fine relief comparison; ``gain_range`` (the depth
     recognizer's), for the amplitude check (:func:`amplitude_compatible`).
     """
-    if not settings.enabled:
+    if not settings.enabled or not (depth or colour):  # nothing to decide: this wall's prototypes are not needed
         return depth, colour
     groups = list(_library_sets(prototypes, settings))
     protos = prototypes.for_wall(image.wall_rgb, image.threshold, image.noise_rgb)
