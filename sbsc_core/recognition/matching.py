@@ -276,20 +276,34 @@ def patch_ncc(patch: np.ndarray, template: np.ndarray, mask: np.ndarray | None =
     return float((p * t).sum() / den) if den > 1e-12 else -1.0
 
 
-def least_squares_gain(patch: np.ndarray, template: np.ndarray, known: np.ndarray | None = None) -> float:
-    """Least-squares amplitude of ``patch`` relative to ``template`` (over ``known`` pixels if given)."""
+def least_squares_gain(patch: np.ndarray, template: np.ndarray, known: np.ndarray | None = None, *,
+                       centred: tuple[np.ndarray, float] | None = None) -> float:
+    """Least-squares amplitude of ``patch`` relative to ``template`` (over ``known`` pixels if given).
+
+    ``centred``: :func:`centred_template` of ``template``, when every pixel counts (``known``
+    None) and the caller measures many patches against one template.
+    """
     if known is not None:
         if known.sum() < 2:
             return 0.0
         t = template[known].astype(np.float64)
         x = patch[known].astype(np.float64)
+        t = t - t.mean(axis=0)
+        tt = float((t * t).sum())
     else:
+        t, tt = centred_template(template) if centred is None else centred
         n = template.shape[0] * template.shape[1]
-        t = template.reshape(n, -1).astype(np.float64)
         x = patch.reshape(n, -1).astype(np.float64)
-    t = t - t.mean(axis=0)
-    tt = float((t * t).sum())
     return float((t * (x - x.mean(axis=0))).sum() / tt) if tt > 1e-18 else 0.0
+
+
+def centred_template(template: np.ndarray) -> tuple[np.ndarray, float]:
+    """``template``'s pixels (n, channels) in float64 less their mean, and their sum of squares
+    (what :func:`least_squares_gain` measures every patch against)."""
+    n = template.shape[0] * template.shape[1]
+    t = template.reshape(n, -1).astype(np.float64)
+    t = t - t.mean(axis=0)
+    return t, float((t * t).sum())
 
 
 def window_energy(region: np.ndarray, ph: int, pw: int) -> np.ndarray:
@@ -440,6 +454,7 @@ def match_in_rois(
     if float(((tp - tp.reshape(ph * pw, -1).mean(axis=0)) ** 2).sum()) < 1e-18:
         return []
     opts = _Search(pad_px, margin_px, min_energy, min_known, full_known, masked_pre)
+    centred = centred_template(tp)  # the gain of every unmasked peak is measured against it
     out: list[Match] = []
     for roi in rois:
         c = _correlate_around(image, tp, (h, w), roi, known=known if image.ndim == 2 else None, o=opts,
@@ -452,7 +467,7 @@ def match_in_rois(
             if c.masked[y, x] and c.known is not None:
                 gain = least_squares_gain(patch, tp, c.known[y:y + ph, x:x + pw] > 0)
             else:
-                gain = least_squares_gain(patch, tp)
+                gain = least_squares_gain(patch, tp, centred=centred)
             if gain_range is not None and not gain_range[0] <= gain <= gain_range[1]:
                 return REFUSE_POINT  # a wrong amplitude: not this class here, look on
             dy, dx = subpixel_offset(c.corr, y, x)
