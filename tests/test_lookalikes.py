@@ -18,7 +18,12 @@ from sbsc_core.recognition.colour_recognition import (
 )
 from sbsc_core.recognition.consensus import consensus_all
 from sbsc_core.recognition.depth_recognition import depth_rois, match_depth
-from sbsc_core.recognition.lookalikes import content_box, lookalike_sets, prepare_library, resolve_on_wall
+from sbsc_core.recognition.lookalikes import (
+    content_box,
+    lookalike_sets,
+    prepare_library,
+    resolve_on_wall,
+)
 from sbsc_core.recognition.templates import make_templates
 from sbsc_core.settings import DetectionSettings
 from sbsc_core.types import Box, Candidate, ModelLibrary, ObjectModel, Orthoimage, WallArea
