@@ -18,7 +18,12 @@ from sbsc_core.recognition.colour_recognition import (
 )
 from sbsc_core.recognition.consensus import consensus_all
 from sbsc_core.recognition.depth_recognition import depth_rois, match_depth
-from sbsc_core.recognition.lookalikes import content_box, lookalike_sets, resolve_on_wall
+from sbsc_core.recognition.lookalikes import (
+    content_box,
+    lookalike_sets,
+    prepare_library,
+    resolve_on_wall,
+)
 from sbsc_core.recognition.templates import make_templates
 from sbsc_core.settings import DetectionSettings
 from sbsc_core.types import Box, Candidate, ModelLibrary, ObjectModel, Orthoimage, WallArea
@@ -90,6 +95,26 @@ def test_lookalike_sets_come_from_the_library(library) -> None:
     s = DetectionSettings()
     templates = make_templates(library, 0.005)
     assert lookalike_sets(templates, s.lookalikes) == [frozenset({"extinguisher_sign", "call_point_sign"})]
+
+
+def test_a_prepared_library_reaches_a_wall_task_and_decides_alike(library) -> None:
+    """The look-alike sets, same-size pairs and relief models made once (prepare_library)
+    travel with the prototypes to a wall's task (pickled) and give the same decisions."""
+    import pickle
+
+    s = DetectionSettings()
+    w = _recognized(library, {"extinguisher_sign": (80.0, 120.0), "call_point_sign": (200.0, 330.0)}, s, seed=0)
+    fresh = resolve_on_wall(w.depth, w.colour, w.image, learn_prototypes(w.templates, s.colour), s.lookalikes)
+    prepared = prepare_library(learn_prototypes(w.templates, s.colour), s.lookalikes)
+    received = pickle.loads(pickle.dumps(prepared))
+    made = set(received._cache)
+    assert ("relief_models",) in made and ("same_size_pairs", s.lookalikes.size_tolerance) in made
+    assert [frozenset({"extinguisher_sign", "call_point_sign"})] in list(received._cache.values())
+    again = resolve_on_wall(w.depth, w.colour, w.image, received, s.lookalikes)
+    assert set(received._cache) - made  # only this wall's prototypes were made there
+    assert all(k[0] not in ("lookalike_sets", "same_size_pairs", "relief_models") for k in set(received._cache) - made)
+    assert [(c.class_id, c.centre, c.score, c.lookalike_margin) for c in again[0] + again[1]] == \
+        [(c.class_id, c.centre, c.score, c.lookalike_margin) for c in fresh[0] + fresh[1]]
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -33,7 +33,7 @@ from ..recognition.colour_recognition import (
     match_colour,
 )
 from ..recognition.depth_recognition import depth_images, depth_rois, match_depth, noise_relief
-from ..recognition.lookalikes import library_relief_models, resolve_on_wall
+from ..recognition.lookalikes import library_relief_models, prepare_library, resolve_on_wall
 from ..recognition.templates import ModelTemplate, make_templates
 from ..settings import DetectionSettings
 from ..types import (
@@ -131,9 +131,11 @@ def _partition_wall_job(scratch: str, w: int, wall_id: str, frame: WallFrame, *,
 
 def _templates_job(library: ModelLibrary, s: DetectionSettings, classes: list[str]
                    ) -> tuple[dict[str, ModelTemplate], ColourPrototypes]:
-    """The templates of the searched classes at the orthoimage's pixel size, and their colour prototypes."""
+    """The templates of the searched classes at the orthoimage's pixel size, and their colour
+    prototypes with what the look-alike decisions read of the library alone made once
+    (:func:`~sbsc_core.recognition.lookalikes.prepare_library`: each wall's task receives it)."""
     templates = make_templates(library, s.orthoimage.pixel_m, classes)
-    return templates, learn_prototypes(templates, s.colour)
+    return templates, prepare_library(learn_prototypes(templates, s.colour), s.lookalikes)
 
 
 def _wall_cloud(cloud: PointCloud, wall: Wall) -> tuple[PointCloud, Wall]:

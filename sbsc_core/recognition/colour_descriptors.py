@@ -113,7 +113,8 @@ def _kmeans_1d(values: np.ndarray, k: int, merge_tol: float, bins: int = 256,
             else:
                 groups.append([v])
         if len(groups) < centres.size:
-            centres = np.array([np.mean(g) for g in groups])
+            # np.mean(g)'s value: the sum as np.add.reduce adds, over the count
+            centres = np.array([float(np.add.reduce(np.asarray(g))) / len(g) for g in groups])
     # labels: the nearest centre (ties to the lower), as _nearest gives them, by comparisons
     labels = np.zeros(x.size, np.intp)
     above = [x.size]
@@ -294,11 +295,13 @@ def normalise_descriptors(v: np.ndarray, settings: ColourRecognitionSettings | N
     s = settings or ColourRecognitionSettings()
     out = np.array(v, np.float64, copy=True)
     out[..., 4] = np.minimum(out[..., 4], s.segment_cap) / s.segment_cap
-    for i in (5, 6, 9, 10):
-        out[..., i] = out[..., i] / s.ab_scale
-    for i in (2, 3, 7, 8, 11, 12, 13, 14):
-        out[..., i] = np.clip(out[..., i], 0.0, 1.0)
+    out[..., _AB] /= s.ab_scale  # element by element: one call for the columns, the same values
+    out[..., _UNIT] = np.clip(out[..., _UNIT], 0.0, 1.0)
     return out
+
+
+_AB = [5, 6, 9, 10]  # a and b: divided by ab_scale
+_UNIT = [2, 3, 7, 8, 11, 12, 13, 14]  # shares, ratios, roundness and energy: within [0, 1]
 
 
 def descriptor_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray | float:

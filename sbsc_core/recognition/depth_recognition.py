@@ -70,7 +70,7 @@ Additions to the paper, each a named setting:
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -338,6 +338,9 @@ class DepthImages:
     jd: np.ndarray  # J_D (depth_image_known)
     known: np.ndarray  # its pixels with data, enclosed holes or openings
     levelled: np.ndarray  # J_D minus the local wall level (levelled)
+    # (settings, their relief_thresholds of ``levelled``): the RoIs' and the matches' noise, computed once
+    thresholds: tuple[DepthRecognitionSettings, tuple[float, float]] | None = field(
+        default=None, repr=False, compare=False)
 
 
 def depth_images(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSettings) -> DepthImages:
@@ -368,6 +371,9 @@ def depth_rois(ortho: Orthoimage, area: WallArea, settings: DepthRecognitionSett
         sides = [(t.height_px, t.width_px) for t in templates.values()]
         limits = (settings.max_roi_factor * max(max(s) for s in sides), 0.5 * min(min(s) for s in sides))
     margin = int(round(settings.border_margin_m / ortho.pixel_m))
+    if images is not None:
+        return _rois_from_jd(jd, None, settings, margin, limits,
+                             thresholds=_levelled_thresholds(ortho, area, images, settings))
     return _rois_from_jd(jd, _plain_wall(ortho, area, jd, settings), settings, margin, limits)
 
 
@@ -394,12 +400,24 @@ def noise_relief(ortho: Orthoimage, area: WallArea, images: DepthImages,
     """The wall's noise relief (metres): the smallest relief told from its plain wall,
     ``min_relief_m`` raised to ``noise_k`` robust sigmas of the depth noise measured there
     (:func:`relief_thresholds` on the levelled J_D, as :func:`match_depth` uses it)."""
-    return relief_thresholds(images.levelled, _plain_wall(ortho, area, images.levelled, settings), settings)[0]
+    return _levelled_thresholds(ortho, area, images, settings)[0]
 
 
-def _rois_from_jd(jd: np.ndarray, wall: np.ndarray, settings: DepthRecognitionSettings, margin_px: int = 0,
-                  limits: tuple[float, float] | None = None) -> list[Box]:
-    relief_m, grad_m = relief_thresholds(jd, wall, settings)
+def _levelled_thresholds(ortho: Orthoimage, area: WallArea, images: DepthImages,
+                         settings: DepthRecognitionSettings) -> tuple[float, float]:
+    """:func:`relief_thresholds` of the levelled J_D on its plain wall, kept on ``images``
+    (the RoIs, the matches and the taught amplitudes of one wall read the same)."""
+    if images.thresholds is None or images.thresholds[0] is not settings:
+        wall = _plain_wall(ortho, area, images.levelled, settings)
+        images.thresholds = (settings, relief_thresholds(images.levelled, wall, settings))
+    return images.thresholds[1]
+
+
+def _rois_from_jd(jd: np.ndarray, wall: np.ndarray | None, settings: DepthRecognitionSettings, margin_px: int = 0,
+                  limits: tuple[float, float] | None = None, *,
+                  thresholds: tuple[float, float] | None = None) -> list[Box]:
+    """RoIs of ``jd``; ``thresholds``: :func:`relief_thresholds` of it on ``wall``, when known."""
+    relief_m, grad_m = relief_thresholds(jd, wall, settings) if thresholds is None else thresholds
     edges = relief_edges(jd, settings, grad_m)
     relief = np.abs(_smooth(jd, settings.canny_sigma_px)) >= relief_m
     relief = cv2.morphologyEx(relief.astype(np.uint8), cv2.MORPH_OPEN, np.ones((2, 2), np.uint8)) > 0
@@ -522,6 +540,9 @@ class ModelView:
     image: np.ndarray  # J_D smoothed (correlated), other objects in front at the wall plane
     known: np.ndarray  # pixels with data that are not another object in front
     front: np.ndarray | None = None  # the other objects in front with their edges (None: none)
+    # what the correlation around each RoI needs of this image alone, by RoI and window
+    # size: shared by the templates matched on it (match_in_rois's ``windows``)
+    windows: dict = field(default_factory=dict, repr=False, compare=False)
 
     def front_share(self, box: Box) -> float:
         """The share of ``box`` covered by objects in front (0 without any)."""
@@ -750,7 +771,7 @@ def match_depth(
                               sigma_px=settings.match_sigma_px, gain_range=settings.gain_range,
                               min_energy=min_energy, accept=plausible, known=v.known,
                               min_known=settings.min_known_share, full_known=settings.full_known_share,
-                              masked_pre=settings.masked_pre_threshold)
+                              masked_pre=settings.masked_pre_threshold, windows=v.windows)
         reach = settings.template_pad_px + settings.isolation_gap_px + settings.isolation_width_px
 
         def verified(m) -> bool:
@@ -772,6 +793,8 @@ def match_depth(
         t = templates[cid]
         if t.depth is None or t.relief_m() < settings.min_template_relief_m:
             continue
+        for v in views.values():  # RoI windows are shared by one class's models and turns, then let go (memory)
+            v.windows.clear()
         # the reference model and any further ones (exemplars): each is searched, NMS keeps the best
         models = [m for i, m in enumerate(t.depth_models())
                   if i == 0 or float(np.abs(m).max()) >= settings.min_template_relief_m]
@@ -847,10 +870,14 @@ def refine_turn(search: Callable[[float, list[Box]], list[Candidate]], cand: Can
     """
     best = cand
     place = [box_at(cand.centre, 1, 1)]
+    tried: dict[float, Candidate | None] = {}  # by angle: a step back to an angle tried is not searched again
 
     def at(a: float) -> Candidate | None:
-        found = search(round(a % 360.0, 3), place)
-        return max(found, key=lambda c: c.score) if found else None
+        a = round(a % 360.0, 3)
+        if a not in tried:
+            found = search(a, place)
+            tried[a] = max(found, key=lambda c: c.score) if found else None
+        return tried[a]
 
     for step in steps:
         for _ in range(6):

@@ -457,6 +457,35 @@ def relief_models(templates: dict[str, ModelTemplate]
     return models, offsets
 
 
+def _library_sets(prototypes: ColourPrototypes, settings: LookalikeSettings) -> list[frozenset[str]]:
+    """:func:`lookalike_sets` of the library's templates, made once per library (cached on ``prototypes``)."""
+    key = ("lookalike_sets", settings.size_tolerance, settings.min_depth_ncc, settings.max_colour_delta_e,
+           settings.relief_decides, settings.depth_alike_any_colour)
+    if key not in prototypes._cache:
+        prototypes._cache[key] = lookalike_sets(prototypes.templates, settings)  # type: ignore[assignment]
+    return prototypes._cache[key]  # type: ignore[return-value]
+
+
+def _library_pairs(prototypes: ColourPrototypes, settings: LookalikeSettings) -> list[tuple[str, str]]:
+    """:func:`same_size_pairs` of the library's templates, made once per library (cached on ``prototypes``)."""
+    key = ("same_size_pairs", settings.size_tolerance)
+    if key not in prototypes._cache:
+        prototypes._cache[key] = same_size_pairs(prototypes.templates, settings)  # type: ignore[assignment]
+    return prototypes._cache[key]  # type: ignore[return-value]
+
+
+def prepare_library(prototypes: ColourPrototypes, settings: LookalikeSettings) -> ColourPrototypes:
+    """``prototypes`` with what every wall's :func:`resolve_on_wall` reads of the library alone
+    (the look-alike sets, the same-size pairs, the relief models) made now, in their cache:
+    a wall's task that receives them (pickled with it) does not make them again."""
+    library_relief_models(prototypes)
+    if settings.enabled:
+        _library_sets(prototypes, settings)
+        if settings.colour_confusable:
+            _library_pairs(prototypes, settings)
+    return prototypes
+
+
 def library_relief_models(prototypes: ColourPrototypes
                           ) -> tuple[dict[str, np.ndarray | list[np.ndarray]], dict[str, tuple[float, float]]]:
     """:func:`relief_models` of the library's templates, made once per library (cached on
@@ -502,19 +531,12 @@ def resolve_on_wall(depth: list[Candidate], colour: list[Candidate], image: Colo
     orthoimage's pixels), for the fine relief comparison; ``gain_range`` (the depth
     recognizer's), for the amplitude check (:func:`amplitude_compatible`).
     """
-    if not settings.enabled:
+    if not settings.enabled or not (depth or colour):  # nothing to decide: this wall's prototypes are not needed
         return depth, colour
-    key = ("lookalike_sets", settings.size_tolerance, settings.min_depth_ncc, settings.max_colour_delta_e,
-           settings.relief_decides, settings.depth_alike_any_colour)
-    if key not in prototypes._cache:
-        prototypes._cache[key] = lookalike_sets(prototypes.templates, settings)  # type: ignore[assignment]
-    groups: list[frozenset[str]] = list(prototypes._cache[key])  # type: ignore[arg-type]
+    groups = list(_library_sets(prototypes, settings))
     protos = prototypes.for_wall(image.wall_rgb, image.threshold, image.noise_rgb)
     if settings.colour_confusable:
-        pkey = ("same_size_pairs", settings.size_tolerance)
-        if pkey not in prototypes._cache:
-            prototypes._cache[pkey] = same_size_pairs(prototypes.templates, settings)  # type: ignore[assignment]
-        pairs: list[tuple[str, str]] = prototypes._cache[pkey]  # type: ignore[assignment]
+        pairs = _library_pairs(prototypes, settings)
         groups += [g for g in colour_confusable(protos, prototypes.templates, settings, prototypes.settings.mu_c,
                                                 pairs=pairs) if not any(g <= h for h in groups)]
     if not groups:

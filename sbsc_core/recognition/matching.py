@@ -276,20 +276,34 @@ def patch_ncc(patch: np.ndarray, template: np.ndarray, mask: np.ndarray | None =
     return float((p * t).sum() / den) if den > 1e-12 else -1.0
 
 
-def least_squares_gain(patch: np.ndarray, template: np.ndarray, known: np.ndarray | None = None) -> float:
-    """Least-squares amplitude of ``patch`` relative to ``template`` (over ``known`` pixels if given)."""
+def least_squares_gain(patch: np.ndarray, template: np.ndarray, known: np.ndarray | None = None, *,
+                       centred: tuple[np.ndarray, float] | None = None) -> float:
+    """Least-squares amplitude of ``patch`` relative to ``template`` (over ``known`` pixels if given).
+
+    ``centred``: :func:`centred_template` of ``template``, when every pixel counts (``known``
+    None) and the caller measures many patches against one template.
+    """
     if known is not None:
         if known.sum() < 2:
             return 0.0
         t = template[known].astype(np.float64)
         x = patch[known].astype(np.float64)
+        t = t - t.mean(axis=0)
+        tt = float((t * t).sum())
     else:
+        t, tt = centred_template(template) if centred is None else centred
         n = template.shape[0] * template.shape[1]
-        t = template.reshape(n, -1).astype(np.float64)
         x = patch.reshape(n, -1).astype(np.float64)
-    t = t - t.mean(axis=0)
-    tt = float((t * t).sum())
     return float((t * (x - x.mean(axis=0))).sum() / tt) if tt > 1e-18 else 0.0
+
+
+def centred_template(template: np.ndarray) -> tuple[np.ndarray, float]:
+    """``template``'s pixels (n, channels) in float64 less their mean, and their sum of squares
+    (what :func:`least_squares_gain` measures every patch against)."""
+    n = template.shape[0] * template.shape[1]
+    t = template.reshape(n, -1).astype(np.float64)
+    t = t - t.mean(axis=0)
+    return t, float((t * t).sum())
 
 
 def window_energy(region: np.ndarray, ph: int, pw: int) -> np.ndarray:
@@ -402,6 +416,7 @@ def match_in_rois(
     min_known: float = 0.0,
     full_known: float = 1.0,
     masked_pre: float = -1.0,
+    windows: dict | None = None,
 ) -> list[Match]:
     """Normalised cross-correlation of ``template`` (padded by ``pad_px`` of zeros) around RoIs.
 
@@ -424,6 +439,10 @@ def match_in_rois(
         its known pixels only (:func:`masked_ncc`; the higher coefficient counts, the gain
         is then the masked one), computed only around windows reaching ``masked_pre`` in
         the plain map.
+    windows : a dict the caller keeps across calls on the same ``image`` and ``known``:
+        what a RoI's map needs of the image alone (its crop, the flat windows, the known
+        shares), computed once per RoI and window size for every template of that size
+        (a model's turns by 180 degrees, classes of one size).
 
     Returns
     -------
@@ -435,9 +454,11 @@ def match_in_rois(
     if float(((tp - tp.reshape(ph * pw, -1).mean(axis=0)) ** 2).sum()) < 1e-18:
         return []
     opts = _Search(pad_px, margin_px, min_energy, min_known, full_known, masked_pre)
+    centred = centred_template(tp)  # the gain of every unmasked peak is measured against it
     out: list[Match] = []
     for roi in rois:
-        c = _correlate_around(image, tp, (h, w), roi, known=known if image.ndim == 2 else None, o=opts)
+        c = _correlate_around(image, tp, (h, w), roi, known=known if image.ndim == 2 else None, o=opts,
+                              windows=windows)
 
         def judge(y: int, x: int, c: _RoiCorrelation = c) -> str:
             if c.share is not None and c.share[y, x] < min_known:  # seen too little: no object here
@@ -446,7 +467,7 @@ def match_in_rois(
             if c.masked[y, x] and c.known is not None:
                 gain = least_squares_gain(patch, tp, c.known[y:y + ph, x:x + pw] > 0)
             else:
-                gain = least_squares_gain(patch, tp)
+                gain = least_squares_gain(patch, tp, centred=centred)
             if gain_range is not None and not gain_range[0] <= gain <= gain_range[1]:
                 return REFUSE_POINT  # a wrong amplitude: not this class here, look on
             dy, dx = subpixel_offset(c.corr, y, x)
@@ -489,26 +510,58 @@ class _RoiCorrelation:
     kept: dict[tuple[int, int], tuple[float, float, float]]
 
 
-def _correlate_around(image: np.ndarray, tp: np.ndarray, size: tuple[int, int], roi: Box,
-                      *, known: np.ndarray | None, o: _Search) -> _RoiCorrelation:
-    """NCC map of the padded template ``tp`` (unpadded ``size``) whose centre lies in ``roi``."""
+@dataclass(frozen=True)
+class _RoiWindows:
+    """What the correlation maps around one RoI need of the image alone, for every padded
+    template of one size (:func:`_roi_windows`; read only)."""
+
+    region: np.ndarray
+    rows: np.ndarray
+    cols: np.ndarray
+    valid: np.ndarray
+    known: np.ndarray | None
+    share: np.ndarray | None
+
+
+def _roi_windows(image: np.ndarray, padded: tuple[int, int], size: tuple[int, int], roi: Box,
+                 *, known: np.ndarray | None, o: _Search) -> _RoiWindows:
+    """The crop of ``image`` (and ``known``) around ``roi`` for a padded template of shape
+    ``padded`` (unpadded ``size``), the map's rows and columns, the windows whose centre lies
+    in the RoI and that are not flat, and the known share of each window's footprint."""
     h, w = size
-    ph, pw = tp.shape[:2]
+    ph, pw = padded
     cy_off, cx_off = o.pad_px + (h - 1) / 2.0, o.pad_px + (w - 1) / 2.0
     cr0, cr1 = roi.r0 - o.margin_px, roi.r1 - 1 + o.margin_px
     cc0, cc1 = roi.c0 - o.margin_px, roi.c1 - 1 + o.margin_px
     r_a, tl_r1, c_a, tl_c1 = _search_window(roi, o.margin_px, (cy_off, cx_off))
     region = crop_padded(image, r_a, tl_r1 + ph, c_a, tl_c1 + pw)
-    res = ncc_map(region, tp)
-    ys = np.arange(res.shape[0]) + r_a + cy_off
-    xs = np.arange(res.shape[1]) + c_a + cx_off
+    shape = (region.shape[0] - ph + 1, region.shape[1] - pw + 1)  # that of the NCC map
+    ys = np.arange(shape[0]) + r_a + cy_off
+    xs = np.arange(shape[1]) + c_a + cx_off
     valid = ((ys >= cr0) & (ys <= cr1))[:, None] & ((xs >= cc0) & (xs <= cc1))[None, :]
     valid &= window_energy(region, ph, pw) > o.min_energy  # a flat patch has no defined correlation
     kreg = share = None
-    masked = np.zeros(res.shape, bool)
     if known is not None:
         kreg = crop_padded(known, r_a, tl_r1 + ph, c_a, tl_c1 + pw).astype(np.float32)
-        share = footprint_share(kreg, ph, pw, pad_px=o.pad_px, shape=res.shape)
+        share = footprint_share(kreg, ph, pw, pad_px=o.pad_px, shape=shape)
+    return _RoiWindows(region, ys, xs, valid, kreg, share)
+
+
+def _correlate_around(image: np.ndarray, tp: np.ndarray, size: tuple[int, int], roi: Box,
+                      *, known: np.ndarray | None, o: _Search, windows: dict | None = None) -> _RoiCorrelation:
+    """NCC map of the padded template ``tp`` (unpadded ``size``) whose centre lies in ``roi``;
+    ``windows`` (see :func:`match_in_rois`) keeps the RoI's :class:`_RoiWindows` by size."""
+    ph, pw = tp.shape[:2]
+    key = (roi.r0, roi.c0, roi.r1, roi.c1, size, (ph, pw), known is None, o)
+    win = None if windows is None else windows.get(key)
+    if win is None:
+        win = _roi_windows(image, (ph, pw), size, roi, known=known, o=o)
+        if windows is not None:
+            windows[key] = win
+    region, valid, kreg, share = win.region, win.valid, win.known, win.share
+    res = ncc_map(region, tp)
+    masked = np.zeros(res.shape, bool)
+    if known is not None:
         # masked also a little below min_known: an object seen too little must still peak
         # there (and be refused), not on the border of the allowed windows beside it
         partial = valid & (share < o.full_known) & (share >= MASKED_FLOOR * o.min_known)
@@ -521,7 +574,7 @@ def _correlate_around(image: np.ndarray, tp: np.ndarray, size: tuple[int, int], 
                                             kreg[y0:y1 + ph - 1, x0:x1 + pw - 1], tp)
             masked = partial & (mres > res)
             res = np.where(masked, mres, res)
-    return _RoiCorrelation(region, res, ys, xs, valid, kreg, share, masked, {})
+    return _RoiCorrelation(region, res, win.rows, win.cols, valid, kreg, share, masked, {})
 
 
 # --------------------------------------------------------------------------- orientation
