@@ -155,3 +155,22 @@ def test_a_door_casing_does_not_swallow_an_object_touching_it() -> None:
     assert all(b.height < 60 for b in rois)  # no RoI holds the casing
     kept = replace(s, casing_max_m=0.0)  # without frame removal: one RoI of casing and exit light
     assert any(b.r0 == 76 and b.height > 150 for b in colour_rois(ortho, area, kept))
+
+
+def test_a_region_longer_than_any_object_gathers_no_object_into_its_roi(library) -> None:
+    """A dark rail along the wall and up its end, longer than any object, is no object's part:
+    a socket inside its box keeps a RoI of its own (merged with the rail, the RoI would be too
+    long to match)."""
+    templates, protos = library
+    s = ColourRecognitionSettings()
+    ortho, area = make_wall(seed=12, colour=WALL, holes=0)
+    for rows, cols in ((slice(200, 208), slice(40, 460)), (slice(40, 208), slice(40, 48))):
+        ortho.colour[rows, cols] = (40, 35, 30)  # an L of rail, 2.1 m by 0.84 m
+        area.visible[rows, cols] = False
+    paste(ortho, area, templates["socket"], (150.0, 250.0), seed=3)  # inside the L's box, apart from it
+    rois = colour_rois(ortho, area, s, largest_px=protos.largest_footprint_px)
+    assert [b for b in rois if b.width > 400]  # the rail, a RoI of its own
+    cands = match_colour(ortho, area, rois, protos, s)
+    assert [x.class_id for x in cands if np.hypot(x.centre[0] - 150, x.centre[1] - 250) < 2] == ["socket"]
+    merged = colour_rois(ortho, area, s)  # without the library's limit: one RoI, too long to match
+    assert len(merged) == 1 and not match_colour(ortho, area, merged, protos, s)

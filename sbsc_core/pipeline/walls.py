@@ -96,7 +96,7 @@ def process_orthoimage(ortho: Orthoimage, templates: dict[str, ModelTemplate], p
     t_stage["depth"] = time.perf_counter() - t
     t = time.perf_counter()
     c_img = colour_image(ortho, area, s.colour)  # J_C and J_BW, computed once per wall
-    c_rois = colour_rois(ortho, area, s.colour, c_img)
+    c_rois = colour_rois(ortho, area, s.colour, c_img, largest_px=prototypes.largest_footprint_px)
     c_cands = match_colour(ortho, area, c_rois, prototypes, s.colour, image=c_img)
     d_cands, c_cands = resolve_on_wall(d_cands, c_cands, c_img, prototypes, s.lookalikes,
                                        relief=d_img.levelled, gain_range=s.depth.gain_range)

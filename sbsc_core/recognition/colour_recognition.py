@@ -217,18 +217,23 @@ def colour_noise(rgb: np.ndarray, where: np.ndarray) -> np.ndarray:
 
 
 def colour_rois(ortho: Orthoimage, area: WallArea, settings: ColourRecognitionSettings,
-                image: ColourImage | None = None) -> list[Box]:
+                image: ColourImage | None = None, *, largest_px: int | None = None) -> list[Box]:
     """RoIs of J_BW: bounding rectangles of compact foreground regions, clustered (section 4.3).
 
     ``image`` is ``colour_image(ortho, area, settings)`` when the caller already has it.
+    With ``largest_px`` (the library's largest footprint side,
+    :attr:`ColourPrototypes.largest_footprint_px`), a region longer than ``max_roi_factor``
+    times that is no object (:func:`match_colour` skips it) and gathers no other region into
+    its box (:func:`~sbsc_core.recognition.matching.cluster_boxes`): a sign beside a dark
+    door frame keeps a RoI of its own.
     """
     img = image if image is not None else colour_image(ortho, area, settings)
-    return _rois(img.foreground, settings)
+    return _rois(img.foreground, settings, settings.max_roi_factor * largest_px if largest_px else None)
 
 
-def _rois(fg: np.ndarray, settings: ColourRecognitionSettings) -> list[Box]:
+def _rois(fg: np.ndarray, settings: ColourRecognitionSettings, longest_px: float | None = None) -> list[Box]:
     boxes = boxes_from_mask(fg, settings.roi_min_px, settings.roi_min_area_px)
-    return cluster_boxes(boxes, settings.roi_merge_gap_px)
+    return cluster_boxes(boxes, settings.roi_merge_gap_px, longest_px=longest_px)
 
 
 # --------------------------------------------------------------------------- prototypes

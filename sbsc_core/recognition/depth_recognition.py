@@ -431,12 +431,7 @@ def _rois_from_jd(jd: np.ndarray, wall: np.ndarray | None, settings: DepthRecogn
         return cluster_boxes(boxes, settings.roi_merge_gap_px, settings.roi_merge_overlap)
     longest, thinnest = limits
     boxes = [b for b in boxes if max(b.height, b.width) <= longest or min(b.height, b.width) >= thinnest]
-    # a region reaching further than any object of the library is no object's part: its box
-    # (a door frame joined to the skirting spans the wall) gathers no other region
-    large = [b for b in boxes if max(b.height, b.width) > longest]
-    objects = [b for b in boxes if max(b.height, b.width) <= longest]
-    return sorted(cluster_boxes(objects, settings.roi_merge_gap_px, settings.roi_merge_overlap) + large,
-                  key=lambda b: (b.r0, b.c0, b.r1, b.c1))
+    return cluster_boxes(boxes, settings.roi_merge_gap_px, settings.roi_merge_overlap, longest_px=longest)
 
 
 # --------------------------------------------------------------------------- matching

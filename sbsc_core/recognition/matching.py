@@ -51,12 +51,20 @@ def boxes_from_mask(mask: np.ndarray, min_side_px: int, min_area_px: int = 1) ->
     return out
 
 
-def cluster_boxes(boxes: list[Box], gap_px: int = 0, min_overlap: float = 0.0) -> list[Box]:
+def cluster_boxes(boxes: list[Box], gap_px: int = 0, min_overlap: float = 0.0, *,
+                  longest_px: float | None = None) -> list[Box]:
     """Merge boxes that overlap (or lie within ``gap_px``) until none do (paper, Figure 3 e).
 
     With ``min_overlap`` > 0 two boxes are merged only when their intersection exceeds
-    that fraction of the smaller one.
+    that fraction of the smaller one. With ``longest_px`` (the library's limit: no object
+    is longer), a box longer than that is no object's part: it is kept as it is and gathers
+    no other box (a door frame joined to the skirting spans the wall, and would merge every
+    object inside it into one RoI).
     """
+    if longest_px is not None:
+        large = [b for b in boxes if max(b.height, b.width) > longest_px]
+        parts = [b for b in boxes if max(b.height, b.width) <= longest_px]
+        return sorted(cluster_boxes(parts, gap_px, min_overlap) + large, key=lambda b: (b.r0, b.c0, b.r1, b.c1))
     work = list(boxes)
     changed = True
     while changed:
