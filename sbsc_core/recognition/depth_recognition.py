@@ -427,10 +427,10 @@ def _rois_from_jd(jd: np.ndarray, wall: np.ndarray | None, settings: DepthRecogn
         inner[margin_px:-margin_px, margin_px:-margin_px] = 1
         closed &= inner
     boxes = boxes_from_mask(closed > 0, settings.roi_min_px)
-    if limits is None:
-        return cluster_boxes(boxes, settings.roi_merge_gap_px, settings.roi_merge_overlap)
-    longest, thinnest = limits
-    boxes = [b for b in boxes if max(b.height, b.width) <= longest or min(b.height, b.width) >= thinnest]
+    longest = None
+    if limits is not None:
+        longest, thinnest = limits
+        boxes = [b for b in boxes if max(b.height, b.width) <= longest or min(b.height, b.width) >= thinnest]
     return cluster_boxes(boxes, settings.roi_merge_gap_px, settings.roi_merge_overlap, longest_px=longest)
 
 

@@ -60,7 +60,9 @@ its call point (45 mm) because their prints correlated better on a low-contrast 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import cv2
 import numpy as np
@@ -457,21 +459,24 @@ def relief_models(templates: dict[str, ModelTemplate]
     return models, offsets
 
 
+def _once(prototypes: ColourPrototypes, key: tuple, make: Callable[[], Any]) -> Any:
+    """``make()``, made once per library: cached on ``prototypes`` under ``key``."""
+    if key not in prototypes._cache:
+        prototypes._cache[key] = make()  # the wall prototypes' cache, shared with them
+    return prototypes._cache[key]
+
+
 def _library_sets(prototypes: ColourPrototypes, settings: LookalikeSettings) -> list[frozenset[str]]:
     """:func:`lookalike_sets` of the library's templates, made once per library (cached on ``prototypes``)."""
     key = ("lookalike_sets", settings.size_tolerance, settings.min_depth_ncc, settings.max_colour_delta_e,
            settings.relief_decides, settings.depth_alike_any_colour)
-    if key not in prototypes._cache:
-        prototypes._cache[key] = lookalike_sets(prototypes.templates, settings)  # type: ignore[assignment]
-    return prototypes._cache[key]  # type: ignore[return-value]
+    return _once(prototypes, key, lambda: lookalike_sets(prototypes.templates, settings))
 
 
 def _library_pairs(prototypes: ColourPrototypes, settings: LookalikeSettings) -> list[tuple[str, str]]:
     """:func:`same_size_pairs` of the library's templates, made once per library (cached on ``prototypes``)."""
-    key = ("same_size_pairs", settings.size_tolerance)
-    if key not in prototypes._cache:
-        prototypes._cache[key] = same_size_pairs(prototypes.templates, settings)  # type: ignore[assignment]
-    return prototypes._cache[key]  # type: ignore[return-value]
+    return _once(prototypes, ("same_size_pairs", settings.size_tolerance),
+                 lambda: same_size_pairs(prototypes.templates, settings))
 
 
 def prepare_library(prototypes: ColourPrototypes, settings: LookalikeSettings) -> ColourPrototypes:
@@ -490,10 +495,7 @@ def library_relief_models(prototypes: ColourPrototypes
                           ) -> tuple[dict[str, np.ndarray | list[np.ndarray]], dict[str, tuple[float, float]]]:
     """:func:`relief_models` of the library's templates, made once per library (cached on
     ``prototypes``, like the look-alike sets)."""
-    key = ("relief_models",)
-    if key not in prototypes._cache:
-        prototypes._cache[key] = relief_models(prototypes.templates)  # type: ignore[assignment]
-    return prototypes._cache[key]  # type: ignore[return-value]
+    return _once(prototypes, ("relief_models",), lambda: relief_models(prototypes.templates))
 
 
 def same_size_pairs(templates: dict[str, ModelTemplate], settings: LookalikeSettings) -> list[tuple[str, str]]:
