@@ -71,7 +71,7 @@ from sbsc_core.recognition.mounting import within_wall_height  # noqa: E402
 from sbsc_core.recognition.placement import place_hits  # noqa: E402
 from sbsc_core.recognition.templates import make_templates  # noqa: E402
 from sbsc_core.settings import DetectionSettings  # noqa: E402
-from sbsc_core.simulate.designs import RANDOM, design_builder  # noqa: E402
+from sbsc_core.simulate.designs import RANDOM, SIBLING, design_builder, library_builder  # noqa: E402
 from sbsc_core.simulate.scenarios import simulate_scene  # noqa: E402
 from sbsc_core.types import Orthoimage  # noqa: E402
 
@@ -242,6 +242,12 @@ def main() -> int:
                          "``sbsc simulate --designs random``), beside --pairs x --fit-seeds")
     ap.add_argument("--eval-families", nargs="+", type=int, default=[], metavar="SEED",
                     help="random design families evaluated on (never ones fitted on)")
+    ap.add_argument("--fit-crosses", nargs="+", default=[], metavar="N/M",
+                    help="random crosses fitted on: a scene of family N with the library of its sibling M "
+                         "(family M's designs at N's sizes, ``--library-designs sibling``): objects whose design "
+                         "differs from their model, as between standard and alt")
+    ap.add_argument("--eval-crosses", nargs="+", default=[], metavar="N/M",
+                    help="random crosses evaluated on (no family of them fitted on)")
     ap.add_argument("--fit-scenes", nargs="+", type=Path, default=[],
                     help="simulated scenes (any layout, e.g. bench_realism.py --full runs) also fitted on")
     ap.add_argument("--eval-scenes", nargs="+", type=Path, default=[], help="simulated scenes also evaluated on")
@@ -253,8 +259,11 @@ def main() -> int:
     args = ap.parse_args()
     if set(args.fit_seeds) & set(args.eval_seeds):
         ap.error("--fit-seeds and --eval-seeds must be disjoint")
-    if set(args.fit_families) & set(args.eval_families):
-        ap.error("--fit-families and --eval-families must be disjoint")
+    crosses = {part: [tuple(int(x) for x in c.split("/")) for c in cs]
+               for part, cs in (("fit", args.fit_crosses), ("eval", args.eval_crosses))}
+    fitted_families = set(args.fit_families) | {f for c in crosses["fit"] for f in c}
+    if fitted_families & (set(args.eval_families) | {f for c in crosses["eval"] for f in c}):
+        ap.error("the families fitted on (--fit-families, --fit-crosses) and evaluated on must be disjoint")
     if any(p.split("/")[0] == "third" or p.endswith("/third") for p in args.pairs):
         ap.error("the third design family is for testing only: never fit on it")
     args.work.mkdir(parents=True, exist_ok=True)
@@ -268,15 +277,18 @@ def main() -> int:
             for seed in seeds for pair in pairs]
     plan += [(part, family, RANDOM, RANDOM) for part, families in
              (("fit", args.fit_families), ("eval", args.eval_families)) for family in families]
+    plan += [(part, n, RANDOM, f"{SIBLING}{m}") for part in ("fit", "eval") for n, m in crosses[part]]
     for part, seed, scene_d, lib_d in plan:
         for variant in args.variants:
             for turned in args.turned:
                 scan = args.work / f"{variant}-{scene_d}-{lib_d}-t{turned:g}-s{seed}"
                 if not (scan / "ground_truth.json").is_file():
+                    builder = design_builder(scene_d, seed)
+                    library = (library_builder(SIBLING, builder, seed, int(lib_d[len(SIBLING):]))
+                               if lib_d.startswith(SIBLING) else design_builder(lib_d, seed))
                     simulate_scene(scene_file(args.work, turned, seed), scan, seed=seed,
                                    angular_step_deg=args.step, design=False,
-                                   object_builder=design_builder(scene_d, seed),
-                                   library_builder=design_builder(lib_d, seed), **VARIANTS[variant])
+                                   object_builder=builder, library_builder=library, **VARIANTS[variant])
                 rows = rows_of(scan, settings, args.radius, codes)
                 data[part].extend(rows)
                 n_right = sum(r for _, r in rows)
@@ -297,8 +309,9 @@ def main() -> int:
     _, ece_fit = reliability(cal.predict(xf), yf)
     fixed = f"seeds {args.fit_seeds} of {args.pairs}, " if args.fit_seeds else ""
     fixed_e = f"seeds {args.eval_seeds} of {args.eval_pairs or args.pairs}, " if args.eval_seeds else ""
-    print(f"\nfitted on {len(yf)} hits ({int(yf.sum())} right) of {fixed}random families {args.fit_families}; "
-          f"evaluated on {len(ye)} hits ({int(ye.sum())} right) of {fixed_e}random families {args.eval_families}; "
+    print(f"\nfitted on {len(yf)} hits ({int(yf.sum())} right) of {fixed}random families {args.fit_families}, "
+          f"crosses {args.fit_crosses}; evaluated on {len(ye)} hits ({int(ye.sum())} right) of {fixed_e}random "
+          f"families {args.eval_families}, crosses {args.eval_crosses}; "
           f"variants {args.variants}")
     print(f"candidates made by {', '.join(sorted(codes))}")
     print("coefficients: " + ", ".join(f"{n} {c:+.3f}" for n, c in zip(FEATURES, cal.coef, strict=True))
@@ -315,6 +328,7 @@ def main() -> int:
     if args.write or args.out:
         cal.info = {"fit_seeds": list(args.fit_seeds), "eval_seeds": list(args.eval_seeds), "scenes": "one_room.yaml",
                     "fit_families": list(args.fit_families), "eval_families": list(args.eval_families),
+                    "fit_crosses": list(args.fit_crosses), "eval_crosses": list(args.eval_crosses),
                     "variants": list(args.variants), "pairs": list(args.pairs) if args.fit_seeds else [],
                     "eval_pairs": list(args.eval_pairs or args.pairs) if args.eval_seeds else [], "turned": list(args.turned),
                     "radius_m": args.radius,

@@ -178,12 +178,15 @@ def _add_simulate(cmds: Commands) -> None:
     s.add_argument("--designs", choices=["standard", "alt", "third", "random"], default="standard",
                    help="design set the objects are built with (default: standard; third: for testing only; "
                         "random: a new family for --design-seed)")
-    s.add_argument("--library-designs", choices=["standard", "alt", "third", "random"], default=None,
-                   help="design set of the model library (default: the same as --designs)")
+    s.add_argument("--library-designs", choices=["standard", "alt", "third", "random", "sibling"], default=None,
+                   help="design set of the model library (default: the same as --designs; sibling, with --designs "
+                        "random: the family of --library-design-seed made at the scene family's sizes, as alt is "
+                        "to standard)")
     s.add_argument("--design-seed", type=int, default=None, metavar="N",
                    help="--designs random: the family's seed (default: --seed)")
     s.add_argument("--library-design-seed", type=int, default=None, metavar="N",
-                   help="--library-designs random: the library family's seed (default: the scene's family seed)")
+                   help="--library-designs random or sibling: the library family's seed (default: the scene's "
+                        "family seed; for sibling, that seed + 1)")
     s.add_argument("--realistic", action="store_true",
                    help="realistic scanner: mixed pixels, range noise growing with range and incidence, "
                         "dropouts, registration error, per-station exposure, highlights")
@@ -498,7 +501,7 @@ def output_parent(path: str | Path, option: str = "--out") -> Path:
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from .paths import scene_path
-    from .simulate.designs import design_builder
+    from .simulate.designs import design_builder, library_builder
     from .simulate.scenarios import simulate_scenario, simulate_scene
 
     if (args.scenario is None) == (args.scene is None) and args.scenario != "building":
@@ -506,9 +509,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     con = console()
     out = output_parent(args.out)
     design_seed = args.seed if args.design_seed is None else args.design_seed
-    library_seed = design_seed if args.library_design_seed is None else args.library_design_seed
     builder = design_builder(args.designs, design_seed)
-    library = design_builder(args.library_designs, library_seed) if args.library_designs else builder
+    library = library_builder(args.library_designs, builder, design_seed, args.library_design_seed)
     everything = args.all_realism
     realism = {"realistic": args.realistic or everything, "clutter": args.clutter or everything,
                "furniture": args.furniture or everything, "survey_frame": args.survey_frame or everything}

@@ -12,8 +12,8 @@ from sbsc_core.errors import InputError
 from sbsc_core.paths import sample_projects_dir
 from sbsc_core.simulate.building import build_building, sized_for
 from sbsc_core.simulate.catalogue import CATALOGUE, CLASS_ORDER
-from sbsc_core.simulate.designs import design_builder
-from sbsc_core.simulate.designs_random import random_family
+from sbsc_core.simulate.designs import design_builder, library_builder
+from sbsc_core.simulate.designs_random import random_family, sibling_family
 from sbsc_core.simulate.library import write_model_library
 from sbsc_core.simulate.scenarios import scenario_description
 from sbsc_core.simulate.scene import load_scene, parse_scene, validate_scene
@@ -75,6 +75,36 @@ def test_every_class_within_its_envelope_and_its_mesh_within_its_size():
         s = fam.specs  # one socket series: the gangs add up, one height
         assert s["socket_x1"].width_m < s["socket_x2"].width_m < s["socket_x4"].width_m
         assert s["socket_x1"].height_m == s["socket_x2"].height_m == s["socket_x4"].height_m
+
+
+def test_a_sibling_family_has_the_scene_sizes_and_its_own_designs():
+    """A sibling (the library of a random cross) has every object's footprint of the scene's family,
+    its mesh fills that footprint, and its reliefs are another family's: depth models differ."""
+    from sbsc_core.simulate.library import render_model
+
+    fam = random_family(3)
+    sib = sibling_family(fam, 11)
+    other = random_family(11)
+    differ = 0
+    for cls in CLASS_ORDER:
+        spec = sib.specs[cls]
+        assert (spec.width_m, spec.height_m) == (fam.specs[cls].width_m, fam.specs[cls].height_m), cls
+        assert spec.depth_m == other.specs[cls].depth_m, cls
+        lo, hi = sib(cls).vertices.min(axis=0), sib(cls).vertices.max(axis=0)
+        assert np.all(np.abs(hi[:2] - lo[:2] - [spec.width_m, spec.height_m]) <= 0.02 * np.array([spec.width_m,
+                                                                                                  spec.height_m])), cls
+        assert hi[2] == pytest.approx(other(cls).vertices[:, 2].max()), cls
+    for cls in ("switch", "socket_x1", "builtin_socket", "smoke_detector"):
+        a, b = render_model(cls, object_builder=fam).depth, render_model(cls, object_builder=sib).depth
+        assert a.shape == b.shape
+        differ += float(np.abs(a - b).mean()) > 0.0005
+    assert differ >= 2
+    with pytest.raises(InputError, match="library-design-seed"):
+        sibling_family(fam, 3)
+    assert library_builder("sibling", fam, 3).seed == 4  # default: the scene's seed + 1
+    assert library_builder(None, fam, 3) is fam
+    with pytest.raises(InputError, match="library-designs"):
+        library_builder("sibling", design_builder("standard"), 3)
 
 
 def test_reliefs_and_look_alikes_arise_across_families():

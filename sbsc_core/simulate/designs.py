@@ -26,6 +26,7 @@ DESIGN_SETS: dict[str, ObjectBuilder] = {
 }
 DEFAULT_DESIGNS = "standard"
 RANDOM = "random"  # a family drawn per seed (designs_random)
+SIBLING = "sibling"  # a library only: another random family at the scene family's sizes
 DESIGN_NAMES = (*DESIGN_SETS, RANDOM)
 
 
@@ -45,3 +46,23 @@ def design_builder(name: str | None, seed: int = 0) -> ObjectBuilder:
         return DESIGN_SETS[name]
     except KeyError:
         raise InputError("--designs", f"unknown design set {name!r} ({', '.join(DESIGN_NAMES)})") from None
+
+
+def library_builder(name: str | None, scene: ObjectBuilder, scene_seed: int, seed: int | None = None) -> ObjectBuilder:
+    """The builder of a scene's model library: ``name`` of :func:`design_builder`, or ``None``
+    (the scene's own ``scene``), or ``sibling``.
+
+    ``seed`` is the library family's (default ``scene_seed``). ``sibling`` needs a random
+    scene family: it is :func:`~sbsc_core.simulate.designs_random.sibling_family` of the
+    family of ``seed`` (default ``scene_seed + 1``), another manufacturer's products at the
+    scene's sizes.
+    """
+    if name is None:
+        return scene
+    if name != SIBLING:
+        return design_builder(name, scene_seed if seed is None else seed)
+    from .designs_random import RandomFamily, sibling_family
+
+    if not isinstance(scene, RandomFamily):
+        raise InputError("--library-designs", "sibling needs --designs random")
+    return sibling_family(scene, scene_seed + 1 if seed is None else seed)

@@ -107,6 +107,34 @@ def random_family(seed: int) -> RandomFamily:
     return RandomFamily(seed, designs)
 
 
+def sibling_family(family: RandomFamily, seed: int) -> RandomFamily:
+    """Another manufacturer's products at ``family``'s sizes: the designs of ``seed``, each
+    scaled in the wall plane to the footprint of ``family``'s object of its class.
+
+    What ``alt`` is to ``standard`` (the same catalogue footprints, other reliefs, colours and
+    prints), drawn per seed: a scene of ``family`` with the library of its sibling has
+    objects whose design differs from their model, as a real building's do. The relief
+    depths are the sibling's own; prints stretch with their faces.
+    """
+    other = random_family(seed)
+    if other.seed == family.seed:
+        raise InputError("--library-design-seed", f"a sibling family needs another seed than the family's ({seed})")
+    designs = {}
+    for cls, target in family.designs.items():
+        source = other.designs[cls]
+        spec = dataclasses.replace(target.spec, depth_m=source.spec.depth_m)
+        scale = (target.spec.width_m / source.spec.width_m, target.spec.height_m / source.spec.height_m, 1.0)
+        designs[cls] = Design(spec, f"{source.relief} (sibling {seed})", _scaled(source.build, scale))
+    return RandomFamily(other.seed, designs)
+
+
+def _scaled(build: Callable[[], ColouredMesh], scale: tuple[float, float, float]) -> Callable[[], ColouredMesh]:
+    """``build`` with its mesh's vertices scaled by ``scale`` (x, y, z) about the object's origin."""
+    def scaled() -> ColouredMesh:
+        return build().transformed(np.diag(scale), np.zeros(3))
+    return scaled
+
+
 # --------------------------------------------------------------------------- drawing helpers
 
 
