@@ -12,7 +12,10 @@ sets (``standard/standard``, ``alt/alt`` and, by default, the crosses ``standard
 ``alt/standard``: objects whose design differs from their model, as every real building's
 do, which give real mistakes and right hits with a misfit to learn from), upright and with a share of the rotatable objects turned, at several seeds. ``--fit-families`` / ``--eval-families`` add random design families (issue 27: scene
 and library of one family drawn per seed, ``sbsc simulate --designs random``), so that the
-calibration is fitted on many designs and reported on families left out of the fit. The FIT
+calibration is fitted on many designs and reported on families left out of the fit;
+``--fit-crosses`` / ``--eval-crosses N/M`` add random crosses (a scene of family N with the
+library of its sibling M, ``sbsc simulate --library-designs sibling``: M's designs at N's
+sizes, objects whose design differs from their model, as between standard and alt). The FIT
 seeds and the EVALUATION seeds are disjoint; ``--eval-pairs`` may name other design sets
 for the evaluation only (the third family is never fitted on). Each scene is detected once
 (its candidates are kept in ``--work``) and its candidates go through consensus both with

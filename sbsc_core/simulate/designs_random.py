@@ -109,12 +109,12 @@ def random_family(seed: int) -> RandomFamily:
 
 def sibling_family(family: RandomFamily, seed: int) -> RandomFamily:
     """Another manufacturer's products at ``family``'s sizes: the designs of ``seed``, each
-    scaled in the wall plane to the footprint of ``family``'s object of its class.
+    scaled to the width, height and depth of ``family``'s object of its class.
 
-    What ``alt`` is to ``standard`` (the same catalogue footprints, other reliefs, colours and
+    What ``alt`` is to ``standard`` (the same catalogue sizes, other reliefs, colours and
     prints), drawn per seed: a scene of ``family`` with the library of its sibling has
-    objects whose design differs from their model, as a real building's do. The relief
-    depths are the sibling's own; prints stretch with their faces.
+    objects whose design differs from their model, as a real building's do, while the
+    library still gives each class's size right. Prints stretch with their faces.
     """
     other = random_family(seed)
     if other.seed == family.seed:
@@ -122,8 +122,9 @@ def sibling_family(family: RandomFamily, seed: int) -> RandomFamily:
     designs = {}
     for cls, target in family.designs.items():
         source = other.designs[cls]
-        spec = dataclasses.replace(target.spec, depth_m=source.spec.depth_m)
-        scale = (target.spec.width_m / source.spec.width_m, target.spec.height_m / source.spec.height_m, 1.0)
+        spec = target.spec
+        scale = (spec.width_m / source.spec.width_m, spec.height_m / source.spec.height_m,
+                 spec.depth_m / source.spec.depth_m)
         designs[cls] = Design(spec, f"{source.relief} (sibling {seed})", _scaled(source.build, scale))
     return RandomFamily(other.seed, designs)
 
