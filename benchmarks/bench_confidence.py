@@ -37,6 +37,19 @@ those commits as ``candidates_code``: refit it when recognition changes what it 
     python benchmarks/bench_confidence.py --variants acceptance clutter baseline --work W \
         --fit-scenes S/alt2204 S/std2205 S/std2207 S/alt2208 \
         --eval-scenes S/alt2201 S/std2202 S/alt2206 --write
+
+A fit on random families alone (issue 27; docs/benchmarks.md, "A calibration fitted on random
+families with crosses", not shipped) was made with ``--objective ranking``, from one-room
+floors and Scenario I floors (``S``: ``simulate_scene(scenario_I.yaml, seed=N, design=False,
+realistic=True, clutter=True)`` with ``object_builder=random_family(N)`` and, for the crosses,
+``library_builder=sibling_family(random_family(N), M)``)::
+
+    python benchmarks/bench_confidence.py --work W --variants acceptance --turned 0 0.34 \
+        --fit-seeds --eval-seeds --fit-families 3001 3002 3003 3004 3005 3006 3007 3008 \
+        --fit-crosses 3001/3501 3002/3502 3003/3503 3004/3504 3005/3505 3006/3506 3007/3507 3008/3508 \
+        --eval-families 3101 3102 --eval-crosses 3101/3601 3102/3602 \
+        --fit-scenes S/f5001 S/f5002 S/f5003 S/f5004 S/x5001_5501 S/x5002_5502 S/x5003_5503 S/x5004_5504 \
+        --eval-scenes S/f5101 ... S/f5120 --table --objective ranking
 """
 
 from __future__ import annotations
@@ -64,6 +77,7 @@ from sbsc_core.recognition.confidence import (  # noqa: E402
     FEATURES,
     MONOTONE,
     fit_logistic,
+    fit_ranking_logistic,
     hit_features,
     model_reliefs,
     reliability,
@@ -129,9 +143,10 @@ def candidates_of(scan: Path, settings: DetectionSettings) -> dict:
 
 
 def rows_of(scan: Path, settings: DetectionSettings, radius: float,
-            codes: set[str] | None = None) -> list[tuple[np.ndarray, int]]:
-    """(features, right) of every hit, with and without the expected counts; the commit that
-    made the scene's candidates is added to ``codes``."""
+            codes: set[str] | None = None) -> list[tuple[np.ndarray, int, tuple]]:
+    """(features, right, group) of every hit, with and without the expected counts (group:
+    scene, counts or not, class: the hits that compete for one class's count); the commit
+    that made the scene's candidates is added to ``codes``."""
     data = candidates_of(scan, settings)
     if codes is not None:
         codes.add(data.get("code", "unknown"))
@@ -142,7 +157,7 @@ def rows_of(scan: Path, settings: DetectionSettings, radius: float,
                                                    data["classes"]))
     orthos = parked(data["frames"])
     out = []
-    for exp in (None, expected):
+    for counted, exp in enumerate((None, expected)):
         hits = [h for v in consensus_all(depth, colour, exp, settings.consensus, data["classes"]).values() for h in v]
         feats = [hit_features(h, depth, colour, data["reliefs"]) for h in hits]
         pos = []
@@ -164,7 +179,7 @@ def rows_of(scan: Path, settings: DetectionSettings, radius: float,
             if best is not None:
                 taken.add(best[1])
                 right[k] = 1
-        out.extend(zip(feats, right, strict=True))
+        out.extend(zip(feats, right, [(str(scan), counted, h.class_id) for h in hits], strict=True))
     return out
 
 
@@ -257,6 +272,10 @@ def main() -> int:
     ap.add_argument("--table", action="store_true",
                     help="also Table 1 with counts of every evaluation scene, with the shipped calibration "
                          "and the fitted one (the steps of sbsc detect after recognition, from the kept candidates)")
+    ap.add_argument("--objective", choices=["likelihood", "ranking"], default="likelihood",
+                    help="likelihood: one logistic fit of every hit (default, the shipped calibration's); ranking: "
+                         "weights that order each class's hits in a scene right before wrong, then Platt-scaled "
+                         "(fit_ranking_logistic)")
     ap.add_argument("--write", action="store_true", help="store the fitted model in the package")
     ap.add_argument("--out", type=Path, default=None, help="store the fitted model there (to try it first)")
     args = ap.parse_args()
@@ -294,20 +313,22 @@ def main() -> int:
                                    object_builder=builder, library_builder=library, **VARIANTS[variant])
                 rows = rows_of(scan, settings, args.radius, codes)
                 data[part].extend(rows)
-                n_right = sum(r for _, r in rows)
+                n_right = sum(r for _, r, _ in rows)
                 print(f"{part:4s} {scan.name:44s} hits {len(rows):3d} right {n_right:3d} "
                       f"({time.perf_counter() - t0:.0f} s)", flush=True)
     for part, scans in (("fit", args.fit_scenes), ("eval", args.eval_scenes)):
         for scan in scans:
             rows = rows_of(scan, settings, args.radius, codes)
             data[part].extend(rows)
-            print(f"{part:4s} {str(scan):44s} hits {len(rows):3d} right {sum(r for _, r in rows):3d} "
+            print(f"{part:4s} {str(scan):44s} hits {len(rows):3d} right {sum(r for _, r, _ in rows):3d} "
                   f"({time.perf_counter() - t0:.0f} s)", flush=True)
-    xf = np.stack([f for f, _ in data["fit"]])
-    yf = np.array([r for _, r in data["fit"]], float)
-    xe = np.stack([f for f, _ in data["eval"]])
-    ye = np.array([r for _, r in data["eval"]], float)
-    cal = fit_logistic(xf, yf, signs=[MONOTONE.get(f, 0) for f in FEATURES])
+    xf = np.stack([f for f, _, _ in data["fit"]])
+    yf = np.array([r for _, r, _ in data["fit"]], float)
+    xe = np.stack([f for f, _, _ in data["eval"]])
+    ye = np.array([r for _, r, _ in data["eval"]], float)
+    signs = [MONOTONE.get(f, 0) for f in FEATURES]
+    cal = (fit_ranking_logistic(xf, yf, [g for _, _, g in data["fit"]], signs=signs) if args.objective == "ranking"
+           else fit_logistic(xf, yf, signs=signs))
     table, ece = reliability(cal.predict(xe), ye)
     _, ece_fit = reliability(cal.predict(xf), yf)
     fixed = f"seeds {args.fit_seeds} of {args.pairs}, " if args.fit_seeds else ""
@@ -332,7 +353,7 @@ def main() -> int:
         cal.info = {"fit_seeds": list(args.fit_seeds), "eval_seeds": list(args.eval_seeds), "scenes": "one_room.yaml",
                     "fit_families": list(args.fit_families), "eval_families": list(args.eval_families),
                     "fit_crosses": list(args.fit_crosses), "eval_crosses": list(args.eval_crosses),
-                    "variants": list(args.variants), "pairs": list(args.pairs) if args.fit_seeds else [],
+                    "objective": args.objective, "variants": list(args.variants), "pairs": list(args.pairs) if args.fit_seeds else [],
                     "eval_pairs": list(args.eval_pairs or args.pairs) if args.eval_seeds else [], "turned": list(args.turned),
                     "radius_m": args.radius,
                     "fit_scenes": [p.name for p in args.fit_scenes], "eval_scenes": [p.name for p in args.eval_scenes],

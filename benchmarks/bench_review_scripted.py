@@ -55,9 +55,12 @@ def review(out_dir: Path, scan: Path, truth_path: Path, threshold: float) -> dic
         pid = ensure_sample_project(scan, out_dir, settings=settings, name="scripted", points=1,
                                     models=out_dir.parent / "models" if (out_dir.parent / "models").is_dir()
                                     else None)
+        admin = add_user(settings, "admin", "admin")  # an imported project has only the admins as members
         token = add_user(settings, "bot", "reviewer")
         h = {"Authorization": f"Bearer {token}"}
         with TestClient(create_app(settings, start_jobs=False)) as c:
+            c.post(f"/api/projects/{pid}/members", json={"user": "bot", "role": "reviewer"},
+                   headers={"Authorization": f"Bearer {admin}"}).raise_for_status()
             doc = c.get(f"/api/projects/{pid}/detections", headers=h).json()
             ref_doc = {**doc, "detections": [{**d, "id": d["id"]} for d in doc["detections"]]}
             table = evaluate(ref_doc, read_truth(truth_path))

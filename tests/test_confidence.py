@@ -80,12 +80,12 @@ def test_shipped_calibration_refuses_room_controllers_and_keeps_switches_of_anot
     assert cal is not None
     names = ("in_depth", "in_colour", "rho_depth", "colour_goodness", "alpha", "class_margin",
              "lookalike_margin", "gain_misfit", "relief_misfit", "unmatched_relief", "relief_margin",
-             "colour_only_print")
+             "colour_only_print", "gain_excess")
     assert FEATURES == names  # the vectors below follow this order
-    controllers = np.array([[1, 0, .95, 0, .5, .3, -.04, .39, .22, 0, .3, 0],
-                            [1, 1, .95, .92, 1, .3, .05, .37, .20, 0, .3, 0]])
-    switches = np.array([[1, 0, .95, 0, .5, .12, .24, .31, .09, 0, .21, 0],
-                         [1, 0, .95, 0, .5, .12, .30, .28, .08, 0, .23, 0]])
+    controllers = np.array([[1, 0, .95, 0, .5, .3, -.04, .39, .22, 0, .3, 0, .39],
+                            [1, 1, .95, .92, 1, .3, .05, .37, .20, 0, .3, 0, .37]])
+    switches = np.array([[1, 0, .95, 0, .5, .12, .24, .31, .09, 0, .21, 0, .31],
+                         [1, 0, .95, 0, .5, .12, .30, .28, .08, 0, .23, 0, .28]])
     threshold = ConfidenceSettings().min_confidence
     assert (cal.predict(controllers) < threshold).all()
     assert (cal.predict(switches) > threshold).all()
@@ -131,6 +131,10 @@ def test_depth_residual_features() -> None:
     d.gain, d.relief_iou = 1.8, 0.75
     f = dict(zip(FEATURES, hit_features(make_hit(d, None, 0.5), [d], []), strict=True))
     assert f["gain_misfit"] == pytest.approx(np.log(1.8)) and f["relief_misfit"] == pytest.approx(0.25)
+    assert f["gain_excess"] == pytest.approx(np.log(1.8))  # the scene stands out further than the model
+    d.gain = 0.6  # flattened: a misfit, no excess
+    flat = dict(zip(FEATURES, hit_features(make_hit(d, None, 0.5), [d], []), strict=True))
+    assert flat["gain_misfit"] == pytest.approx(-np.log(0.6)) and flat["gain_excess"] == 0
     c = dict(zip(FEATURES, hit_features(make_hit(None, _cand("socket", "colour", 0.1), 0.5), [], []), strict=True))
     assert c["gain_misfit"] == 0 and c["relief_misfit"] == 0 and c["unmatched_relief"] == 0
     deep = dict(zip(FEATURES, hit_features(make_hit(None, _cand("socket", "colour", 0.1), 0.5), [], [],
@@ -309,3 +313,40 @@ def test_expected_counts_are_filled_with_the_most_probable_hits(tmp_path) -> Non
     strong = make_hit(real, None, 0.5)
     strong.confidence = 0.99
     assert fill_by_confidence([weak, kept], [strong], 0.3) == [weak, kept]
+
+
+def test_ranking_fit_orders_competing_hits_where_the_likelihood_fit_does_not() -> None:
+    """Hits compete for a class's count inside a group (one class in one scene). In the contested
+    groups the right hit fits the model's amplitude and a look-alike does not; the uncontested
+    hits (one panel per scene, right however flattened) carry the same misfit. Fitted on every
+    hit alike, the correlation gets the weight the uncontested hits give it, too strong for the
+    misfit to put the right hit first in every contested group; fitted on the pairs, the
+    misfit orders them all, and the Platt step makes it a probability again."""
+    from sbsc_core.recognition.confidence import fit_ranking_logistic
+
+    rng = np.random.default_rng(3)
+    x, y, groups = [], [], []
+    for g in range(300):
+        if g % 2:  # contested: a right hit and a look-alike of a better correlation but a misfit
+            x += [[rng.uniform(0.90, 0.95), rng.uniform(0.0, 0.1)], [rng.uniform(0.93, 0.99), rng.uniform(0.12, 0.3)]]
+            y += [1, 0]
+            groups += [g, g]
+        else:  # uncontested: the correlation tells right from wrong, the misfit does not (flattened alike)
+            right = rng.random() < 0.7
+            x.append([rng.uniform(0.93, 0.99) if right else rng.uniform(0.80, 0.90), rng.uniform(0.2, 0.5)])
+            y.append(int(right))
+            groups.append(g)
+    x, y = np.array(x), np.array(y, float)
+    signs = [1, -1]
+
+    def misordered(cal: Calibration) -> int:
+        p = cal.predict(x)
+        return sum(1 for g in range(1, 300, 2) if p[groups.index(g)] <= p[groups.index(g) + 1])
+
+    ranked = fit_ranking_logistic(x, y, groups, signs=signs)
+    plain = fit_logistic(x, y, signs=signs)
+    assert misordered(ranked) == 0 < misordered(plain)
+    p = ranked.predict(x)
+    assert abs(p.mean() - y.mean()) < 0.01  # the Platt step: as many right hits as the confidence says
+    assert np.all(np.diff(p[np.argsort(x @ ranked.coef)]) >= 0)  # ... and the order of the pairs kept
+    assert fit_ranking_logistic(x[:1], y[:1], groups[:1]).coef.shape == (2,)  # no pair: the plain fit

@@ -37,7 +37,7 @@ UNKNOWN_CLASS = "unknown"
 CALIBRATION_PATH = Path(__file__).with_name("calibration") / "confidence.json"
 FEATURES = ("in_depth", "in_colour", "rho_depth", "colour_goodness", "alpha", "class_margin",
             "lookalike_margin", "gain_misfit", "relief_misfit", "unmatched_relief", "relief_margin",
-            "colour_only_print")
+            "colour_only_print", "gain_excess")
 _MARGIN_CAP = 0.3  # margins beyond this say nothing more
 _GAIN_CAP = 1.0  # |ln gain| beyond this (a relief e times too deep or too flat) says nothing more
 _RELIEF_CAP_M = 0.02  # a model standing out this far would surely have been matched in depth
@@ -72,6 +72,13 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
     mixed pixels), while only the right one stands out where the scene does. 0 without a
     depth match.
 
+    ``gain_excess``: ``gain_misfit`` where the scene stands out further than the model (ln
+    gain > 0), 0 where it stands out less. A scanner flattens relief (mixed pixels at
+    edges, range noise averaged over a pixel, rays that miss a recess), it never deepens
+    it: a right object's relief comes out at most as deep as its model, while a thermostat
+    taken for the flat switch of its outline stands out further. Fitted on its own weight,
+    the flattening (``gain_misfit`` alone) is judged apart from the excess.
+
     ``colour_only_print``: the look-alike margin again, for a hit found in colour only (0
     otherwise), times 1 - ``unmatched_relief``. Found in colour alone, the print is the only
     evidence of which class it is: a flat sign lost in a noisy scan's depth whose pictogram
@@ -100,7 +107,8 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
     looks = [c.lookalike_margin for c in (hit.depth, hit.colour) if c is not None and c.lookalike_margin is not None]
     look = float(np.clip(min(looks) if looks else _MARGIN_CAP, -_MARGIN_CAP, _MARGIN_CAP))
     d = hit.depth
-    gain = 0.0 if d is None or d.gain is None else min(_GAIN_CAP, abs(float(np.log(max(d.gain, 1e-6)))))
+    ln_gain = 0.0 if d is None or d.gain is None else float(np.clip(np.log(max(d.gain, 1e-6)), -_GAIN_CAP, _GAIN_CAP))
+    gain = abs(ln_gain)
     relief = 0.0 if d is None or d.relief_iou is None else float(np.clip(1.0 - d.relief_iou, 0.0, 1.0))
     unmatched = 0.0
     if d is None and reliefs:
@@ -110,7 +118,7 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
         float(hit.rho_depth is not None), float(hit.rho_colour is not None),
         float(hit.rho_depth or 0.0), 0.0 if hit.rho_colour is None else 1.0 - float(hit.rho_colour),
         float(hit.alpha), float(np.clip(margin, 0.0, _MARGIN_CAP)), look,
-        gain, relief, unmatched, relief_margin, colour_only_print,
+        gain, relief, unmatched, relief_margin, colour_only_print, max(ln_gain, 0.0),
     ])
 
 
@@ -166,18 +174,20 @@ def load_calibration(path: Path | None = None) -> Calibration | None:
 # The sign each feature's coefficient must have: better evidence never lowers the confidence.
 MONOTONE = {"rho_depth": 1, "colour_goodness": 1, "alpha": 1, "class_margin": 1, "lookalike_margin": 1,
             "gain_misfit": -1, "relief_misfit": -1, "unmatched_relief": -1, "relief_margin": 1,
-            "colour_only_print": 1}
+            "colour_only_print": 1, "gain_excess": -1}
 
 
-def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int] | None = None) -> Calibration:
+def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int] | None = None, *,
+                 weights: np.ndarray | None = None) -> Calibration:
     """Maximum-likelihood logistic regression with a small L2 penalty on the coefficients.
 
     ``signs`` (one per column: +1, -1 or 0) bounds each coefficient to be >= 0, <= 0 or
     free (e.g. from :data:`MONOTONE`): a few scenes with correlated features must not teach
-    that a worse match is more likely right.
+    that a worse match is more likely right. ``weights``: one per row (default 1).
     """
     x = np.asarray(x, float)
     y = np.asarray(y, float)
+    wt = np.ones(len(y)) if weights is None else np.asarray(weights, float)
     bounds = None
     if signs is not None:
         if len(signs) != x.shape[1]:
@@ -187,14 +197,51 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int
     def loss(w: np.ndarray) -> tuple[float, np.ndarray]:
         z = w[0] + x @ w[1:]
         p = 1.0 / (1.0 + np.exp(-np.clip(z, -40, 40)))
-        nll = float(np.sum(np.logaddexp(0.0, z) - y * z)) + 0.5 * l2 * float(w[1:] @ w[1:])
-        g = np.concatenate([[np.sum(p - y)], x.T @ (p - y) + l2 * w[1:]])
+        nll = float(np.sum(wt * (np.logaddexp(0.0, z) - y * z))) + 0.5 * l2 * float(w[1:] @ w[1:])
+        r = wt * (p - y)
+        g = np.concatenate([[np.sum(r)], x.T @ r + l2 * w[1:]])
         return nll, g
 
     from scipy.optimize import minimize  # here: only calibration needs it, not every detection
 
     res = minimize(loss, np.zeros(x.shape[1] + 1), jac=True, method="L-BFGS-B", bounds=bounds)
     return Calibration(res.x[1:], float(res.x[0]))
+
+
+def fit_ranking_logistic(x: np.ndarray, y: np.ndarray, groups: list, l2: float = 1e-2,
+                         signs: list[int] | None = None) -> Calibration:
+    """A logistic model fitted to order the hits that compete for one class's count, then
+    rescaled to a probability.
+
+    With expected counts, :func:`fill_by_confidence` keeps each class's most probable hits:
+    what decides is the order of a class's hits in a scene, right before wrong. Fitted to
+    every hit alike, the likelihood also weighs hits that compete with nothing (the one
+    electrical panel, right however flattened its relief), and a misfit that tells a
+    look-alike from the real object (the thermostat taken for the flat switch of its
+    outline) gets the weight those hits allow. So:
+
+    1. the weights are fitted to the feature differences of every (right, wrong) pair of
+       rows of one group (one class in one scene, one consensus run), both ways round: a
+       Bradley-Terry model of which of two hits is the right one;
+    2. the score those weights give each row is mapped to a probability by a logistic fit
+       of one slope and an intercept on all rows (Platt scaling), so that the confidence is
+       calibrated again. The slope is positive: the order of step 1 is kept.
+
+    ``signs`` bounds the weights as in :func:`fit_logistic`. Groups without a right and a
+    wrong row add no pair; with no pair at all this is :func:`fit_logistic`.
+    """
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
+    members: dict = {}
+    for i, g in enumerate(groups):
+        members.setdefault(g, ([], []))[int(y[i] > 0.5)].append(i)
+    pairs = np.array([(i, j) for wrong, right in members.values() for i in right for j in wrong], int).reshape(-1, 2)
+    if not len(pairs):
+        return fit_logistic(x, y, l2, signs)
+    d = x[pairs[:, 0]] - x[pairs[:, 1]]
+    order = fit_logistic(np.concatenate([d, -d]), np.repeat([1.0, 0.0], len(d)), l2, signs)
+    platt = fit_logistic((x @ order.coef)[:, None], y, 0.0, [1])
+    return Calibration(order.coef * platt.coef[0], platt.intercept)
 
 
 def reliability(p: np.ndarray, y: np.ndarray, bins: int = 10) -> tuple[list[tuple[float, float, int, float, float]], float]:
