@@ -412,8 +412,14 @@ def fill_sampling_gaps(depth: np.ndarray, colour: np.ndarray, mask: np.ndarray, 
         return depth, colour, mask
 
     def box(table: np.ndarray) -> np.ndarray:
-        """Sums over the whole window at the pixels to fill."""
-        return table[rows + k, cols + k] - table[rows, cols + k] - table[rows + k, cols] + table[rows, cols]
+        """Sums over the whole window at the pixels to fill (np.take of flat indices: as
+        ``table[rows + k, cols + k] - ...``, without fancy indexing's slow path)."""
+        tw = table.shape[1]
+        flat = table.reshape(-1, *table.shape[2:])
+        at = rows * tw
+        at += cols
+        return (np.take(flat, at + (k * tw + k), axis=0) - np.take(flat, at + k, axis=0)
+                - np.take(flat, at + k * tw, axis=0) + np.take(flat, at, axis=0))
 
     cnt = total[rows, cols].astype(np.float64)
     d_ii = cv2.integral(np.pad(np.where(mask, depth, 0.0), r).astype(np.float64), sdepth=cv2.CV_64F)
