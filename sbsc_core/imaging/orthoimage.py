@@ -124,9 +124,13 @@ def wall_coordinates(xyz: np.ndarray, frame: WallFrame, cloud_origin: np.ndarray
     out = np.empty((len(xyz), 3), np.float32)
     for k, axis in enumerate((frame.axis_u, frame.axis_v, frame.normal)):
         a = np.asarray(axis, np.float64)
-        col = xyz[:, 0] * np.float32(a[0])
-        col += xyz[:, 1] * np.float32(a[1])
-        col += xyz[:, 2] * np.float32(a[2])
+        f = a.astype(np.float32)
+        # the products, summed in axis order; a zero component (a wall's axis_v, an upright
+        # wall's normal, a ceiling's frame) adds a zero: left out, the sum is the same
+        terms = [i for i in range(3) if f[i] != 0]
+        col = xyz[:, terms[0]] * f[terms[0]] if terms else np.zeros(len(xyz), np.float32)
+        for i in terms[1:]:
+            col += xyz[:, i] * f[i]
         col -= np.float32(o @ a)
         out[:, k] = col
     return out
