@@ -262,3 +262,10 @@ def test_fill_sampling_gaps_fills_between_data_with_the_window_mean_not_a_hole()
         assert d[r, q] == pytest.approx(float(depth[win][ok].astype(np.float64).mean()), abs=1e-6)
         assert np.array_equal(c[r, q], np.rint(colour[win][ok].astype(np.float64).mean(axis=0)).astype(np.uint8))
     assert np.array_equal(d[mask], depth[mask]) and np.array_equal(c[mask], colour[mask])
+
+
+def test_depth_visualisation_greys_the_relief_and_whitens_no_data():
+    from sbsc_core.pipeline.walls import depth_visualisation
+
+    depth = np.array([[0.0, 0.05, -0.05], [np.nan, 1.0, -1.0]], np.float32)
+    assert depth_visualisation(depth).tolist() == [[128, 64, 191], [255, 0, 254]]
