@@ -415,7 +415,8 @@ class _TilesAlong:
         self.made, self.library, self.s = made, library, s
         self.done: dict[int, tuple[str, WallResult]] = {}
         self.seconds = 0.0
-        self.kept = np.zeros(0, np.int64)
+        self.kept = np.zeros(0, np.int64)  # points binned per tile (set by :meth:`jobs`)
+        self.templates: dict[str, ModelTemplate] = {}  # the tiles' templates (set by :meth:`jobs`)
 
     def jobs(self, parked: Path) -> list[tuple[int, tuple[str, int], Callable, dict]]:
         """``(points, ("tile", k), job function, its arguments)`` for every tile that got points."""
