@@ -377,3 +377,19 @@ def test_parts_that_fit_one_footprint_are_grouped() -> None:
     assert group_boxes(parts, height=30, width=45, gap_px=6) == [Box(0, 0, 25, 40)]
     assert group_boxes(parts, height=30, width=45, gap_px=3) == []  # too far apart to be one object
     assert group_boxes(parts, height=12, width=45, gap_px=6) == []  # together too big for the model
+
+
+def test_fill_gaps_fills_a_small_gap_with_its_neighbours_mean_and_leaves_a_large_hole():
+    from sbsc_core.recognition.depth_recognition import fill_gaps
+
+    ok = np.ones((60, 60), bool)
+    ok[30, 30] = False  # a gap: known pixels all around
+    ok[0:20, 0:20] = False  # a hole: its middle has no known neighbour within the Gaussian's reach
+    grey = np.where(ok, 0.02, 0.0).astype(np.float32)
+    rgb = np.zeros((60, 60, 3), np.uint8)
+    rgb[ok] = (200, 100, 50)
+    for values, want in ((grey, 0.02), (rgb, (200, 100, 50))):
+        out, filled = fill_gaps(values, ok, 1.0, 0.5)
+        assert out.dtype == np.float32 and filled[30, 30] and not filled[5, 5]
+        assert np.allclose(out[30, 30], want, rtol=1e-5) and not np.any(out[5, 5])
+        assert np.array_equal(out[ok], np.asarray(values, np.float32)[ok])

@@ -243,3 +243,29 @@ def test_near_walls_is_near_wall_of_each_wall_or_ed() -> None:
     assert want[-3000:].sum() > 1000
     np.testing.assert_array_equal(near_walls(xyz, site, 0.05, origin), want)
     assert not near_walls(xyz[:0], frames, 0.05, origin).any()
+
+
+def test_fill_sampling_gaps_fills_between_data_with_the_window_mean_not_a_hole():
+    from sbsc_core.imaging.orthoimage import fill_sampling_gaps
+
+    rng = np.random.default_rng(3)
+    mask = np.ones((40, 50), bool)
+    mask[10, 10] = mask[20, 30] = False  # sampling gaps: data all around
+    mask[25:40, 0:20] = False  # a hole (an opening): its rim has data on one side only
+    depth = np.where(mask, rng.normal(0.0, 0.01, mask.shape), np.nan).astype(np.float32)
+    colour = (rng.integers(0, 256, mask.shape + (3,)) * mask[..., None]).astype(np.uint8)
+    d, c, m = fill_sampling_gaps(depth, colour, mask, 2, 0.5)
+    assert m[10, 10] and m[20, 30] and not m[25:40, 0:20].any()
+    for r, q in ((10, 10), (20, 30)):
+        win = (slice(r - 2, r + 3), slice(q - 2, q + 3))
+        ok = mask[win]
+        assert d[r, q] == pytest.approx(float(depth[win][ok].astype(np.float64).mean()), abs=1e-6)
+        assert np.array_equal(c[r, q], np.rint(colour[win][ok].astype(np.float64).mean(axis=0)).astype(np.uint8))
+    assert np.array_equal(d[mask], depth[mask]) and np.array_equal(c[mask], colour[mask])
+
+
+def test_depth_visualisation_greys_the_relief_and_whitens_no_data():
+    from sbsc_core.pipeline.walls import depth_visualisation
+
+    depth = np.array([[0.0, 0.05, -0.05], [np.nan, 1.0, -1.0]], np.float32)
+    assert depth_visualisation(depth).tolist() == [[128, 64, 191], [255, 0, 254]]

@@ -67,10 +67,10 @@ def illumination_field(ortho: Orthoimage, settings: ColourPrepSettings | None = 
     h, w = ortho.shape
     g = max(1, int(round(s.cell_m / ortho.pixel_m)))
     hc, wc = math.ceil(h / g), math.ceil(w / g)
-    col = np.full((hc * g, wc * g, 3), np.nan, np.float32)
-    col[:h, :w] = np.where(ortho.mask[..., None], ortho.colour.astype(np.float32), np.nan)
+    col = np.full((hc * g, wc * g, 3), np.nan, np.float32)  # NaN: no data; the pixels with data copied in
+    np.copyto(col[:h, :w], ortho.colour, where=ortho.mask[..., None])
     dep = np.full((hc * g, wc * g), np.nan, np.float32)
-    dep[:h, :w] = np.where(ortho.mask, ortho.depth, np.nan)
+    np.copyto(dep[:h, :w], ortho.depth, where=ortho.mask)
     col_b = col.reshape(hc, g, wc, g, 3).transpose(0, 2, 1, 3, 4).reshape(hc, wc, g * g, 3)
     dep_b = dep.reshape(hc, g, wc, g).transpose(0, 2, 1, 3).reshape(hc, wc, g * g)
     cnt = np.isfinite(dep_b).sum(axis=2)

@@ -124,9 +124,13 @@ def wall_coordinates(xyz: np.ndarray, frame: WallFrame, cloud_origin: np.ndarray
     out = np.empty((len(xyz), 3), np.float32)
     for k, axis in enumerate((frame.axis_u, frame.axis_v, frame.normal)):
         a = np.asarray(axis, np.float64)
-        col = xyz[:, 0] * np.float32(a[0])
-        col += xyz[:, 1] * np.float32(a[1])
-        col += xyz[:, 2] * np.float32(a[2])
+        f = a.astype(np.float32)
+        # the products, summed in axis order; a zero component (a wall's axis_v, an upright
+        # wall's normal, a ceiling's frame) adds a zero: left out, the sum is the same
+        terms = [i for i in range(3) if f[i] != 0]
+        col = xyz[:, terms[0]] * f[terms[0]] if terms else np.zeros(len(xyz), np.float32)
+        for i in terms[1:]:
+            col += xyz[:, i] * f[i]
         col -= np.float32(o @ a)
         out[:, k] = col
     return out
@@ -412,8 +416,14 @@ def fill_sampling_gaps(depth: np.ndarray, colour: np.ndarray, mask: np.ndarray, 
         return depth, colour, mask
 
     def box(table: np.ndarray) -> np.ndarray:
-        """Sums over the whole window at the pixels to fill."""
-        return table[rows + k, cols + k] - table[rows, cols + k] - table[rows + k, cols] + table[rows, cols]
+        """Sums over the whole window at the pixels to fill (np.take of flat indices: as
+        ``table[rows + k, cols + k] - ...``, without fancy indexing's slow path)."""
+        tw = table.shape[1]
+        flat = table.reshape(-1, *table.shape[2:])
+        at = rows * tw
+        at += cols
+        return (np.take(flat, at + (k * tw + k), axis=0) - np.take(flat, at + k, axis=0)
+                - np.take(flat, at + k * tw, axis=0) + np.take(flat, at, axis=0))
 
     cnt = total[rows, cols].astype(np.float64)
     d_ii = cv2.integral(np.pad(np.where(mask, depth, 0.0), r).astype(np.float64), sdepth=cv2.CV_64F)

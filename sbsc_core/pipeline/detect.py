@@ -30,6 +30,7 @@ from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import (
     Executor,
+    Future,
     ProcessPoolExecutor,
     ThreadPoolExecutor,
 )
@@ -78,7 +79,7 @@ from ..types import (
     PointCloud,
     Segmentation,
 )
-from .executors import InlineExecutor, _as_done, _walls_results, wall_executor, wall_pool
+from .executors import InlineExecutor, _as_done, _walls_results, call_job, wall_executor, wall_pool
 from .outputs import DetectionResult, write_outputs
 from .walls import (
     WALL_STAGES,
@@ -96,6 +97,7 @@ _TALL_STOREY_M = 5.0  # a storey higher than this is named in a warning (several
 
 if TYPE_CHECKING:  # the documents (and pydantic) are imported where used: the wall workers never need them
     from ..io.documents import ExpectedCounts
+    from ..scene.ceilings import CeilingBinning, CeilingResults
     from .walls import Expected
 
 
@@ -357,20 +359,20 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, lev
                   library: ModelLibrary, expected: ExpectedCounts | None, s: DetectionSettings,
                   executor: Executor, scratch: Path, parked: Path | None, in_flight: int, progress: Progress,
                   timings: dict[str, float], log: Callable[[str], None],
-                  part_executor: Executor | None = None, ceilings_binned=None) -> _BeyondWalls:
+                  part_executor: Executor | None = None, ceilings_done: CeilingResults | None = None,
+                  ) -> _BeyondWalls:
     """The ceiling tiles' and column faces' results (issue 11), when the settings ask for them.
 
-    ``ceilings_binned``: the ceilings' binning that the walls' partition pass already ran
-    (:func:`~sbsc_core.pipeline.surfaces.ceiling_binning`)."""
+    ``ceilings_done``: the ceiling tiles' results, when they ran with the walls (:class:`_TilesAlong`)."""
     out = _BeyondWalls()
     counts = None if expected is None else expected.counts
     if s.ceilings.enabled:  # objects on ceilings: the tiles join the walls in the consensus
         from .surfaces import detect_ceilings
 
-        ceil = detect_ceilings(parts, origin, seg, library=library, expected=counts, s=s,
-                               executor=executor, scratch=scratch,
-                               parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
-                               levels=levels, part_executor=part_executor, binned=ceilings_binned)
+        ceil = ceilings_done or detect_ceilings(
+            parts, origin, seg, library=library, expected=counts, s=s, executor=executor, scratch=scratch,
+            parked=parked, in_flight=in_flight, progress=progress, timings=timings, log=log,
+            levels=levels, part_executor=part_executor)
         out.walls.update(ceil.walls)
         out.templates.update(ceil.templates)
         out.classes = sorted(set(out.classes) | set(ceil.classes))
@@ -398,6 +400,62 @@ def _beyond_walls(parts: Sequence, origin: np.ndarray, seg: Segmentation, *, lev
         out.classes = sorted(set(out.classes) | set(pend.classes))
         out.surfaces += pend.surfaces()
     return out
+
+
+class _TilesAlong:
+    """The ceiling tiles that the walls' partition pass binned (``binning``, None: none), as
+    tasks of the walls' stream: their jobs, then their results as they come.
+
+    The tiles' templates are ``made`` in a worker while segmentation runs (None: made here).
+    """
+
+    def __init__(self, binning: CeilingBinning | None, *, scratch: Path, classes: list[str], made: Future | None,
+                 library: ModelLibrary, s: DetectionSettings) -> None:
+        self.binning, self.scratch, self.classes = binning, scratch, classes
+        self.made, self.library, self.s = made, library, s
+        self.done: dict[int, tuple[str, WallResult]] = {}
+        self.seconds = 0.0
+        self.kept = np.zeros(0, np.int64)  # points binned per tile (set by :meth:`jobs`)
+        self.templates: dict[str, ModelTemplate] = {}  # the tiles' templates (set by :meth:`jobs`)
+
+    def jobs(self, parked: Path) -> list[tuple[int, tuple[str, int], Callable, dict]]:
+        """``(points, ("tile", k), job function, its arguments)`` for every tile that got points."""
+        if self.binning is None:
+            return []
+        from ..scene.ceilings import binned_records
+        from .surfaces import ceiling_tile_job
+
+        self.kept = binned_records(self.scratch, len(self.binning.tiles))
+        made = self.made.result() if self.made is not None else _templates_job(self.library, self.s, self.classes)
+        self.templates, prototypes = made
+        return [(int(n), ("tile", k), ceiling_tile_job,
+                 dict(scratch=str(self.scratch), k=k, tile=tile, templates=self.templates, prototypes=prototypes,
+                      s=self.s, images=str(parked)))
+                for k, (tile, n) in enumerate(zip(self.binning.tiles, self.kept, strict=True)) if n > 0]
+
+    def add(self, k: int, res: tuple[str, WallResult, dict[str, float]], *, progress: Progress | None) -> None:
+        """Tile ``k``'s result; its progress told when ``progress`` is given (the walls are done)."""
+        self.done[k] = res[:2]
+        self.seconds += sum(res[2].values())
+        if progress is not None:
+            self.progress(progress)
+
+    def progress(self, progress: Progress) -> None:
+        if self.binning is not None:
+            progress(Stage.CEILINGS, len(self.done) / max(1, int(np.count_nonzero(self.kept))))
+
+    def results(self, levels: list | None, timings: dict[str, float],
+                log: Callable[[str], None]) -> CeilingResults | None:
+        """The tiles' results for the consensus (None when no tile was binned); ``timings["ceilings"]``
+        the seconds of the tiles' tasks (in the workers, beside the walls')."""
+        if self.binning is None:
+            return None
+        from .surfaces import ceiling_results
+
+        timings[Stage.CEILINGS] = self.seconds
+        return ceiling_results(self.binning.tiles, self.kept, dict(self.done[k] for k in sorted(self.done)),
+                               self.templates, self.classes, levels=levels, log=log,
+                               said=f"with the walls ({self.seconds:.1f} s of tasks)")
 
 
 def _storey_points(executor: Executor, parts: Sequence, sample_meta: list[tuple[int, bool]], origin: np.ndarray,
@@ -530,6 +588,9 @@ def detect_scans(
     # make the templates now
     warm = [executor.submit(_ready) for _ in range(workers)] if workers > 1 else []
     made = executor.submit(_templates_job, library, s, classes) if workers > 1 else None
+    ceiling_classes = search_classes(library, None if expected is None else expected.counts, kind="ceiling")
+    made_c = (executor.submit(_templates_job, library, s, ceiling_classes)
+              if workers > 1 and s.ceilings.enabled and ceiling_classes else None)
     found = find_scan_storeys(cloud, s.segmentation)
     sampled = len(cloud)
     if len(found.levels) > 1 and sampled < points:
@@ -586,19 +647,32 @@ def detect_scans(
     t = time.perf_counter()
     templates, prototypes = made.result() if made is not None else _templates_job(library, s, classes)
     timings["templates"] = time.perf_counter() - t
-    # the biggest walls first, so that no worker is left with a big one at the end; the
-    # results are put back in the walls' order (the consensus sees them as in memory)
-    order = sorted(range(len(seg.walls)), key=lambda w: -int(kept[w]))
     parked = Path(scratch) / "images"
     parked.mkdir(exist_ok=True)
-    # each task writes its wall's images itself: this process only receives the small results
-    wall_jobs = [dict(scratch=str(scratch), w=w, wall_id=seg.walls[w].id, frame=seg.walls[w].frame,
-                      templates=templates, prototypes=prototypes, s=s, images=str(parked)) for w in order]
+    # each task writes its surface's images itself: this process only receives the small results
+    jobs = [(int(kept[w]), ("wall", w), _partition_wall_job,
+             dict(scratch=str(scratch), w=w, wall_id=seg.walls[w].id, frame=seg.walls[w].frame,
+                  templates=templates, prototypes=prototypes, s=s, images=str(parked)))
+            for w in range(len(seg.walls))]
+    tiles = _TilesAlong(ceilings, scratch=Path(scratch), classes=ceiling_classes, made=made_c, library=library, s=s)
+    jobs += tiles.jobs(parked)
+    # the ceiling tiles run in the same stream as the walls (no worker idles between them), the
+    # biggest surfaces first, so that no worker is left with a big one at the end; the results
+    # are put back in the walls' order (the consensus sees them as in memory) and the tiles'
+    jobs.sort(key=lambda j: -j[0])
     with ThreadPoolExecutor(max_workers=1) as cleaner:  # frees the disk while the walls run, not at the end
 
         def results() -> Iterator[tuple[str, WallResult, dict[str, float]]]:
-            for k, res in _as_done(executor, wall_jobs, _partition_wall_job, 2 * workers):
-                cleaner.submit(drop_wall_partition, scratch, order[k])  # its points are not read again
+            walls_left = len(seg.walls)
+            for k, res in _as_done(executor, [(fn, job) for _, _, fn, job in jobs], call_job, 2 * workers):
+                kind, i = jobs[k][1]
+                if kind == "tile":
+                    tiles.add(i, res, progress=progress if not walls_left else None)
+                    continue
+                cleaner.submit(drop_wall_partition, scratch, i)  # its points are not read again
+                walls_left -= 1
+                if not walls_left:
+                    tiles.progress(progress)
                 yield res
 
         done = _collect_walls(results(), len(seg.walls), progress, timings)
@@ -606,7 +680,7 @@ def detect_scans(
     beyond = _beyond_walls(parts, origin, seg, levels=levels, columns=found_columns, pendants=pendants,
                            library=library, expected=expected, s=s, executor=executor,
                            scratch=Path(scratch), parked=parked, in_flight=2 * workers, progress=progress,
-                           timings=timings, log=log, ceilings_binned=ceilings)
+                           timings=timings, log=log, ceilings_done=tiles.results(levels, timings, log))
     walls.update(beyond.walls)
     if s.ceilings.enabled or found_columns:
         templates, classes = {**beyond.templates, **templates}, sorted(set(classes) | set(beyond.classes))

@@ -149,6 +149,12 @@ def _submit(ex: Executor, fn: Callable, job: Job) -> Future:
     return ex.submit(fn, **job) if isinstance(job, Mapping) else ex.submit(fn, *job)
 
 
+def call_job(fn: Callable, kwargs: Mapping[str, object]) -> object:
+    """``fn(**kwargs)``: one task of a stream of tasks of several kinds (:func:`_as_done`
+    runs one function on every job: this one, with jobs ``(fn, kwargs)``)."""
+    return fn(**kwargs)
+
+
 def _as_done(ex: Executor, jobs: Iterable[Job], fn: Callable, in_flight: int) -> Iterator[tuple[int, object]]:
     """``(k, fn(*job))`` (``fn(**job)`` for a mapping) for the k-th job, as the tasks finish, with
     at most ``in_flight`` submitted at once.

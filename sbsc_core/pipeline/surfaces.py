@@ -80,9 +80,17 @@ def detect_ceilings(parts: list[ScanPart | MemoryPart], origin: np.ndarray, seg:
         library=library, classes=classes, s=s, scratch=scratch, parked=parked, in_flight=in_flight, progress=progress,
         part_executor=part_executor, binned=None if binned is None else binned_records(scratch, len(tiles)))
     timings[Stage.CEILINGS] = time.perf_counter() - t0
+    return ceiling_results(tiles, kept, results, templates, classes, levels=levels,
+                           log=log, said=f"in {timings['ceilings']:.1f} s")
+
+
+def ceiling_results(tiles: list[CeilingTile], kept: np.ndarray, results: dict, templates: dict, classes: list[str],
+                    *, levels: list[CeilingLevels] | None, log, said: str) -> CeilingResults:
+    """The tiles' results (by tile id, in the tiles' order) for the consensus, told in ``log``
+    with the points binned per tile (``kept``) and ``said`` (how long it took)."""
     lower = [f"{lv.storey + ' ' if lv.storey else ''}{z:.2f} m" for lv in levels or [] for z in lv.z]
     log(f"{len(results)} ceiling tiles" + (f" (lower ceilings at {', '.join(lower)})" if lower else "")
-        + f": {int(kept.sum()):,} points, searched for {', '.join(classes)} in {timings['ceilings']:.1f} s")
+        + f": {int(kept.sum()):,} points, searched for {', '.join(classes)} {said}")
     return CeilingResults(results, templates, classes, [t for t in tiles if t.id in results])
 
 

@@ -194,10 +194,12 @@ def _box_uv(ortho: Orthoimage, b: Box) -> dict:
 
 def depth_visualisation(depth: np.ndarray, scale_m: float = 0.10) -> np.ndarray:
     """8-bit grey image of a depth map: wall plane mid-grey, relief darker, no data white."""
-    img = np.full(depth.shape, 255, np.uint8)
-    ok = np.isfinite(depth)
-    img[ok] = np.clip(128 - depth[ok] / scale_m * 127, 0, 254).astype(np.uint8)
-    return img
+    grey = depth / scale_m  # on the whole image, then white where no data (as on the pixels with data only)
+    grey *= 127
+    np.subtract(128, grey, out=grey)
+    np.clip(grey, 0, 254, out=grey)
+    grey[~np.isfinite(depth)] = 255
+    return grey.astype(np.uint8)
 
 
 def overlay_image(w: WallResult, detections: Sequence[Detection], colour_bgr: np.ndarray | None = None) -> np.ndarray:
@@ -222,7 +224,7 @@ def _write_wall_images(ortho: Orthoimage, images: Path) -> None:
     if not cv2.imwrite(str(images / f"{wid}_colour.png"), cv2.cvtColor(ortho.colour, cv2.COLOR_RGB2BGR)):
         raise SbscError(f"{images}: cannot write images")
     cv2.imwrite(str(images / f"{wid}_depth.png"), depth_visualisation(ortho.depth))
-    np.save(images / f"{wid}_depth.npy", ortho.depth.astype(np.float32))
+    np.save(images / f"{wid}_depth.npy", np.asarray(ortho.depth, np.float32))
 
 
 _PARKED = np.zeros((0, 0), bool)

@@ -115,12 +115,15 @@ def fill_gaps(values: np.ndarray, ok: np.ndarray, sigma_px: float, min_weight: f
     if sigma_px <= 0 or ok.all() or not ok.any():
         return np.asarray(values, np.float32), ok
     w = cv2.GaussianBlur(ok.astype(np.float32), (0, 0), sigma_px)
-    v = np.where(ok[..., None] if values.ndim == 3 else ok, values, 0).astype(np.float32)
+    v = np.where(ok[..., None] if values.ndim == 3 else ok, values, 0).astype(np.float32, copy=False)
     num = cv2.GaussianBlur(v, (0, 0), sigma_px)
     fill = ~ok & (w >= min_weight)
-    out = np.asarray(values, np.float32).copy()
+    out = np.array(values, np.float32)  # a copy
     den = np.maximum(w, 1e-6)
-    out[fill] = (num / (den[..., None] if values.ndim == 3 else den))[fill]
+    # the quotient at the pixels to fill only (np.take of flat indices: as (num / den)[fill])
+    at = np.flatnonzero(fill)
+    n = fill.size
+    out.reshape(n, -1)[at] = np.take(num.reshape(n, -1), at, axis=0) / np.take(den.reshape(n), at)[:, None]
     return out, ok | fill
 
 
