@@ -671,9 +671,9 @@ def detect_scans(
                     continue
                 cleaner.submit(drop_wall_partition, scratch, i)  # its points are not read again
                 walls_left -= 1
+                yield res  # the walls' bar counts it (in _collect_walls) before the tiles' bar may start
                 if not walls_left:
                     tiles.progress(progress)
-                yield res
 
         done = _collect_walls(results(), len(seg.walls), progress, timings)
     walls = {wall.id: done[wall.id] for wall in seg.walls}
