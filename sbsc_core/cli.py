@@ -684,7 +684,7 @@ def main(argv: Sequence[str] | None = None, registrars: Sequence[Registrar] | No
         except Stopped as exc:
             con.close()
             print(f"sbsc: stopped by {exc}", file=sys.stderr)
-            return 128 + exc.signum
+            code = 128 + exc.signum
         except SbscError as exc:
             con.close()
             if con.debug:
@@ -712,6 +712,12 @@ def main(argv: Sequence[str] | None = None, registrars: Sequence[Registrar] | No
             print(f"sbsc: internal error: {type(exc).__name__}: {text} "
                   "(run again with --debug for the traceback)", file=sys.stderr)
             return EXIT_INTERNAL
+    # Stopped: the command has cleaned up (scratch folder, partial output) and its workers are
+    # gone. The process ends here: at a normal exit Python joins the worker pools' manager
+    # threads, and one may wait forever on a result that a terminated worker half sent.
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 if __name__ == "__main__":

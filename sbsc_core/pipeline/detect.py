@@ -79,7 +79,15 @@ from ..types import (
     PointCloud,
     Segmentation,
 )
-from .executors import InlineExecutor, _as_done, _walls_results, call_job, wall_executor, wall_pool
+from .executors import (
+    InlineExecutor,
+    _as_done,
+    _walls_results,
+    call_job,
+    close_pool,
+    wall_executor,
+    wall_pool,
+)
 from .outputs import DetectionResult, write_outputs
 from .walls import (
     WALL_STAGES,
@@ -324,7 +332,7 @@ def _beyond_walls_in_memory(cloud: PointCloud, seg: Segmentation, library: Model
                                  log=lambda msg: None, part_executor=InlineExecutor())
     finally:
         if own and isinstance(executor, ProcessPoolExecutor):
-            executor.shutdown(wait=True, cancel_futures=True)
+            close_pool(executor)
 
 
 # --------------------------------------------------------------------------- out of core

@@ -7,6 +7,7 @@ import contextlib
 import functools
 import itertools
 import multiprocessing
+import sys
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import (
@@ -64,6 +65,16 @@ def wall_pool(settings: DetectionSettings, n_walls: int | None = None) -> Proces
     return pool
 
 
+def close_pool(pool: ProcessPoolExecutor) -> None:
+    """Shut ``pool`` down, from a ``finally`` block: waiting for its workers, unless what ends
+    the block is a stop (a ``BaseException`` that is not an ``Exception``: the command's
+    SIGTERM / SIGINT, whose handler has already terminated the workers). Then it does not
+    wait: the pool's manager thread may be blocked for good reading a result that a killed
+    worker had half sent (CPython's ProcessPoolExecutor), and joining it would hang the stop."""
+    exc = sys.exc_info()[1]
+    pool.shutdown(wait=exc is None or isinstance(exc, Exception), cancel_futures=True)
+
+
 def _walls_results(cloud: PointCloud, seg: Segmentation, templates: dict[str, ModelTemplate],
                    prototypes: ColourPrototypes, s: DetectionSettings,
                    *, pool: ProcessPoolExecutor | None = None) -> Iterator[tuple[str, WallResult, dict[str, float]]]:
@@ -94,7 +105,7 @@ def _walls_results(cloud: PointCloud, seg: Segmentation, templates: dict[str, Mo
                                            prototypes, s))
     finally:
         if own:
-            pool.shutdown(wait=True, cancel_futures=True)
+            close_pool(pool)
 
 
 class InlineExecutor(Executor):
@@ -138,7 +149,7 @@ def wall_executor(settings: DetectionSettings, scheduler: str | None = None) -> 
     try:
         yield pool
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        close_pool(pool)
 
 
 Job = tuple | Mapping[str, object]
