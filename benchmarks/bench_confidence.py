@@ -294,20 +294,20 @@ def main() -> int:
     data: dict[str, list[tuple[np.ndarray, int]]] = {"fit": [], "eval": []}
     codes: set[str] = set()
     t0 = time.perf_counter()
-    plan = [(part, seed, *pair.split("/")) for part, seeds, pairs in
+    # (part, scene seed, scene design set, library design set, library family seed or None)
+    plan = [(part, seed, *pair.split("/"), None) for part, seeds, pairs in
             (("fit", args.fit_seeds, args.pairs), ("eval", args.eval_seeds, args.eval_pairs or args.pairs))
             for seed in seeds for pair in pairs]
-    plan += [(part, family, RANDOM, RANDOM) for part, families in
+    plan += [(part, family, RANDOM, RANDOM, None) for part, families in
              (("fit", args.fit_families), ("eval", args.eval_families)) for family in families]
-    plan += [(part, n, RANDOM, f"{SIBLING}{m}") for part in ("fit", "eval") for n, m in crosses[part]]
-    for part, seed, scene_d, lib_d in plan:
+    plan += [(part, n, RANDOM, SIBLING, m) for part in ("fit", "eval") for n, m in crosses[part]]
+    for part, seed, scene_d, lib_d, lib_seed in plan:
         for variant in args.variants:
             for turned in args.turned:
-                scan = args.work / f"{variant}-{scene_d}-{lib_d}-t{turned:g}-s{seed}"
+                scan = args.work / f"{variant}-{scene_d}-{lib_d}{lib_seed or ''}-t{turned:g}-s{seed}"
                 if not (scan / "ground_truth.json").is_file():
                     builder = design_builder(scene_d, seed)
-                    library = (library_builder(SIBLING, builder, seed, int(lib_d[len(SIBLING):]))
-                               if lib_d.startswith(SIBLING) else design_builder(lib_d, seed))
+                    library = library_builder(lib_d, builder, seed, lib_seed)
                     simulate_scene(scene_file(args.work, turned, seed), scan, seed=seed,
                                    angular_step_deg=args.step, design=False,
                                    object_builder=builder, library_builder=library, **VARIANTS[variant])

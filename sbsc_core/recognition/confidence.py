@@ -177,17 +177,15 @@ MONOTONE = {"rho_depth": 1, "colour_goodness": 1, "alpha": 1, "class_margin": 1,
             "colour_only_print": 1, "gain_excess": -1}
 
 
-def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int] | None = None, *,
-                 weights: np.ndarray | None = None) -> Calibration:
+def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int] | None = None) -> Calibration:
     """Maximum-likelihood logistic regression with a small L2 penalty on the coefficients.
 
     ``signs`` (one per column: +1, -1 or 0) bounds each coefficient to be >= 0, <= 0 or
     free (e.g. from :data:`MONOTONE`): a few scenes with correlated features must not teach
-    that a worse match is more likely right. ``weights``: one per row (default 1).
+    that a worse match is more likely right.
     """
     x = np.asarray(x, float)
     y = np.asarray(y, float)
-    wt = np.ones(len(y)) if weights is None else np.asarray(weights, float)
     bounds = None
     if signs is not None:
         if len(signs) != x.shape[1]:
@@ -197,9 +195,8 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int
     def loss(w: np.ndarray) -> tuple[float, np.ndarray]:
         z = w[0] + x @ w[1:]
         p = 1.0 / (1.0 + np.exp(-np.clip(z, -40, 40)))
-        nll = float(np.sum(wt * (np.logaddexp(0.0, z) - y * z))) + 0.5 * l2 * float(w[1:] @ w[1:])
-        r = wt * (p - y)
-        g = np.concatenate([[np.sum(r)], x.T @ r + l2 * w[1:]])
+        nll = float(np.sum(np.logaddexp(0.0, z) - y * z)) + 0.5 * l2 * float(w[1:] @ w[1:])
+        g = np.concatenate([[np.sum(p - y)], x.T @ (p - y) + l2 * w[1:]])
         return nll, g
 
     from scipy.optimize import minimize  # here: only calibration needs it, not every detection
