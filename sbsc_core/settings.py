@@ -180,6 +180,7 @@ class DepthRecognitionSettings:
     isolation_max_occupancy: float = 0.5  # a side strip with more relief: part of something larger
     isolation_trails: bool = True  # ... unless it falls at every pixel to the wall: a mixed-pixel trail
     min_relief_iou: float = 0.5  # where model and scene stand out must overlap this much (IoU)
+    face_edge_px: int = 2  # a match's face amplitude (Candidate.face_gain) leaves this much of its outline out
     foreground_factor: float = 3.0  # relief beyond this x a model's peak is another object in front of the wall
     # (a desk panel, a bin): unknown to that model, like an unseen pixel (0: off); above gain_range's top
     foreground_edge_px: int = 8  # ... with its edge (falling by min_relief_m per pixel) up to this wide

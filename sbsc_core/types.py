@@ -342,6 +342,7 @@ class Candidate:
     lookalike_margin: float | None = None  # print NCC of its class minus the best other look-alike's
     gain: float | None = None  # depth: least-squares relief amplitude of the scene over the model's
     relief_iou: float | None = None  # depth: IoU of where the scene and the model stand out
+    face_gain: float | None = None  # depth: the scene's relief over the model's inside the footprint, off its outline
     position: tuple[float, float] | None = None  # depth: (row, col) from the relief's sharp edges, for placement
 
 

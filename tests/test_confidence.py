@@ -80,12 +80,12 @@ def test_shipped_calibration_refuses_room_controllers_and_keeps_switches_of_anot
     assert cal is not None
     names = ("in_depth", "in_colour", "rho_depth", "colour_goodness", "alpha", "class_margin",
              "lookalike_margin", "gain_misfit", "relief_misfit", "unmatched_relief", "relief_margin",
-             "colour_only_print", "gain_excess")
+             "colour_only_print", "gain_excess", "face_deficit", "face_excess")
     assert FEATURES == names  # the vectors below follow this order
-    controllers = np.array([[1, 0, .95, 0, .5, .3, -.04, .39, .22, 0, .3, 0, .39],
-                            [1, 1, .95, .92, 1, .3, .05, .37, .20, 0, .3, 0, .37]])
-    switches = np.array([[1, 0, .95, 0, .5, .12, .24, .31, .09, 0, .21, 0, .31],
-                         [1, 0, .95, 0, .5, .12, .30, .28, .08, 0, .23, 0, .28]])
+    controllers = np.array([[1, 0, .95, 0, .5, .3, -.04, .39, .22, 0, .3, 0, .39, 0, .39],
+                            [1, 1, .95, .92, 1, .3, .05, .37, .20, 0, .3, 0, .37, 0, .37]])
+    switches = np.array([[1, 0, .95, 0, .5, .12, .24, .31, .09, 0, .21, 0, .31, 0, .31],
+                         [1, 0, .95, 0, .5, .12, .30, .28, .08, 0, .23, 0, .28, 0, .28]])
     threshold = ConfidenceSettings().min_confidence
     assert (cal.predict(controllers) < threshold).all()
     assert (cal.predict(switches) > threshold).all()
@@ -140,6 +140,16 @@ def test_depth_residual_features() -> None:
     deep = dict(zip(FEATURES, hit_features(make_hit(None, _cand("socket", "colour", 0.1), 0.5), [], [],
                                            {"socket": 0.012}), strict=True))
     assert deep["unmatched_relief"] == pytest.approx(0.6)
+    assert flat["face_deficit"] == 0 and flat["face_excess"] == 0  # a candidate kept before face_gain was measured
+    d.gain, d.face_gain = 0.55, 0.98  # a deep object's ring flattened by mixed pixels, its face as deep as its model's
+    face = dict(zip(FEATURES, hit_features(make_hit(d, None, 0.5), [d], []), strict=True))
+    assert face["gain_misfit"] == pytest.approx(-np.log(0.55)) and face["face_deficit"] == pytest.approx(-np.log(0.98))
+    d.face_gain = 0.45  # a flatter object of the model's outline
+    flatter = dict(zip(FEATURES, hit_features(make_hit(d, None, 0.5), [d], []), strict=True))
+    assert flatter["face_deficit"] == pytest.approx(-np.log(0.45)) and flatter["face_excess"] == 0
+    d.face_gain = 1.5
+    deeper = dict(zip(FEATURES, hit_features(make_hit(d, None, 0.5), [d], []), strict=True))
+    assert deeper["face_excess"] == pytest.approx(np.log(1.5)) and deeper["face_deficit"] == 0
 
 
 def test_a_calibration_of_fewer_features_still_loads_and_predicts() -> None:

@@ -4,6 +4,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from sbsc_core.recognition.depth_recognition import depth_rois, match_depth
 from sbsc_core.recognition.matching import cluster_boxes
@@ -350,6 +351,52 @@ def test_candidates_carry_their_relief_gain_and_fit(scene) -> None:
     deep = [x for x in match_depth(deep_ortho, deep_area, depth_rois(deep_ortho, deep_area, s), templates, s)
             if x.class_id == "panel"]
     assert deep and deep[0].gain == pytest.approx(1.6, abs=0.2)
+
+
+def test_face_gain_reads_a_deep_object_s_face_whatever_its_mixed_pixels_do() -> None:
+    """A 12 cm deep panel whose outline a scan's mixed pixels widen by 3 pixels of half its
+    depth (as the realistic scanner's do): the match's gain, read mostly on the wall ring
+    around the footprint, falls far below 1, while its face stands out exactly as far as the
+    model's: face_gain ~1. A panel of that outline 0.7x as deep: face_gain ~0.7."""
+    s = DepthRecognitionSettings()
+    templates = make_templates(synthetic_library(), PIXEL_M)
+    deep = replace(templates["panel"], depth=templates["panel"].depth * (0.12 / 0.05))
+    found = {}
+    for depth_factor in (1.0, 0.7):
+        ortho, area = make_wall(seed=7, holes=0)
+        paste(ortho, area, replace(deep, depth=deep.depth * depth_factor), (150.0, 250.0))
+        stands = np.nan_to_num(ortho.depth) > 0.01
+        grown = stands
+        for share in (0.75, 0.5, 0.25):  # the trail of mixed ranges around the outline, falling to the wall
+            ring = ndimage.binary_dilation(grown) & ~grown
+            ortho.depth[ring] = share * 0.12 * depth_factor
+            grown = grown | ring
+        lib = {"panel": deep}
+        cands = match_depth(ortho, area, depth_rois(ortho, area, s), lib, s)
+        found[depth_factor] = max(cands, key=lambda c: c.score)
+    right, shallow = found[1.0], found[0.7]
+    assert right.gain < 0.8  # the wall ring's trail pulls the window's amplitude down
+    assert right.face_gain == pytest.approx(1.0, abs=0.05)
+    assert shallow.face_gain == pytest.approx(0.7, abs=0.05)
+
+
+def test_face_gain_leaves_the_outline_and_unseen_pixels_out() -> None:
+    from sbsc_core.recognition.depth_recognition import face_gain
+
+    model = np.zeros((20, 20), np.float32)
+    model[2:18, 2:18] = 0.02
+    relief = np.zeros((40, 40), np.float32)
+    relief[12:28, 12:28] = 0.03  # 1.5x as deep
+    relief[12:14, 12:28] = 0.0  # its top rows blurred into the wall: part of the outline
+    box = Box(10, 10, 30, 30)
+    assert face_gain(relief, model, box, edge_px=2) == pytest.approx(1.5)
+    assert face_gain(relief, model, box, edge_px=0) < 1.4
+    known = np.ones((40, 40), bool)
+    relief[20, 20] = 0.5  # a spike where the scan has no data
+    known[20, 20] = False
+    assert face_gain(relief, model, box, edge_px=2, known=known) == pytest.approx(1.5)
+    assert face_gain(relief, np.zeros((20, 20), np.float32), box, edge_px=2) is None
+    assert face_gain(relief, model, Box(10, 10, 31, 30), edge_px=2) is None  # not the model's size
 
 
 def test_see_through_gaps_are_closed_and_solid_models_left_alone() -> None:

@@ -37,7 +37,7 @@ UNKNOWN_CLASS = "unknown"
 CALIBRATION_PATH = Path(__file__).with_name("calibration") / "confidence.json"
 FEATURES = ("in_depth", "in_colour", "rho_depth", "colour_goodness", "alpha", "class_margin",
             "lookalike_margin", "gain_misfit", "relief_misfit", "unmatched_relief", "relief_margin",
-            "colour_only_print", "gain_excess")
+            "colour_only_print", "gain_excess", "face_deficit", "face_excess")
 _MARGIN_CAP = 0.3  # margins beyond this say nothing more
 _GAIN_CAP = 1.0  # |ln gain| beyond this (a relief e times too deep or too flat) says nothing more
 _RELIEF_CAP_M = 0.02  # a model standing out this far would surely have been matched in depth
@@ -79,6 +79,16 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
     taken for the flat switch of its outline stands out further. Fitted on its own weight,
     the flattening (``gain_misfit`` alone) is judged apart from the excess.
 
+    ``face_deficit`` and ``face_excess``: how much less, or further, the object's face
+    stands out than its model's inside the footprint, away from the outline
+    (:func:`~sbsc_core.recognition.depth_recognition.face_gain`): the negative and positive
+    parts of its ln, capped to 1 (0 without a depth match). ``gain`` is read mostly on the
+    wall ring around the footprint, where a scan's mixed pixels widen a deep object's relief:
+    a right 12 cm panel comes out at half its model's depth there, a 4 cm call point at 0.9,
+    so ``gain_misfit`` cannot tell the flattening every deep object shows from a flatter
+    object of the same outline (a thermostat on a call point's model). Its face can: a right
+    object's stands out as far as its model's, whatever its depth.
+
     ``colour_only_print``: the look-alike margin again, for a hit found in colour only (0
     otherwise), times 1 - ``unmatched_relief``. Found in colour alone, the print is the only
     evidence of which class it is: a flat sign lost in a noisy scan's depth whose pictogram
@@ -114,11 +124,14 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
     if d is None and reliefs:
         unmatched = min(1.0, float(reliefs.get(hit.class_id, 0.0)) / _RELIEF_CAP_M)
     colour_only_print = look * (1.0 - unmatched) if d is None and hit.rho_colour is not None else 0.0
+    face = getattr(d, "face_gain", None)  # candidates kept before it was measured have none
+    ln_face = 0.0 if face is None else float(np.clip(np.log(max(face, 1e-6)), -_GAIN_CAP, _GAIN_CAP))
     return np.array([
         float(hit.rho_depth is not None), float(hit.rho_colour is not None),
         float(hit.rho_depth or 0.0), 0.0 if hit.rho_colour is None else 1.0 - float(hit.rho_colour),
         float(hit.alpha), float(np.clip(margin, 0.0, _MARGIN_CAP)), look,
         gain, relief, unmatched, relief_margin, colour_only_print, max(ln_gain, 0.0),
+        max(-ln_face, 0.0), max(ln_face, 0.0),
     ])
 
 
@@ -174,7 +187,7 @@ def load_calibration(path: Path | None = None) -> Calibration | None:
 # The sign each feature's coefficient must have: better evidence never lowers the confidence.
 MONOTONE = {"rho_depth": 1, "colour_goodness": 1, "alpha": 1, "class_margin": 1, "lookalike_margin": 1,
             "gain_misfit": -1, "relief_misfit": -1, "unmatched_relief": -1, "relief_margin": 1,
-            "colour_only_print": 1, "gain_excess": -1}
+            "colour_only_print": 1, "gain_excess": -1, "face_deficit": -1, "face_excess": -1}
 
 
 def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int] | None = None) -> Calibration:
