@@ -276,6 +276,9 @@ def main() -> int:
                     help="likelihood: one logistic fit of every hit (default, the shipped calibration's); ranking: "
                          "weights that order each class's hits in a scene right before wrong, then Platt-scaled "
                          "(fit_ranking_logistic)")
+    ap.add_argument("--link", choices=["platt", "isotonic"], default="platt",
+                    help="with --objective ranking: how the score becomes a probability (Platt scaling, or "
+                         "the isotonic_link of confidence.py)")
     ap.add_argument("--write", action="store_true", help="store the fitted model in the package")
     ap.add_argument("--out", type=Path, default=None, help="store the fitted model there (to try it first)")
     args = ap.parse_args()
@@ -327,7 +330,8 @@ def main() -> int:
     xe = np.stack([f for f, _, _ in data["eval"]])
     ye = np.array([r for _, r, _ in data["eval"]], float)
     signs = [MONOTONE.get(f, 0) for f in FEATURES]
-    cal = (fit_ranking_logistic(xf, yf, [g for _, _, g in data["fit"]], signs=signs) if args.objective == "ranking"
+    cal = (fit_ranking_logistic(xf, yf, [g for _, _, g in data["fit"]], signs=signs, link=args.link)
+           if args.objective == "ranking"
            else fit_logistic(xf, yf, signs=signs))
     table, ece = reliability(cal.predict(xe), ye)
     _, ece_fit = reliability(cal.predict(xf), yf)
@@ -353,7 +357,8 @@ def main() -> int:
         cal.info = {"fit_seeds": list(args.fit_seeds), "eval_seeds": list(args.eval_seeds), "scenes": "one_room.yaml",
                     "fit_families": list(args.fit_families), "eval_families": list(args.eval_families),
                     "fit_crosses": list(args.fit_crosses), "eval_crosses": list(args.eval_crosses),
-                    "objective": args.objective, "variants": list(args.variants), "pairs": list(args.pairs) if args.fit_seeds else [],
+                    "objective": args.objective, "link": args.link if args.objective == "ranking" else "logistic",
+                    "variants": list(args.variants), "pairs": list(args.pairs) if args.fit_seeds else [],
                     "eval_pairs": list(args.eval_pairs or args.pairs) if args.eval_seeds else [], "turned": list(args.turned),
                     "radius_m": args.radius,
                     "fit_scenes": [p.name for p in args.fit_scenes], "eval_scenes": [p.name for p in args.eval_scenes],

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -360,3 +362,26 @@ def test_ranking_fit_orders_competing_hits_where_the_likelihood_fit_does_not() -
     assert abs(p.mean() - y.mean()) < 0.01  # the Platt step: as many right hits as the confidence says
     assert np.all(np.diff(p[np.argsort(x @ ranked.coef)]) >= 0)  # ... and the order of the pairs kept
     assert fit_ranking_logistic(x[:1], y[:1], groups[:1]).coef.shape == (2,)  # no pair: the plain fit
+
+
+def test_an_isotonic_link_is_calibrated_where_platt_scaling_is_under_confident_at_the_top() -> None:
+    """Scores whose top third is right every time but whose middle is a coin toss: one
+    logistic slope cannot follow both, the isotonic link does (and says "very likely",
+    not "certain", at the top); it keeps the order, and survives its JSON form."""
+    from sbsc_core.recognition.confidence import isotonic_link, reliability
+
+    rng = np.random.default_rng(5)
+    z = rng.uniform(0.0, 3.0, 3000)
+    y = np.where(z > 2.0, 1.0, np.where(z > 1.0, (rng.random(3000) < 0.5).astype(float), 0.0))
+    platt = fit_logistic(z[:, None], y, 0.0, [1])
+    iso = Calibration(np.array([1.0]), 0.0, link=isotonic_link(z, y))
+    top = z > 2.2
+    assert (platt.predict(z[top, None]) >= 0.99).mean() < 0.5  # a bulk accept at 0.99 takes few of them
+    assert 0.99 < iso.predict(z[top, None]).min() < 1.0
+    assert reliability(iso.predict(z[:, None]), y)[1] < reliability(platt.predict(z[:, None]), y)[1] / 2
+    p = iso.predict(np.sort(z)[:, None])
+    assert np.all(np.diff(p) >= 0)
+    again = Calibration.from_dict(json.loads(json.dumps(iso.to_dict())))
+    assert np.allclose(again.predict(z[:, None]), iso.predict(z[:, None]), atol=1e-5)
+    with pytest.raises(ValueError, match="link"):
+        Calibration(np.array([1.0]), 0.0, link=(np.array([1.0, 0.5]), np.array([0.2, 0.3])))

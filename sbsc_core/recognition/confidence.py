@@ -142,12 +142,15 @@ class Calibration:
     ``features`` names the model's inputs, a subset of :data:`FEATURES` (default: the
     first ``len(coef)`` of them, so a calibration fitted before a feature was added still
     loads). :meth:`predict` takes either those columns or all of :data:`FEATURES`.
+    ``link`` (scores, confidences), both increasing, replaces the logistic function by the
+    piecewise-linear map through those knots (:func:`isotonic_link`), constant beyond them.
     """
 
     coef: np.ndarray
     intercept: float
     features: tuple[str, ...] | None = None
     info: dict | None = None
+    link: tuple[np.ndarray, np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         self.coef = np.asarray(self.coef, float)
@@ -158,22 +161,34 @@ class Calibration:
         if unknown or len(self.features) != len(self.coef):
             raise ValueError(f"calibration features {list(self.features)} do not fit {list(FEATURES)} "
                              f"and {len(self.coef)} coefficients")
+        if self.link is not None:
+            zs, ps = (np.asarray(a, float) for a in self.link)
+            if zs.ndim != 1 or zs.shape != ps.shape or not len(zs) or np.any(np.diff(zs) <= 0) \
+                    or np.any(np.diff(ps) < 0) or ps.min() < 0 or ps.max() > 1:
+                raise ValueError("calibration link: scores must increase and confidences in [0, 1] not decrease")
+            self.link = (zs, ps)
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         x = np.atleast_2d(np.asarray(x, float))
         if x.shape[1] != len(self.features):  # every feature given: take the model's own
             x = x[:, [FEATURES.index(f) for f in self.features]]
         z = self.intercept + x @ self.coef
+        if self.link is not None:
+            return np.interp(z, *self.link)
         return 1.0 / (1.0 + np.exp(-np.clip(z, -40, 40)))
 
     def to_dict(self) -> dict:
+        link = {} if self.link is None else {"link": {"score": [float(v) for v in self.link[0]],  # unrounded:
+                                                      "confidence": [float(v) for v in self.link[1]]}}  # steep ramps
         return {"schema": "sbsc.confidence/1", "features": list(self.features),
                 "coef": [round(float(c), 6) for c in self.coef], "intercept": round(float(self.intercept), 6),
-                **({"info": self.info} if self.info else {})}
+                **link, **({"info": self.info} if self.info else {})}
 
     @classmethod
     def from_dict(cls, d: dict) -> Calibration:
-        return cls(np.asarray(d["coef"], float), float(d["intercept"]), tuple(d.get("features", ())), d.get("info"))
+        link = d.get("link")
+        return cls(np.asarray(d["coef"], float), float(d["intercept"]), tuple(d.get("features", ())), d.get("info"),
+                   None if link is None else (np.asarray(link["score"], float), np.asarray(link["confidence"], float)))
 
 
 def load_calibration(path: Path | None = None) -> Calibration | None:
@@ -218,8 +233,42 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int
     return Calibration(res.x[1:], float(res.x[0]))
 
 
+def isotonic_link(z: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Knots (scores, confidences) of the non-decreasing map from a score to the share of
+    right rows: the pool-adjacent-violators fit (``scipy.optimize.isotonic_regression``) of
+    ``y`` over the rows sorted by ``z``, with knots at the first and last score of each block
+    of equal fitted value (between blocks the map ramps linearly). A block's share is taken as (right + 1) / (rows + 2): a block of right
+    rows only says "very likely", not "certain"; the shares are made non-decreasing again
+    (weighted by the blocks' rows).
+
+    The logistic function of Platt scaling has one slope for the whole range: where the top
+    of a score's range is purer than its middle, it is under-confident there (a bulk accept
+    at 0.99 takes few), this is not.
+    """
+    from scipy.optimize import isotonic_regression  # here: only calibration needs it
+
+    z, y = np.asarray(z, float), np.asarray(y, float)
+    order = np.argsort(z, kind="stable")
+    zs, ys = z[order], y[order]
+    fitted = isotonic_regression(ys).x
+    starts = np.r_[0, np.flatnonzero(np.diff(fitted)) + 1]
+    ends = np.r_[starts[1:], len(ys)]
+    rows = (ends - starts).astype(float)
+    share = isotonic_regression((np.add.reduceat(ys, starts) + 1.0) / (rows + 2.0), weights=rows).x
+    knots: list[float] = []
+    shares: list[float] = []
+    for a, b, p in zip(starts, ends, share, strict=True):
+        for zk in (zs[a], zs[b - 1]):  # the block's first and last score: a step, with a ramp between blocks
+            if knots and zk <= knots[-1]:  # the same score (ties across blocks): the later, higher share
+                shares[-1] = max(shares[-1], float(p))
+            else:
+                knots.append(float(zk))
+                shares.append(float(p))
+    return np.array(knots), np.array(shares)
+
+
 def fit_ranking_logistic(x: np.ndarray, y: np.ndarray, groups: list, l2: float = 1e-2,
-                         signs: list[int] | None = None) -> Calibration:
+                         signs: list[int] | None = None, *, link: str = "platt") -> Calibration:
     """A logistic model fitted to order the hits that compete for one class's count, then
     rescaled to a probability.
 
@@ -237,9 +286,13 @@ def fit_ranking_logistic(x: np.ndarray, y: np.ndarray, groups: list, l2: float =
        of one slope and an intercept on all rows (Platt scaling), so that the confidence is
        calibrated again. The slope is positive: the order of step 1 is kept.
 
+    With ``link="isotonic"``, step 2 is :func:`isotonic_link` of the same score instead.
+
     ``signs`` bounds the weights as in :func:`fit_logistic`. Groups without a right and a
     wrong row add no pair; with no pair at all this is :func:`fit_logistic`.
     """
+    if link not in ("platt", "isotonic"):
+        raise ValueError(f"link must be 'platt' or 'isotonic', not {link!r}")
     x = np.asarray(x, float)
     y = np.asarray(y, float)
     members: dict = {}
@@ -250,6 +303,8 @@ def fit_ranking_logistic(x: np.ndarray, y: np.ndarray, groups: list, l2: float =
         return fit_logistic(x, y, l2, signs)
     d = x[pairs[:, 0]] - x[pairs[:, 1]]
     order = fit_logistic(np.concatenate([d, -d]), np.repeat([1.0, 0.0], len(d)), l2, signs)
+    if link == "isotonic":
+        return Calibration(order.coef, 0.0, link=isotonic_link(x @ order.coef, y))
     platt = fit_logistic((x @ order.coef)[:, None], y, 0.0, [1])
     return Calibration(order.coef * platt.coef[0], platt.intercept)
 
