@@ -60,6 +60,7 @@ import pickle
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -279,6 +280,8 @@ def main() -> int:
     ap.add_argument("--link", choices=["platt", "isotonic"], default="platt",
                     help="with --objective ranking: how the score becomes a probability (Platt scaling, or "
                          "the isotonic_link of confidence.py)")
+    ap.add_argument("--features", nargs="+", choices=list(FEATURES), default=None, metavar="NAME",
+                    help="the features fitted on (default: all of confidence.FEATURES)")
     ap.add_argument("--write", action="store_true", help="store the fitted model in the package")
     ap.add_argument("--out", type=Path, default=None, help="store the fitted model there (to try it first)")
     args = ap.parse_args()
@@ -329,10 +332,13 @@ def main() -> int:
     yf = np.array([r for _, r, _ in data["fit"]], float)
     xe = np.stack([f for f, _, _ in data["eval"]])
     ye = np.array([r for _, r, _ in data["eval"]], float)
-    signs = [MONOTONE.get(f, 0) for f in FEATURES]
-    cal = (fit_ranking_logistic(xf, yf, [g for _, _, g in data["fit"]], signs=signs, link=args.link)
+    names = tuple(args.features or FEATURES)
+    cols = [FEATURES.index(f) for f in names]
+    signs = [MONOTONE.get(f, 0) for f in names]
+    cal = (fit_ranking_logistic(xf[:, cols], yf, [g for _, _, g in data["fit"]], signs=signs, link=args.link)
            if args.objective == "ranking"
-           else fit_logistic(xf, yf, signs=signs))
+           else fit_logistic(xf[:, cols], yf, signs=signs))
+    cal = replace(cal, features=names)  # predict() then takes every feature's column and picks these
     table, ece = reliability(cal.predict(xe), ye)
     _, ece_fit = reliability(cal.predict(xf), yf)
     fixed = f"seeds {args.fit_seeds} of {args.pairs}, " if args.fit_seeds else ""
@@ -342,7 +348,7 @@ def main() -> int:
           f"families {args.eval_families}, crosses {args.eval_crosses}; "
           f"variants {args.variants}")
     print(f"candidates made by {', '.join(sorted(codes))}")
-    print("coefficients: " + ", ".join(f"{n} {c:+.3f}" for n, c in zip(FEATURES, cal.coef, strict=True))
+    print("coefficients: " + ", ".join(f"{n} {c:+.3f}" for n, c in zip(names, cal.coef, strict=True))
           + f", intercept {cal.intercept:+.3f}")
     print("\nreliability on the evaluation scenes")
     print(f"{'confidence':>12s} {'hits':>6s} {'mean conf':>10s} {'accuracy':>9s}")
