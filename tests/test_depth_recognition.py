@@ -381,7 +381,7 @@ def test_face_gain_reads_a_deep_object_s_face_whatever_its_mixed_pixels_do() -> 
 
 
 def test_face_gain_leaves_the_outline_and_unseen_pixels_out() -> None:
-    from sbsc_core.recognition.depth_recognition import face_gain
+    from sbsc_core.recognition.depth_recognition import face_gain, face_region
 
     model = np.zeros((20, 20), np.float32)
     model[2:18, 2:18] = 0.02
@@ -389,14 +389,20 @@ def test_face_gain_leaves_the_outline_and_unseen_pixels_out() -> None:
     relief[12:28, 12:28] = 0.03  # 1.5x as deep
     relief[12:14, 12:28] = 0.0  # its top rows blurred into the wall: part of the outline
     box = Box(10, 10, 30, 30)
-    assert face_gain(relief, model, box, edge_px=2) == pytest.approx(1.5)
-    assert face_gain(relief, model, box, edge_px=0) < 1.4
+    face = face_region(model, 2)
+    assert face.sum() == 12 * 12
+    assert face_gain(relief, model, box, region=face) == pytest.approx(1.5)
+    assert face_gain(relief, model, box, region=face_region(model, 0)) < 1.4
     known = np.ones((40, 40), bool)
     relief[20, 20] = 0.5  # a spike where the scan has no data
     known[20, 20] = False
-    assert face_gain(relief, model, box, edge_px=2, known=known) == pytest.approx(1.5)
-    assert face_gain(relief, np.zeros((20, 20), np.float32), box, edge_px=2) is None
-    assert face_gain(relief, model, Box(10, 10, 31, 30), edge_px=2) is None  # not the model's size
+    assert face_gain(relief, model, box, region=face, known=known) == pytest.approx(1.5)
+    tiny = np.zeros((5, 5), np.float32)
+    tiny[1:4, 1:4] = 0.01
+    assert face_region(tiny, 2).sum() == 9  # too small to erode: its whole footprint
+    assert not face_region(np.zeros((20, 20), np.float32), 2).any()
+    assert face_gain(relief, np.zeros((20, 20), np.float32), box, region=np.zeros((20, 20), bool)) is None
+    assert face_gain(relief, model, Box(10, 10, 31, 30), region=face) is None  # not the model's size
 
 
 def test_see_through_gaps_are_closed_and_solid_models_left_alone() -> None:

@@ -531,44 +531,48 @@ def relief_overlap(jd: np.ndarray, model: np.ndarray, box: Box, pad_px: int, thr
     return float(np.count_nonzero(m & s)) / union if union else 0.0
 
 
-def face_gain(relief: np.ndarray, model: np.ndarray, box: Box, *, edge_px: int,
+def face_region(model: np.ndarray, edge_px: int) -> np.ndarray:
+    """Where ``model`` stands out (over a tenth of its peak), ``edge_px`` off its outline.
+
+    At least that much of an object's outline is blurred in a scan (the smoothing, mixed
+    pixels); a model too small to erode keeps its whole footprint. See :func:`face_gain`.
+    """
+    m = np.abs(np.nan_to_num(model))  # unknown parts of a model: not its face
+    peak = float(m.max()) if m.size else 0.0
+    if peak <= 0:
+        return np.zeros(model.shape, bool)
+    stands = m > 0.1 * peak
+    inner = ndimage.binary_erosion(stands, iterations=edge_px) if edge_px > 0 else stands
+    return inner if np.count_nonzero(inner) >= 4 else stands
+
+
+def face_gain(relief: np.ndarray, model: np.ndarray, box: Box, *, region: np.ndarray,
               known: np.ndarray | None = None) -> float | None:
-    """The scene's relief over the model's inside the footprint, ``edge_px`` away from its outline.
+    """The scene's relief over the model's on the model's face (``region``, :func:`face_region`).
 
     The match's ``gain`` (least squares over the padded window, :func:`least_squares_gain`)
     weighs the wall ring around the footprint most, because a deep model's window mean
     lies near its face: there a scan's mixed pixels and their trails, which stand out by a
     share of the object's depth, widen its relief by a few pixels, and a right 12 cm panel
     whose face stands out exactly as far as its model's comes out at half its depth. Here
-    only where the model stands out counts (over a tenth of its peak), eroded by
-    ``edge_px`` (at least that much of the outline is blurred by the smoothing and mixed
-    pixels; a model too small to erode keeps its whole footprint): the least-squares
-    amplitude, without an offset, of ``relief`` (metres out of the local wall, so the wall
-    is 0) over ``model`` there, on ``known`` pixels. It tells how far the object's face
-    stands out against its model's, whatever its outline does. None when nothing is left.
+    only the model's face counts, away from its outline: the least-squares amplitude,
+    without an offset, of ``relief`` (metres out of the local wall, so the wall is 0) over
+    ``model`` on ``region``'s ``known`` pixels. It tells how far the object's face stands
+    out against its model's, whatever its outline does. None when nothing is left.
 
     Parameters
     ----------
     relief : (H, W) relief out of the local wall (J_D levelled and smoothed), metres.
     model : (h, w) the matched (turned) depth model, metres.
     box : the footprint, ``h`` x ``w`` pixels of ``relief``.
-    edge_px : pixels of the outline left out.
+    region : (h, w) bool, the model's face (:func:`face_region`).
     known : (H, W) bool, the pixels with data (None: all).
     """
     patch = crop_padded(relief, box.r0, box.r1, box.c0, box.c1)
-    if patch.shape != model.shape or model.size == 0:
+    if patch.shape != model.shape or region.shape != model.shape:
         return None
-    model = np.nan_to_num(model)  # unknown parts of a model: not its face
-    peak = float(np.abs(model).max())
-    if peak <= 0:
-        return None
-    stands = np.abs(model) > 0.1 * peak
-    inner = ndimage.binary_erosion(stands, iterations=edge_px) if edge_px > 0 else stands
-    if np.count_nonzero(inner) < 4:
-        inner = stands
-    if known is not None:
-        inner = inner & crop_padded(known, box.r0, box.r1, box.c0, box.c1).astype(bool)
-    m = model[inner].astype(np.float64)
+    inner = region if known is None else region & crop_padded(known, box.r0, box.r1, box.c0, box.c1).astype(bool)
+    m = np.nan_to_num(model[inner]).astype(np.float64)
     mm = float(m @ m)
     return float(m @ patch[inner].astype(np.float64)) / mm if m.size >= 2 and mm > 0 else None
 
@@ -789,6 +793,7 @@ def match_depth(
         min_energy = (h + 2 * settings.template_pad_px) * (w + 2 * settings.template_pad_px) * flat_m ** 2
         relief = float(np.median(np.abs(rot[np.abs(rot) > 0.1 * np.abs(rot).max()])))
         smooth_model = padded_template(rot, settings.template_pad_px, settings.match_sigma_px)
+        face = face_region(rot, settings.face_edge_px)
 
         def overlap(r: float, c: float, gain: float) -> float:
             return relief_overlap(jml, smooth_model, box_at((r, c), h, w), settings.template_pad_px,
@@ -825,8 +830,8 @@ def match_depth(
         peaks = [m for m in peaks if m.score >= settings.foreground_mu_d or verified(m)]
         found = [Candidate(cid, ortho.wall_id, "depth", box_at((m.row, m.col), h, w), (m.row, m.col), m.score,
                            m.roi, deg, gain=m.gain, relief_iou=overlap(m.row, m.col, m.gain),
-                           face_gain=face_gain(jml, rot, box_at((m.row, m.col), h, w), edge_px=settings.face_edge_px,
-                                               known=v.known)) for m in peaks]
+                           face_gain=face_gain(jml, rot, box_at((m.row, m.col), h, w), region=face, known=v.known))
+                 for m in peaks]
         matched_model.update((id(c), rot) for c in found)
         return found
 
