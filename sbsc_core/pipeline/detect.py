@@ -285,24 +285,6 @@ def _columns_of(cloud: PointCloud, seg: Segmentation, s: DetectionSettings,
     return columns
 
 
-def _columns_and_levels(cloud: PointCloud, seg: Segmentation, s: DetectionSettings,
-                        log: Callable[[str], None] | None = None) -> tuple[list, list | None]:
-    """The free-standing columns (:func:`_columns_of`, which drops their faces from ``seg``'s
-    walls) and the storeys' lower ceilings (:func:`~sbsc_core.scene.ceilings.ceiling_levels`,
-    None when the ceilings are not searched), both found in the sample ``cloud``.
-
-    The levels are measured in a thread while the columns are searched: the two only read
-    the sample (the levels look at the storeys, not at the walls), their big array steps let
-    go of the GIL, and the workers are idle then, so the second core does it.
-    """
-    from ..scene.ceilings import ceiling_levels
-
-    with ThreadPoolExecutor(max_workers=1) as side:
-        levels = side.submit(ceiling_levels, cloud, seg, s.ceilings) if s.ceilings.enabled else None
-        columns = _columns_of(cloud, seg, s, log) if s.columns.enabled else []
-        return columns, None if levels is None else levels.result()
-
-
 def _pendants_of(cloud: PointCloud, seg: Segmentation, library: ModelLibrary, expected: ExpectedCounts | None,
                  s: DetectionSettings, *, columns: list, levels: list | None,
                  log: Callable[[str], None] | None = None) -> list:
@@ -631,7 +613,14 @@ def detect_scans(
         seg = segment_floor_ceiling_walls(cloud, s.segmentation, storeys=found)
     if seg.stray_points:  # counted in the sample: scaled to the whole scan
         seg.stray_points = int(round(seg.stray_points * points / max(sampled, 1)))
-    found_columns, levels = _columns_and_levels(cloud, seg, s, log)
+    found_columns = []
+    if s.columns.enabled:  # free-standing columns (issue 11), found in the sample
+        found_columns = _columns_of(cloud, seg, s, log)
+    levels = None
+    if s.ceilings.enabled:  # lower ceilings within a storey (stepped ceilings), measured in the sample
+        from ..scene.ceilings import ceiling_levels
+
+        levels = ceiling_levels(cloud, seg, s.ceilings)
     pendants = _pendants_of(cloud, seg, library, expected, s, columns=found_columns, levels=levels, log=log)
     cloud = None
     for wall in seg.walls:  # indices into the sample: the walls' points come from their partitions
