@@ -213,7 +213,7 @@ def near_walls(xyz: np.ndarray, frames: list[WallFrame], clear_m: float, cloud_o
     for key, ws in cells_of.items():
         lut[key] = combo_id.setdefault(tuple(ws), len(combo_id) + 1)
     combos = sorted(combo_id, key=combo_id.__getitem__)
-    combo = _grid_lookup(xyz, lo, cell, nx, ny, lut)
+    combo = _grid_lookup(xyz, lut, lo=lo, cell=cell, nx=nx, ny=ny)
     sel = np.flatnonzero(combo)
     small = combo.astype(np.uint16 if len(combos) < 65536 else np.int32)
     if len(sel) == len(combo):  # every point near some slab (as in a storey's points): no subset to take
@@ -234,7 +234,7 @@ def near_walls(xyz: np.ndarray, frames: list[WallFrame], clear_m: float, cloud_o
     return out
 
 
-def _grid_lookup(xyz: np.ndarray, lo: np.ndarray, cell: float, nx: int, ny: int, lut: np.ndarray) -> np.ndarray:
+def _grid_lookup(xyz: np.ndarray, lut: np.ndarray, *, lo: np.ndarray, cell: float, nx: int, ny: int) -> np.ndarray:
     """``lut`` (int32, one entry per cell of an ``nx`` x ``ny`` plan grid of ``cell`` from
     ``lo``) at each point's cell; 0 for a point beyond the grid.
 
