@@ -46,6 +46,11 @@ try:  # what `sbsc detect` does before numpy is imported (where the checkout has
 except ImportError:
     pass
 try:
+    from sbsc_core.pipeline.allocator import keep_freed_memory
+    keep_freed_memory()
+except ImportError:
+    pass
+try:
     from sbsc_core.pipeline.detect import detect_to_dir
 except ImportError:  # a checkout of the flat layout (before issue 31)
     from sbsc_core.pipeline import detect_to_dir

@@ -535,9 +535,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_detect(args: argparse.Namespace) -> int:
+    from .pipeline.allocator import keep_freed_memory
     from .pipeline.cpu_features import prefer_fast_sort
 
     prefer_fast_sort()  # before numpy is imported (AMD Zen 4: numpy's AVX2 sort is the fast one)
+    keep_freed_memory()  # arrays freed are used again, not faulted in again (here and in the workers)
     from .pipeline.detect import detect_to_dir
 
     con = console()

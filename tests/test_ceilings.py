@@ -309,3 +309,24 @@ def test_ceiling_binning_is_made_when_a_ceiling_class_is_searched(tmp_path):
     assert ceiling_binning(seg, np.zeros(3), library=lib, expected={"switch": 3}, s=s, scratch=tmp_path) is None
     assert ceiling_binning(Segmentation(0.0, 2.8, [], []), np.zeros(3), library=lib, expected=None, s=s,
                            scratch=tmp_path) is None
+
+
+def test_plan_cells_are_the_cells_of_the_points_xy_in_float64():
+    """:func:`_plan_cells` (one axis at a time, in place) gives the lowest coordinate and the
+    cells that the (N, 2) float64 arithmetic gives on a scan's float32 points far from the
+    origin, cell edges and all."""
+    from sbsc_core.scene.ceilings import _plan_cells
+
+    rng = np.random.default_rng(11)
+    origin = np.array([512_345.0, 5_402_117.0, 211.0])
+    xyz = rng.uniform((-20.0, -9.0, 0.0), (14.0, 30.0, 3.0), (200_000, 3)).astype(np.float32)
+    xyz[:1000, :2] = np.round(xyz[:1000, :2] * 4) / 4  # on the edges of 0.25 m cells
+    idx = np.flatnonzero(xyz[:, 2] > 1.0)
+    c = 0.25
+    xy = np.take(xyz, idx, axis=0)[:, :2].astype(np.float64) + origin[:2]
+    x0, y0 = xy.min(axis=0)
+    ij = np.floor((xy - (x0, y0)) / c).astype(np.int64)
+    for axis, lo in ((0, x0), (1, y0)):
+        got_lo, got = _plan_cells(xyz[:, axis], idx, origin[axis], c)
+        assert got_lo == lo
+        np.testing.assert_array_equal(got, ij[:, axis])

@@ -105,3 +105,23 @@ def test_a_thin_sign_with_a_near_wall_coloured_band_is_not_taken_as_wall() -> No
     assert np.abs(band - np.array(band_rgb)).max() < 8.0  # the band keeps its colour ...
     assert np.abs(band - wall).max() > 25.0  # ... and stays apart from the wall
     assert np.abs(wall - np.array(WALL)).max() < 4.0  # the plain wall is still the wall's colour
+
+
+def test_median_blur_is_scipys_median_filter_per_channel():
+    """:func:`_median_blur` gives ``ndimage.median_filter(..., mode="nearest")`` of each
+    channel, value for value: on float32 fields with ties and steps (OpenCV, windows 3 and
+    5), with NaNs and with a wider window (scipy)."""
+    from scipy import ndimage
+
+    from sbsc_core.imaging.colour_prep import _median_blur
+
+    rng = np.random.default_rng(2)
+    field = (rng.integers(0, 40, (37, 53, 3)) * 3.7).astype(np.float32)
+    field[10:20, 5:30] += np.float32(60.25)  # a station step
+    noisy = rng.normal(150, 20, (41, 29, 3)).astype(np.float32)
+    with_nan = noisy.copy()
+    with_nan[3, 4, 1] = np.nan
+    for cells in (field, noisy, with_nan):
+        for k in (3, 5, 7):
+            want = np.stack([ndimage.median_filter(cells[..., ch], size=k, mode="nearest") for ch in range(3)], axis=-1)
+            np.testing.assert_array_equal(_median_blur(cells, k), want)

@@ -269,3 +269,19 @@ def test_depth_visualisation_greys_the_relief_and_whitens_no_data():
 
     depth = np.array([[0.0, 0.05, -0.05], [np.nan, 1.0, -1.0]], np.float32)
     assert depth_visualisation(depth).tolist() == [[128, 64, 191], [255, 0, 254]]
+
+
+def test_mean_of_packed_colours_is_the_shifted_channels_mean():
+    """:func:`_mean_of_packed` gives each channel's ``(a + b + 1) // 2`` as the int64 shifts
+    and masks do, over the whole 24-bit range (white, black, odd sums)."""
+    from sbsc_core.imaging.orthoimage import _mean_of_packed
+
+    rng = np.random.default_rng(4)
+    a = rng.integers(0, 1 << 24, 50_000, dtype=np.int64)
+    b = rng.integers(0, 1 << 24, 50_000, dtype=np.int64)
+    a[:3], b[:3] = (0xFFFFFF, 0, 0xFFFFFF), (0xFFFFFF, 0, 0xFEFEFE)
+    want = np.stack([((((a >> s) & 255) + ((b >> s) & 255) + 1) // 2).astype(np.uint8) for s in (16, 8, 0)], axis=-1)
+    got = _mean_of_packed(a, b)
+    assert got.dtype == np.uint8
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(_mean_of_packed(a[::3], b[::3]), want[::3])  # strided input

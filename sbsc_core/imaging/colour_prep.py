@@ -92,11 +92,23 @@ def illumination_field(ortho: Orthoimage, settings: ColourPrepSettings | None = 
     k = max(1, int(round(s.illumination_window_m / s.cell_m)))
     k += 1 - k % 2
     if k > 1:
-        filled = np.stack([ndimage.median_filter(filled[..., ch], size=k, mode="nearest") for ch in range(3)],
-                          axis=-1)
+        filled = _median_blur(filled, k)
     field = _upsample(filled, ortho.colour.astype(np.float32), ortho.mask, g=g, shape=(h, w),
                       snap=s.snap_tolerance)
     return field, ref.astype(np.float32)
+
+
+def _median_blur(cells: np.ndarray, k: int) -> np.ndarray:
+    """Each channel of ``cells`` (H, W, 3) float32 median-filtered over a ``k`` x ``k`` window,
+    edges repeated (``ndimage.median_filter(..., mode="nearest")`` per channel).
+
+    OpenCV filters float32 in one pass over the three channels for a window of 3 or 5
+    (a selection among the window's values, as exact as scipy's); other sizes, and NaNs
+    (which the two order differently), use scipy.
+    """
+    if k in (3, 5) and cells.dtype == np.float32 and np.isfinite(cells).all():
+        return cv2.medianBlur(np.ascontiguousarray(cells), k)  # cv2's border: replicated, scipy's "nearest"
+    return np.stack([ndimage.median_filter(cells[..., ch], size=k, mode="nearest") for ch in range(3)], axis=-1)
 
 
 def _median_valid(values: np.ndarray, count: np.ndarray) -> np.ndarray:

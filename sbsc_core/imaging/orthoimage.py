@@ -22,6 +22,7 @@ does not look like a sieve; the edges of openings and shadows do not move.
 from __future__ import annotations
 
 import math
+import sys
 
 import cv2
 import numpy as np
@@ -212,14 +213,14 @@ def near_walls(xyz: np.ndarray, frames: list[WallFrame], clear_m: float, cloud_o
     for key, ws in cells_of.items():
         lut[key] = combo_id.setdefault(tuple(ws), len(combo_id) + 1)
     combos = sorted(combo_id, key=combo_id.__getitem__)
-    ix = np.floor((xyz[:, 0].astype(np.float64) - lo[0]) / cell)
-    iy = np.floor((xyz[:, 1].astype(np.float64) - lo[1]) / cell)
-    inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)  # beyond the grid: far from every slab
-    combo = np.zeros(len(xyz), np.int32)
-    combo[inside] = lut[(iy[inside] * nx + ix[inside]).astype(np.int64)]
-    del ix, iy, inside
+    combo = _grid_lookup(xyz, lut, lo=lo, cell=cell, nx=nx, ny=ny)
     sel = np.flatnonzero(combo)
-    order = sel[np.argsort(combo[sel].astype(np.uint16 if len(combos) < 65536 else np.int32), kind="stable")]
+    small = combo.astype(np.uint16 if len(combos) < 65536 else np.int32)
+    if len(sel) == len(combo):  # every point near some slab (as in a storey's points): no subset to take
+        order = np.argsort(small, kind="stable")
+    else:
+        order = sel[np.argsort(small[sel], kind="stable")]
+    del small
     cuts = np.searchsorted(combo[order], np.arange(1, len(combos) + 2))
     for c, ws in enumerate(combos):
         pts = order[cuts[c]:cuts[c + 1]]
@@ -231,6 +232,30 @@ def near_walls(xyz: np.ndarray, frames: list[WallFrame], clear_m: float, cloud_o
             hit |= near_wall(sub, upright[w], clear_m, cloud_origin)
         out[pts[hit]] = True
     return out
+
+
+def _grid_lookup(xyz: np.ndarray, lut: np.ndarray, *, lo: np.ndarray, cell: float, nx: int, ny: int) -> np.ndarray:
+    """``lut`` (int32, one entry per cell of an ``nx`` x ``ny`` plan grid of ``cell`` from
+    ``lo``) at each point's cell; 0 for a point beyond the grid.
+
+    The cell of a point is ``floor((x - lo) / cell)`` in float64 along each axis; the flat
+    cell number ``iy * nx + ix`` is computed in float64 too (whole numbers far below 2**53:
+    exact), in place, with the points beyond the grid pointed at an extra 0 entry.
+    """
+    fx = xyz[:, 0].astype(np.float64)
+    fx -= lo[0]
+    fx /= cell
+    np.floor(fx, out=fx)
+    fy = xyz[:, 1].astype(np.float64)
+    fy -= lo[1]
+    fy /= cell
+    np.floor(fy, out=fy)
+    inside = (fx >= 0) & (fx < nx) & (fy >= 0) & (fy < ny)  # beyond the grid: far from every slab
+    fy *= nx
+    fy += fx
+    del fx
+    np.copyto(fy, nx * ny, where=~inside)
+    return np.append(lut, np.int32(0))[fy.astype(np.int64)]
 
 
 def in_plan_box(xyz: np.ndarray, lo: np.ndarray, hi: np.ndarray, cloud_origin: np.ndarray | None = None, *,
@@ -338,9 +363,29 @@ def rasterize_median(pixel: np.ndarray, depth: np.ndarray, rgb: np.ndarray, shap
             order = np.argsort(key)
             c_lo, c_hi = packed[order[lo_i]], packed[order[hi_i]]
         del key
-        for k, shift in enumerate((16, 8, 0)):
-            colour[mask, k] = ((((c_lo >> shift) & 255) + ((c_hi >> shift) & 255) + 1) // 2).astype(np.uint8)
+        colour[mask] = _mean_of_packed(c_lo, c_hi)
     return depth_img.reshape(h, w), colour.reshape(h, w, 3), mask.reshape(h, w)
+
+
+def _mean_of_packed(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, 3) uint8 r, g, b of two colours packed in int64 as ``r << 16 | g << 8 | b``, each
+    channel ``(a + b + 1) // 2`` (the mean, halves up).
+
+    The channels are the packed values' bytes (read through a byte view, the low byte first
+    on a little-endian machine; shifted out elsewhere), added in 16 bits: what the shifts
+    and masks of int64 give, in a few passes over 3 bytes a colour instead of 8.
+    """
+    def channels(p: np.ndarray) -> np.ndarray:
+        p = np.ascontiguousarray(p, np.int64)
+        if sys.byteorder == "little":
+            return p.view(np.uint8).reshape(-1, 8)[:, 2::-1].astype(np.uint16)
+        return np.stack([(p >> s) & 255 for s in (16, 8, 0)], axis=-1).astype(np.uint16)
+
+    out = channels(a)
+    out += channels(b)
+    out += 1
+    out >>= 1
+    return out.astype(np.uint8)
 
 
 def _pixel_layers(q: np.ndarray, start: np.ndarray, n: np.ndarray, *, gap_q: int, far_q: int, zero_q: int,

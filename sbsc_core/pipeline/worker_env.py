@@ -1,5 +1,6 @@
 """The environment of the worker processes: numpy's CPU features, set before numpy
-is imported (see ``cpu_features``), and the readiness check of a worker."""
+is imported (see ``cpu_features``), and the C library's allocator (see ``allocator``); and
+the readiness check of a worker."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import os
 from collections.abc import Iterator
 
 from ..settings import DetectionSettings
+from .allocator import allocator_environment
 from .cpu_features import numpy_environment
 
 
@@ -26,8 +28,9 @@ def _environ(name: str) -> str | None:
 
 
 def worker_environment() -> dict[str, str]:
-    """Environment variables for new worker processes (see :mod:`sbsc_core.pipeline.cpu_features`)."""
-    return numpy_environment()
+    """Environment variables for new worker processes (see :mod:`sbsc_core.pipeline.cpu_features`
+    and :mod:`sbsc_core.pipeline.allocator`)."""
+    return {**numpy_environment(), **allocator_environment()}
 
 
 @contextlib.contextmanager

@@ -183,7 +183,7 @@ def find_pendants(cloud: PointCloud, seg: Segmentation, s: PendantSettings, *,
         lowest = min([cz, *(level.z if level is not None else ())])
         z_lo, z_hi = max(fz + s.below_m, lowest - s.reach_m), cz - s.gap_m
         band = np.flatnonzero((zr > np.float32(z_lo - origin[2])) & (zr < np.float32(z_hi - origin[2])))
-        xy = cloud.xyz[band, :2].astype(np.float64) + origin[:2]
+        xy = np.take(cloud.xyz, band, axis=0)[:, :2].astype(np.float64) + origin[:2]  # take: as xyz[band], faster
         z_band = zr[band].astype(np.float64) + origin[2]
         # the ceiling over each point: the storey's or a lower one
         top = np.r_[cz, level.z][level.label(xy)] if level is not None else np.full(len(band), cz)
@@ -191,7 +191,7 @@ def find_pendants(cloud: PointCloud, seg: Segmentation, s: PendantSettings, *,
         band, xy, z_band, top = band[inside], xy[inside], z_band[inside], top[inside]
         if len(band) < s.min_points:
             continue
-        lo = xy.min(axis=0)
+        lo = np.array([xy[:, 0].min(), xy[:, 1].min()])  # xy.min(axis=0), without its slow reduction of 2 columns
         ij = np.floor((xy - lo) / s.cell_m).astype(np.int64)
         nx, ny = int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1
         cell = ij[:, 1] * nx + ij[:, 0]

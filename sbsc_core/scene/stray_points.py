@@ -60,7 +60,8 @@ def dense_box(xyz: np.ndarray, settings: SegmentationSettings | None = None, whe
         raise InputError(where, "no points with finite coordinates")
     cell = s.stray_cell_m
     half = float(1 << (_CELL_BITS - 1))
-    centre = np.floor(np.median(p, axis=0) / cell) * cell  # the voxel grid is centred on the bulk
+    # the voxel grid is centred on the bulk: np.median(p, axis=0), a column at a time (the same values, faster)
+    centre = np.floor(np.array([np.median(p[:, a]) for a in range(3)]) / cell) * cell
     with np.errstate(invalid="ignore", over="ignore"):
         f = np.floor((p - centre) / cell)
     near = (np.abs(f[:, 0]) < half - 1) & (np.abs(f[:, 1]) < half - 1) & (np.abs(f[:, 2]) < half - 1)
