@@ -385,3 +385,20 @@ def test_an_isotonic_link_is_calibrated_where_platt_scaling_is_under_confident_a
     assert np.allclose(again.predict(z[:, None]), iso.predict(z[:, None]), atol=1e-5)
     with pytest.raises(ValueError, match="link"):
         Calibration(np.array([1.0]), 0.0, link=(np.array([1.0, 0.5]), np.array([0.2, 0.3])))
+
+
+def test_a_calibration_file_that_is_missing_or_wrong_is_named(tmp_path) -> None:
+    from sbsc_core.errors import InputError
+    from sbsc_core.recognition.confidence import load_calibration
+
+    with pytest.raises(InputError, match="nope.json: no such calibration file"):
+        load_calibration(tmp_path / "nope.json")
+    bad = tmp_path / "bad.json"
+    for text, reason in (("{", "not a confidence calibration"), ('{"coef": [1.0]}', "no field 'intercept'"),
+                         ('{"coef": [1.0], "intercept": 0, "features": ["colour_of_the_sky"]}', "do not fit"),
+                         ('{"coef": [1.0], "intercept": 0, "link": {"score": [2, 1], "confidence": [0, 1]}}',
+                          "link"), ("[]", "not a confidence calibration")):
+        bad.write_text(text)
+        with pytest.raises(InputError, match=f"bad.json: .*{reason}"):
+            load_calibration(bad)
+    assert load_calibration() is not None  # the shipped one

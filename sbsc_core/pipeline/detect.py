@@ -756,6 +756,10 @@ def detect_to_dir(
         from ..io.models import load_model_library
 
         library = load_model_library(Path(models))
+        if s.confidence.enabled and s.confidence.calibration:  # a bad file is told now, not after the recognition
+            from ..recognition.confidence import load_calibration
+
+            load_calibration(Path(s.confidence.calibration))
         counts = read_expected_counts(expected) if isinstance(expected, (str, Path)) else expected
         origin = scan_origin(paths[0])  # read once: the recentring origin and the georeference
         georef = georeference_fields(scan_crs(paths), origin)

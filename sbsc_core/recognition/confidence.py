@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..settings import ConfidenceSettings, ConsensusSettings
 from ..types import Box, Candidate, WallFrame
 from .consensus import ConsensusHit, consensus_all
@@ -187,16 +188,29 @@ class Calibration:
     @classmethod
     def from_dict(cls, d: dict) -> Calibration:
         link = d.get("link")
-        return cls(np.asarray(d["coef"], float), float(d["intercept"]), tuple(d.get("features", ())), d.get("info"),
+        features = d.get("features")  # none: the first len(coef) of FEATURES
+        return cls(np.asarray(d["coef"], float), float(d["intercept"]), None if features is None else tuple(features),
+                   d.get("info"),
                    None if link is None else (np.asarray(link["score"], float), np.asarray(link["confidence"], float)))
 
 
 def load_calibration(path: Path | None = None) -> Calibration | None:
-    """The shipped calibration (or the one at ``path``); None when there is none."""
+    """The shipped calibration (None when the package has none), or the one at ``path``.
+
+    Raises :class:`~sbsc_core.errors.InputError` naming ``path`` when it is no file or not a
+    calibration (docs/formats.md, "Confidence calibration").
+    """
     p = Path(path) if path is not None else CALIBRATION_PATH
     if not p.is_file():
+        if path is not None:
+            raise InputError(p, "no such calibration file")
         return None
-    return Calibration.from_dict(json.loads(p.read_text(encoding="utf-8")))
+    try:
+        return Calibration.from_dict(json.loads(p.read_text(encoding="utf-8")))
+    except KeyError as e:
+        raise InputError(p, f"not a confidence calibration: no field {e}") from e
+    except (OSError, UnicodeDecodeError, ValueError, TypeError, AttributeError) as e:
+        raise InputError(p, f"not a confidence calibration: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from e
 
 
 # The sign each feature's coefficient must have: better evidence never lowers the confidence.
