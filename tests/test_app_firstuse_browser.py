@@ -91,7 +91,8 @@ def test_add_missed_from_the_top_and_the_panel_pending_until_confirmed(browser, 
         page.wait_for_function("() => document.getElementById('wall-img').naturalWidth > 0")
         refs = sorted(t.split("·")[0].strip() for t in page.locator(".det .where").all_inner_texts())
         img = page.locator("#wall-img").bounding_box()
-        page.mouse.click(img["x"] + img["width"] * 0.5, img["y"] + img["height"] * 0.5)
+        # a click on the image where it is when clicked (a later layout shift must not move it off)
+        page.locator("#wall-img").click(position={"x": img["width"] * 0.5, "y": img["height"] * 0.5})
         page.wait_for_selector("#add-confirm", state="visible")
         msg = page.locator("#add-msg").inner_text()
         new_ref = f"D{int(refs[-1][1:]) + 1:04d}"
@@ -101,7 +102,7 @@ def test_add_missed_from_the_top_and_the_panel_pending_until_confirmed(browser, 
         page.click("#add-undo")  # undo: rejected, audited
         page.wait_for_selector("#add-confirm", state="hidden")
         assert page.locator(".det", has_text=new_ref).get_attribute("data-status") == "rejected"
-        page.mouse.click(img["x"] + img["width"] * 0.3, img["y"] + img["height"] * 0.5)
+        page.locator("#wall-img").click(position={"x": img["width"] * 0.3, "y": img["height"] * 0.5})
         page.wait_for_selector("#add-confirm", state="visible")
         second = f"D{int(refs[-1][1:]) + 2:04d}"
         assert page.locator("#add-msg").inner_text().startswith(f"Added {second} ")
