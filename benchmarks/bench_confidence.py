@@ -80,6 +80,7 @@ from sbsc_core.recognition.confidence import (  # noqa: E402
     fit_logistic,
     fit_ranking_logistic,
     hit_features,
+    isotonic_relink,
     model_reliefs,
     reliability,
     screened_consensus,
@@ -278,7 +279,8 @@ def main() -> int:
                          "weights that order each class's hits in a scene right before wrong, then Platt-scaled "
                          "(fit_ranking_logistic)")
     ap.add_argument("--link", choices=["platt", "isotonic"], default="platt",
-                    help="with --objective ranking: how the score becomes a probability (Platt scaling, or "
+                    help="how the score becomes a probability (Platt scaling or, for --objective likelihood, the "
+                         "logistic fit itself; or "
                          "the isotonic_link of confidence.py)")
     ap.add_argument("--features", nargs="+", choices=list(FEATURES), default=None, metavar="NAME",
                     help="the features fitted on (default: all of confidence.FEATURES)")
@@ -338,6 +340,8 @@ def main() -> int:
     cal = (fit_ranking_logistic(xf[:, cols], yf, [g for _, _, g in data["fit"]], signs=signs, link=args.link)
            if args.objective == "ranking"
            else fit_logistic(xf[:, cols], yf, signs=signs))
+    if args.objective == "likelihood" and args.link == "isotonic":
+        cal = isotonic_relink(cal, xf[:, cols], yf)
     cal = replace(cal, features=names)  # predict() then takes every feature's column and picks these
     table, ece = reliability(cal.predict(xe), ye)
     _, ece_fit = reliability(cal.predict(xf), yf)
@@ -363,7 +367,7 @@ def main() -> int:
         cal.info = {"fit_seeds": list(args.fit_seeds), "eval_seeds": list(args.eval_seeds), "scenes": "one_room.yaml",
                     "fit_families": list(args.fit_families), "eval_families": list(args.eval_families),
                     "fit_crosses": list(args.fit_crosses), "eval_crosses": list(args.eval_crosses),
-                    "objective": args.objective, "link": args.link if args.objective == "ranking" else "logistic",
+                    "objective": args.objective, "link": args.link if args.objective == "ranking" or args.link == "isotonic" else "logistic",
                     "variants": list(args.variants), "pairs": list(args.pairs) if args.fit_seeds else [],
                     "eval_pairs": list(args.eval_pairs or args.pairs) if args.eval_seeds else [], "turned": list(args.turned),
                     "radius_m": args.radius,

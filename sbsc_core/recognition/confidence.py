@@ -38,14 +38,16 @@ UNKNOWN_CLASS = "unknown"
 CALIBRATION_PATH = Path(__file__).with_name("calibration") / "confidence.json"
 FEATURES = ("in_depth", "in_colour", "rho_depth", "colour_goodness", "alpha", "class_margin",
             "lookalike_margin", "gain_misfit", "relief_misfit", "unmatched_relief", "relief_margin",
-            "colour_only_print", "gain_excess", "face_deficit", "face_excess")
+            "colour_only_print", "gain_excess", "face_deficit", "face_excess", "face_shortfall",
+            "relief_surplus")
 _MARGIN_CAP = 0.3  # margins beyond this say nothing more
 _GAIN_CAP = 1.0  # |ln gain| beyond this (a relief e times too deep or too flat) says nothing more
 _RELIEF_CAP_M = 0.02  # a model standing out this far would surely have been matched in depth
 
 
 def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candidate],
-                 reliefs: dict[str, float] | None = None) -> np.ndarray:
+                 reliefs: dict[str, float] | None = None, *,
+                 scene_depth: list[Candidate] | None = None) -> np.ndarray:
     """The features (:data:`FEATURES`) of one consensus hit among all the candidates of its wall.
 
     ``class_margin``: the hit's rho_D minus the best rho_D of another class at its place
@@ -90,6 +92,20 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
     object of the same outline (a thermostat on a call point's model). Its face can: a right
     object's stands out as far as its model's, whatever its depth.
 
+    ``face_shortfall``: ``face_deficit`` times how far the class's model stands out
+    (``reliefs``), as a share of 2 cm (capped to 1). A scan measures a few millimetres of
+    relief no better than its noise: a right 2 mm built-in socket comes out a third short
+    as often as not, while a thermostat on a 3 cm call point's model, a third short, is
+    1 cm missing. 0 without ``reliefs``.
+
+    ``relief_surplus``: for a hit found in colour only, how much further the scene stands
+    out at its place than its class's model, as a share of 2 cm (capped to [0, 1]): the
+    deepest depth match of another class there (footprints overlapping by more than a
+    quarter, among ``scene_depth``, all the scene's depth candidates, when given, since a
+    refused hit's candidates are cleared from ``depth``), at its measured relief (its
+    model's relief times its face gain, or its gain). A flat print matched where a 2 cm
+    object stands out is that object's print, not the flat class's. 0 with a depth match.
+
     ``colour_only_print``: the look-alike margin again, for a hit found in colour only (0
     otherwise), times 1 - ``unmatched_relief``. Found in colour alone, the print is the only
     evidence of which class it is: a flat sign lost in a noisy scan's depth whose pictogram
@@ -133,7 +149,20 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
         float(hit.alpha), float(np.clip(margin, 0.0, _MARGIN_CAP)), look,
         gain, relief, unmatched, relief_margin, colour_only_print, max(ln_gain, 0.0),
         max(-ln_face, 0.0), max(ln_face, 0.0),
+        max(-ln_face, 0.0) * (min(1.0, float(reliefs.get(hit.class_id, 0.0)) / _RELIEF_CAP_M) if reliefs else 0.0),
+        _relief_surplus(hit, others(depth if scene_depth is None else scene_depth), reliefs) if d is None else 0.0,
     ])
+
+
+def _relief_surplus(hit: ConsensusHit, rivals: list[Candidate], reliefs: dict[str, float] | None) -> float:
+    """How much further the scene stands out at a colour-only hit's place than its class's
+    model, as a share of 2 cm (capped to [0, 1]): the deepest depth match of another class
+    there, at its measured amplitude (its model's relief times its face gain, or its gain)."""
+    if not reliefs or not rivals:
+        return 0.0
+    seen = max(float(reliefs.get(c.class_id, 0.0)) * float(getattr(c, "face_gain", None) or c.gain or 1.0)
+               for c in rivals)
+    return float(np.clip((seen - float(reliefs.get(hit.class_id, 0.0))) / _RELIEF_CAP_M, 0.0, 1.0))
 
 
 @dataclass
@@ -216,7 +245,7 @@ def load_calibration(path: Path | None = None) -> Calibration | None:
 # The sign each feature's coefficient must have: better evidence never lowers the confidence.
 MONOTONE = {"rho_depth": 1, "colour_goodness": 1, "alpha": 1, "class_margin": 1, "lookalike_margin": 1,
             "gain_misfit": -1, "relief_misfit": -1, "unmatched_relief": -1, "relief_margin": 1,
-            "colour_only_print": 1, "gain_excess": -1, "face_deficit": -1, "face_excess": -1}
+            "colour_only_print": 1, "gain_excess": -1, "face_deficit": -1, "face_excess": -1, "face_shortfall": -1, "relief_surplus": -1}
 
 
 def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int] | None = None) -> Calibration:
@@ -245,6 +274,14 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-2, signs: list[int
 
     res = minimize(loss, np.zeros(x.shape[1] + 1), jac=True, method="L-BFGS-B", bounds=bounds)
     return Calibration(res.x[1:], float(res.x[0]))
+
+
+def isotonic_relink(calibration: Calibration, x: np.ndarray, y: np.ndarray) -> Calibration:
+    """``calibration`` with its score mapped to a probability by the :func:`isotonic_link` of
+    its own score on the rows ``x`` (features in the calibration's order) and their truths ``y``,
+    instead of the logistic function: the same order of hits, calibrated at the top too."""
+    z = calibration.intercept + np.asarray(x, float) @ calibration.coef
+    return replace(calibration, link=isotonic_link(z, y))
 
 
 def isotonic_link(z: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -318,7 +355,7 @@ def fit_ranking_logistic(x: np.ndarray, y: np.ndarray, groups: list, l2: float =
     d = x[pairs[:, 0]] - x[pairs[:, 1]]
     order = fit_logistic(np.concatenate([d, -d]), np.repeat([1.0, 0.0], len(d)), l2, signs)
     if link == "isotonic":
-        return Calibration(order.coef, 0.0, link=isotonic_link(x @ order.coef, y))
+        return isotonic_relink(Calibration(order.coef, 0.0), x, y)
     platt = fit_logistic((x @ order.coef)[:, None], y, 0.0, [1])
     return Calibration(order.coef * platt.coef[0], platt.intercept)
 
@@ -340,12 +377,13 @@ def reliability(p: np.ndarray, y: np.ndarray, bins: int = 10) -> tuple[list[tupl
 
 
 def score_hits(hits: list[ConsensusHit], depth: list[Candidate], colour: list[Candidate],
-               calibration: Calibration | None, reliefs: dict[str, float] | None = None) -> list[float | None]:
-    """The confidence of every hit (None for all without a calibration); ``reliefs`` as in
-    :func:`hit_features`."""
+               calibration: Calibration | None, reliefs: dict[str, float] | None = None, *,
+               scene_depth: list[Candidate] | None = None) -> list[float | None]:
+    """The confidence of every hit (None for all without a calibration); ``reliefs`` and
+    ``scene_depth`` as in :func:`hit_features`."""
     if calibration is None or not hits:
         return [None] * len(hits)
-    x = np.stack([hit_features(h, depth, colour, reliefs) for h in hits])
+    x = np.stack([hit_features(h, depth, colour, reliefs, scene_depth=scene_depth) for h in hits])
     return [float(v) for v in calibration.predict(x)]
 
 
@@ -425,7 +463,7 @@ def screened_consensus(depth: list[Candidate], colour: list[Candidate], expected
     refused: list[ConsensusHit] = []
     for _ in range(max(1, max_rounds)):
         hits = run(depth, colour)
-        for h, conf in zip(hits, score_hits(hits, depth, colour, cal, reliefs), strict=True):
+        for h, conf in zip(hits, score_hits(hits, depth, colour, cal, reliefs, scene_depth=all_depth), strict=True):
             h.confidence = conf
         weak = [h for h in hits if h.confidence is not None and h.confidence < settings.min_confidence]
         twice = repeated([h for h in hits if not any(h is w for w in weak)])
