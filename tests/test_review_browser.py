@@ -60,6 +60,35 @@ def detections(srv, pid: int) -> list[dict]:  # noqa: ANN001
     return httpx.get(f"{srv.url}/api/projects/{pid}/detections", headers=auth(srv.token)).json()["detections"]
 
 
+def test_a_click_on_the_wall_while_an_add_is_saving_is_told_not_lost(browser, srv):
+    """The add request is held (as a slow snap to the scan would hold it): a second click on
+    the wall meanwhile gets a message instead of nothing, and only one object is added."""
+    pid = new_project(srv, "busy")
+    page = browser.new_page(viewport=VIEW)
+    held = []
+    try:
+        login(page, srv)
+        page.goto(f"{srv.url}/review.html?id={pid}")
+        page.wait_for_selector(".det")
+        page.route(f"**/api/projects/{pid}/detections",
+                   lambda route: held.append(route) if route.request.method == "POST" else route.continue_())
+        page.select_option("#add-wall", "W01")
+        page.select_option("#add-class", "switch")
+        page.wait_for_function("() => document.querySelector('#wall-img').naturalWidth > 0")
+        box = page.locator("#wall-img").bounding_box()
+        page.locator("#wall-img").click(position={"x": box["width"] * 0.3, "y": box["height"] * 0.5})
+        page.wait_for_function("() => document.querySelector('#wall-img').style.cursor === 'progress'")
+        assert len(held) == 1
+        page.locator("#wall-img").click(position={"x": box["width"] * 0.7, "y": box["height"] * 0.5})
+        page.wait_for_selector("#toast.show")
+        assert page.locator("#toast").inner_text() == "Still saving the last change: click the wall again in a moment."
+        held[0].continue_()
+        page.wait_for_selector("#add-msg:has-text('pending until you confirm it')")
+        assert page.locator("#wall-img").evaluate("e => e.style.cursor") == "crosshair"
+        assert len(held) == 1 and sum(d["source"] == "reviewer" for d in detections(srv, pid)) == 1
+    finally:
+        page.close()
+
 def test_gallery_add_promote_and_bulk_accept(browser, srv):
     pid = new_project(srv, "gallery")
     page = browser.new_page(viewport=VIEW)
