@@ -50,6 +50,22 @@ realistic=True, clutter=True)`` with ``object_builder=random_family(N)`` and, fo
         --eval-families 3101 3102 --eval-crosses 3101/3601 3102/3602 \
         --fit-scenes S/f5001 S/f5002 S/f5003 S/f5004 S/x5001_5501 S/x5002_5502 S/x5003_5503 S/x5004_5504 \
         --eval-scenes S/f5101 ... S/f5120 --table --objective ranking
+
+The shipped calibration (2026-11-29, fitted on random families only) is the likelihood fit with
+the isotonic link on the same one-room floors and eleven Scenario I floors::
+
+    python benchmarks/bench_confidence.py --work W --variants acceptance --turned 0 0.34 \
+        --fit-seeds --eval-seeds --fit-families 3001 ... 3008 --fit-crosses 3001/3501 ... 3008/3508 \
+        --eval-families 3101 3102 --eval-crosses 3101/3601 3102/3602 \
+        --fit-scenes S/f5001 ... S/f5004 S/f5201 S/f5202 S/f5203 S/f5204 S/f5206 S/f5208 S/f5210 \
+            S/x5001_5501 ... S/x5004_5504 \
+        --objective likelihood --link isotonic --features in_depth in_colour rho_depth colour_goodness \
+            alpha class_margin lookalike_margin relief_misfit unmatched_relief relief_margin \
+            colour_only_print face_shortfall face_excess relief_surplus
+
+and calibrations are compared on scenes left out of every fit, from their kept candidates::
+
+    python benchmarks/bench_confidence.py --compare before=OLD.json after=NEW.json --eval-scenes S/f5205 ...
 """
 
 from __future__ import annotations
@@ -153,7 +169,7 @@ def rows_of(scan: Path, settings: DetectionSettings, radius: float,
     if codes is not None:
         codes.add(data.get("code", "unknown"))
     truth = json.loads((scan / "ground_truth.json").read_text())["objects"]
-    expected = json.loads((scan / "expected.json").read_text())["counts"]
+    expected = json.loads((scan / "expected.json").read_text())["counts"] if counts else None
     depth, colour = data["depth"], data["colour"]
     data["reliefs"] = model_reliefs(make_templates(load_model_library(scan / "models"), settings.orthoimage.pixel_m,
                                                    data["classes"]))
@@ -192,10 +208,12 @@ def parked(frames: dict) -> dict[str, Orthoimage]:
             for k, (f, px) in frames.items()}
 
 
-def table_of(scan: Path, settings: DetectionSettings, calibration: Path) -> tuple[int, int, int, np.ndarray, np.ndarray]:
-    """Table 1 of a scene detected with its expected counts and ``calibration``, from its kept
-    candidates: the steps of ``sbsc detect`` after recognition (mount heights, screened
-    consensus, counts filled by confidence, placement), scored like ``sbsc evaluate``.
+def table_of(scan: Path, settings: DetectionSettings, calibration: Path, *,
+             counts: bool = True) -> tuple[int, int, int, np.ndarray, np.ndarray]:
+    """Table 1 of a scene detected with its expected counts (or without, ``counts=False``) and
+    ``calibration``, from its kept candidates: the steps of ``sbsc detect`` after recognition
+    (mount heights, screened consensus, counts filled by confidence, placement), scored like
+    ``sbsc evaluate``.
 
     Returns instances, TP, FP, and each detection's confidence and whether it is right.
     """
@@ -211,7 +229,7 @@ def table_of(scan: Path, settings: DetectionSettings, calibration: Path) -> tupl
     templates = make_templates(load_model_library(scan / "models"), settings.orthoimage.pixel_m, data["classes"])
     conf = DetectionSettings().confidence
     conf.calibration = str(calibration)
-    expected = json.loads((scan / "expected.json").read_text())["counts"]
+    expected = json.loads((scan / "expected.json").read_text())["counts"] if counts else None
     hits = screened_consensus(depth, colour, expected, data["classes"], consensus_settings=settings.consensus,
                               settings=conf, reliefs=model_reliefs(templates), frames=data["frames"])
     doc = {"detections": [d.to_dict() for d in place_hits(hits, orthos, templates)]}
@@ -222,16 +240,19 @@ def table_of(scan: Path, settings: DetectionSettings, calibration: Path) -> tupl
     return table.total.instances, table.total.tp, table.total.fp, p, right
 
 
-def print_tables(scans: list[Path], settings: DetectionSettings, calibrations: dict[str, Path]) -> None:
-    """Table 1 (with counts) of every scene under each calibration, their mean and worst, and the ECE."""
+def print_tables(scans: list[Path], settings: DetectionSettings, calibrations: dict[str, Path], *,
+                 counts: bool = True) -> None:
+    """Table 1 (with counts, or without) of every scene under each calibration, their mean and
+    worst, and the ECE of every detection."""
     pooled: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {k: [] for k in calibrations}
     tps: dict[str, list[float]] = {k: [] for k in calibrations}
     fps: dict[str, list[float]] = {k: [] for k in calibrations}
-    print("\nTable 1 with counts, TP % / FP %: " + ", ".join(f"{k} = {v}" for k, v in calibrations.items()))
+    print(f"\nTable 1 {'with' if counts else 'without'} counts, TP % / FP %: "
+          + ", ".join(f"{k} = {v}" for k, v in calibrations.items()))
     for scan in scans:
         cells = []
         for name, path in calibrations.items():
-            n, tp, fp, p, right = table_of(scan, settings, path)
+            n, tp, fp, p, right = table_of(scan, settings, path, counts=counts)
             tps[name].append(100.0 * tp / n)
             fps[name].append(100.0 * fp / n)
             pooled[name].append((p, right))
@@ -284,9 +305,21 @@ def main() -> int:
                          "the isotonic_link of confidence.py)")
     ap.add_argument("--features", nargs="+", choices=list(FEATURES), default=None, metavar="NAME",
                     help="the features fitted on (default: all of confidence.FEATURES)")
+    ap.add_argument("--compare", nargs="+", default=None, metavar="NAME=CALIBRATION",
+                    help="fit nothing: Table 1 with and without counts, and the ECE, of these calibration files "
+                         "on --eval-scenes (from their kept candidates)")
     ap.add_argument("--write", action="store_true", help="store the fitted model in the package")
     ap.add_argument("--out", type=Path, default=None, help="store the fitted model there (to try it first)")
     args = ap.parse_args()
+    if args.compare is not None:
+        if not args.eval_scenes or any("=" not in c for c in args.compare):
+            ap.error("--compare NAME=CALIBRATION ... needs --eval-scenes")
+        settings = DetectionSettings()
+        settings.confidence.enabled = False
+        calibrations = {c.split("=", 1)[0]: Path(c.split("=", 1)[1]) for c in args.compare}
+        for counts in (True, False):
+            print_tables(args.eval_scenes, settings, calibrations, counts=counts)
+        return 0
     if set(args.fit_seeds) & set(args.eval_seeds):
         ap.error("--fit-seeds and --eval-seeds must be disjoint")
     crosses = {part: [tuple(int(x) for x in c.split("/")) for c in cs]
