@@ -169,7 +169,7 @@ def rows_of(scan: Path, settings: DetectionSettings, radius: float,
     if codes is not None:
         codes.add(data.get("code", "unknown"))
     truth = json.loads((scan / "ground_truth.json").read_text())["objects"]
-    expected = json.loads((scan / "expected.json").read_text())["counts"] if counts else None
+    expected = json.loads((scan / "expected.json").read_text())["counts"]
     depth, colour = data["depth"], data["colour"]
     data["reliefs"] = model_reliefs(make_templates(load_model_library(scan / "models"), settings.orthoimage.pixel_m,
                                                    data["classes"]))
