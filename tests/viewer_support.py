@@ -11,6 +11,7 @@ import numpy as np
 import viser
 import zstandard
 from viser import _messages as vm
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from app.viewer.scene import SceneSettings
@@ -58,7 +59,10 @@ class FakeTab:
             for m in inner["messages"]:
                 self.received.append((time.monotonic(), m))
                 if m.get("type") == "GetRenderRequestMessage" and self.frame is not None:  # a browser answers
-                    self.send(vm.GetRenderResponseMessage(payload=self.frame, render_uuid=m["render_uuid"]))
+                    try:
+                        self.send(vm.GetRenderResponseMessage(payload=self.frame, render_uuid=m["render_uuid"]))
+                    except ConnectionClosed:  # the server closed the scene meanwhile (the test's end)
+                        return
 
     def send(self, message: vm.Message) -> None:
         self.ws.send(msgspec.msgpack.encode(message.as_serializable_dict()))
