@@ -137,9 +137,9 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
     ln_gain = 0.0 if d is None or d.gain is None else float(np.clip(np.log(max(d.gain, 1e-6)), -_GAIN_CAP, _GAIN_CAP))
     gain = abs(ln_gain)
     relief = 0.0 if d is None or d.relief_iou is None else float(np.clip(1.0 - d.relief_iou, 0.0, 1.0))
-    unmatched = 0.0
-    if d is None and reliefs:
-        unmatched = min(1.0, float(reliefs.get(hit.class_id, 0.0)) / _RELIEF_CAP_M)
+    # how far the hit's class's model stands out, as a share of 2 cm (0 without reliefs)
+    stands_out = min(1.0, float(reliefs.get(hit.class_id, 0.0)) / _RELIEF_CAP_M) if reliefs else 0.0
+    unmatched = stands_out if d is None else 0.0
     colour_only_print = look * (1.0 - unmatched) if d is None and hit.rho_colour is not None else 0.0
     face = getattr(d, "face_gain", None)  # candidates kept before it was measured have none
     ln_face = 0.0 if face is None else float(np.clip(np.log(max(face, 1e-6)), -_GAIN_CAP, _GAIN_CAP))
@@ -149,7 +149,7 @@ def hit_features(hit: ConsensusHit, depth: list[Candidate], colour: list[Candida
         float(hit.alpha), float(np.clip(margin, 0.0, _MARGIN_CAP)), look,
         gain, relief, unmatched, relief_margin, colour_only_print, max(ln_gain, 0.0),
         max(-ln_face, 0.0), max(ln_face, 0.0),
-        max(-ln_face, 0.0) * (min(1.0, float(reliefs.get(hit.class_id, 0.0)) / _RELIEF_CAP_M) if reliefs else 0.0),
+        max(-ln_face, 0.0) * stands_out,
         _relief_surplus(hit, others(depth if scene_depth is None else scene_depth), reliefs) if d is None else 0.0,
     ])
 
