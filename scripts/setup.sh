@@ -27,7 +27,10 @@ fi
 PY="${PYTHON:-python3}"
 "$PY" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)' \
   || { echo "setup: Python >= 3.11 is needed ($PY is $("$PY" -V 2>&1))" >&2; exit 1; }
-[ -x .venv/bin/python ] || "$PY" -m venv .venv
+# a .venv whose python has no pip is one whose making was interrupted: make it again
+if ! { [ -x .venv/bin/python ] && .venv/bin/python -m pip --version >/dev/null 2>&1; }; then
+  "$PY" -m venv --clear .venv
+fi
 stamp=.venv/.sbsc-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "setup: installing Python packages into .venv (first time takes a few minutes)"
